@@ -1,0 +1,1 @@
+"""Programmed constrained motion of a flexible-boom crane (Jarzebowska, Urbas, Augustynek)."""

@@ -1,0 +1,70 @@
+"""Column drive: the generalized force t_dr^(2) on psi2 (positive increases psi2).
+
+* :class:`TorqueSource` - a prescribed torque profile (the paper's 4000 N m for 0 <= t < 1 s).
+* :class:`SpringDrive` - the paper's flexible drive, E_p,dr = 1/2 s_dr (psi_a - psi2)^2, i.e. the
+  generalized force -dE_p,dr/dpsi2 = s_dr (psi_a(t) - psi2), following a motor angle psi_a(t).
+
+Both give the power they feed into the system, for the energy balance: a torque source delivers
+t_dr * dpsi2/dt; for the spring drive the stored energy E_p,dr is counted as potential energy and
+the motor feeds s_dr (psi_a - psi2) * dpsi_a/dt.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .parameters import FlexibleDrive, TorqueDrive
+from .profiles import Profile, QuinticRise
+
+
+@dataclass(frozen=True)
+class TorqueSource:
+    torque_value: float
+    start: float
+    end: float
+
+    @property
+    def breakpoints(self) -> tuple[float, ...]:
+        """Times where the torque jumps (an integrator should step onto them)."""
+        return (self.start, self.end)
+
+    def torque(self, t: float, psi2: float, left_limit: bool = False) -> float:
+        """t_dr(t); with ``left_limit`` the limit from below, t_dr(t-) (for a step ending on a jump)."""
+        on = self.start < t <= self.end if left_limit else self.start <= t < self.end
+        return self.torque_value if on else 0.0
+
+    def potential(self, t: float, psi2: float) -> float:
+        return 0.0
+
+    def power(self, t: float, psi2: float, psi2_rate: float, left_limit: bool = False) -> float:
+        return self.torque(t, psi2, left_limit) * psi2_rate
+
+
+@dataclass(frozen=True)
+class SpringDrive:
+    stiffness: float
+    motor_angle: Profile
+
+    @property
+    def breakpoints(self) -> tuple[float, ...]:
+        return ()
+
+    def torque(self, t: float, psi2: float, left_limit: bool = False) -> float:
+        """s_dr (psi_a(t) - psi2); continuous in t, so ``left_limit`` changes nothing."""
+        return self.stiffness * (self.motor_angle(t)[0] - psi2)
+
+    def potential(self, t: float, psi2: float) -> float:
+        return 0.5 * self.stiffness * (self.motor_angle(t)[0] - psi2) ** 2
+
+    def power(self, t: float, psi2: float, psi2_rate: float, left_limit: bool = False) -> float:
+        return self.torque(t, psi2) * self.motor_angle(t)[1]
+
+
+Drive = TorqueSource | SpringDrive
+
+
+def make_drive(spec: TorqueDrive | FlexibleDrive, psi2_start: float) -> Drive:
+    """Drive model from its configuration; the motor angle of a spring drive starts at ``psi2_start``."""
+    if isinstance(spec, TorqueDrive):
+        return TorqueSource(spec.torque, spec.start, spec.end)
+    return SpringDrive(spec.stiffness, QuinticRise(psi2_start, spec.travel, spec.start, spec.duration))

@@ -1,0 +1,97 @@
+"""Unconstrained equations of motion of the chain, M(q) qdd + h(q, qd) = Q(t, q, qd).
+
+Sign convention: Q holds generalized *forces* (positive along +q), i.e. minus the paper's gradient
+terms e = g + f_sup + f_l + d of eq. (8):
+
+    Q = -dE_p,g/dq - K q - D qd + t_dr e_psi2,
+
+with E_p,g = sum_l m^(l) g J_3 T^(l) r_C^(l), K = sum_s U^T S U (support springs, base block) +
+S^(3) (RFE springs, boom block), D = beta_sup K_sup + beta_boom K_boom (optional Rayleigh damping,
+zero in the paper) and t_dr the column drive (:mod:`crane_reference.drive`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .drive import Drive
+from .inertia import composite_inertias, gravity_forces, mass_matrix, velocity_forces
+from .kinematics import forward_kinematics, point_kinematics, point_position_jacobian, velocity_terms
+from .model import ChainModel
+from .parameters import Damping
+
+
+@njit(cache=True)
+def chain_terms(q, qd, kinds, axes, origins, body_joint, body_H, gravity, ee_joint, ee_point):
+    """M, h, gravity forces, total gravity potential, E's position, rotation, Jacobian C and d."""
+    n = q.size
+    T, S = forward_kinematics(q, kinds, axes, origins)
+    _, B = velocity_terms(qd, S)
+    Hc, G = composite_inertias(T, B, body_joint, body_H, n)
+    M = mass_matrix(S, Hc)
+    h = velocity_forces(S, G)
+    Qg = gravity_forces(S, Hc, gravity)
+    potential_g = gravity * Hc[0, 2, 3]
+    p, C, d = point_kinematics(T, S, B, ee_joint, ee_point)
+    return M, h, Qg, potential_g, p, T[ee_joint, :3, :3].copy(), C, d
+
+
+@dataclass(frozen=True)
+class DynamicsTerms:
+    """Everything eqs. (6)-(8) need at one (t, q, qd)."""
+
+    M: np.ndarray
+    h: np.ndarray
+    Q: np.ndarray
+    ee_position: np.ndarray
+    ee_rotation: np.ndarray
+    ee_jacobian: np.ndarray
+    ee_bias: np.ndarray
+    gravity_potential: float
+
+
+class CraneDynamics:
+    """Evaluates M, h, Q and the end-effector kinematics of a :class:`ChainModel`."""
+
+    def __init__(self, model: ChainModel, drive: Drive, damping: Damping | None = None):
+        self.model = model
+        self.drive = drive
+        damping = damping or Damping()
+        self.damping_matrix = damping.support * model.support_stiffness + damping.boom * model.boom_stiffness
+        self._kinds = np.array([j.kind for j in model.joints], dtype=np.int64)
+        self._axes = np.array([j.axis for j in model.joints], dtype=np.int64)
+        self._origins = np.ascontiguousarray([j.origin for j in model.joints], dtype=float)
+        self._body_joint = np.array([b.joint for b in model.bodies], dtype=np.int64)
+        self._body_H = np.ascontiguousarray([b.inertia.pseudo_inertia() for b in model.bodies], dtype=float)
+
+    def terms(self, t: float, q: np.ndarray, qd: np.ndarray, left_limit: bool = False) -> DynamicsTerms:
+        """Terms at (t, q, qd); ``left_limit`` evaluates the drive just before t (a step ending on a jump)."""
+        m = self.model
+        M, h, Qg, Vg, p, R, C, d = chain_terms(q, qd, self._kinds, self._axes, self._origins, self._body_joint,
+                                               self._body_H, m.gravity, m.end_effector_joint,
+                                               m.end_effector_point)
+        Q = Qg - m.stiffness @ q - self.damping_matrix @ qd
+        Q[m.drive_joint] += self.drive.torque(t, q[m.drive_joint], left_limit)
+        return DynamicsTerms(M, h, Q, p, R, C, d, Vg)
+
+    def end_effector(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Position of E and its Jacobian C (3, n) at q."""
+        m = self.model
+        return point_position_jacobian(q, self._kinds, self._axes, self._origins, m.end_effector_joint,
+                                       m.end_effector_point)
+
+    def kinetic_energy(self, terms: DynamicsTerms, qd: np.ndarray) -> float:
+        """E_k = 1/2 qd^T M qd (= 1/2 sum_l tr(dT H dT^T))."""
+        return 0.5 * qd @ terms.M @ qd
+
+    def potential_energy(self, t: float, q: np.ndarray, terms: DynamicsTerms) -> float:
+        """E_p = E_p,g + 1/2 q^T K q + E_p,dr."""
+        return (terms.gravity_potential + 0.5 * q @ self.model.stiffness @ q
+                + self.drive.potential(t, q[self.model.drive_joint]))
+
+    def dissipated_power(self, qd: np.ndarray) -> float:
+        """Power lost in the Rayleigh dampers, qd^T D qd >= 0."""
+        return qd @ self.damping_matrix @ qd

@@ -1,0 +1,66 @@
+"""Consistent start: static equilibrium of the constrained crane.
+
+At rest (qd = 0, so h = 0) the programmed motion equations (8) reduce to B^T Q(q) = 0 on the
+independent directions, together with Phi(q, 0) = 0.  The column is held by the drive at its initial
+angle, so the psi2 row is not balanced by the free system but by the drive's holding torque
+t_hold = -(B^T Q)_psi2, which is reported (zero for the symmetric default layout).  All other
+independent coordinates (base, RFE angles) are free and settle under gravity and the springs; the
+dependent coordinates follow from the constraints.  The drive's own torque is taken just before t0
+(off for the paper's torque step, zero for a spring drive whose motor angle starts at psi2).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import root
+
+from .programmed_motion import ProgrammedMotion, velocity_map
+
+
+class EquilibriumError(RuntimeError):
+    """No static equilibrium was found."""
+
+
+@dataclass(frozen=True)
+class Equilibrium:
+    q: np.ndarray
+    holding_torque: float
+    max_force_residual: float
+
+
+def reduced_static_forces(motion: ProgrammedMotion, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(B^T Q at qd = 0 [N or N m per independent coordinate], q with q_dc projected)."""
+    q, _ = motion.project_positions(t, q)
+    qd = np.zeros_like(q)
+    terms = motion.dynamics.terms(t, q, qd, left_limit=True)
+    con = motion.constraints.terms(t, terms.ee_position, terms.ee_jacobian, terms.ee_bias, qd)
+    B = velocity_map(con.A, motion.independent, motion.dependent)
+    return B.T @ terms.Q, q
+
+
+def static_equilibrium(motion: ProgrammedMotion, q_start: np.ndarray, t0: float = 0.0,
+                       force_tolerance: float = 1e-7) -> Equilibrium:
+    """Equilibrium near ``q_start`` with the drive coordinate held at its value in ``q_start``."""
+    drive = motion.dynamics.model.drive_joint
+    rows = np.flatnonzero(motion.independent != drive)
+    free = motion.independent[rows]
+    q_base = q_start.copy()
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        q = q_base.copy()
+        q[free] = x
+        forces, _ = reduced_static_forces(motion, t0, q)
+        return forces[rows]
+
+    result = root(residual, q_start[free], method="hybr", options={"xtol": 1e-15})
+    q = q_base.copy()
+    q[free] = result.x
+    forces, q = reduced_static_forces(motion, t0, q)
+    worst = float(np.max(np.abs(forces[rows])))
+    if not worst <= force_tolerance:
+        raise EquilibriumError(f"static equilibrium not found: largest unbalanced generalized force {worst:.3g} "
+                               f"(solver: {result.message})")
+    held = int(np.flatnonzero(motion.independent == drive)[0])
+    return Equilibrium(q, -float(forces[held]), worst)

@@ -1,0 +1,85 @@
+"""Mass matrix, velocity terms and gravity forces from pseudo-inertia matrices (compiled with numba).
+
+With T_i^(l) = S_i T^(l) (see :mod:`crane_reference.kinematics`) the paper's mass matrix entries are
+
+    m_ij = sum_l tr(T_i^(l) H^(l) T_j^(l)T) = tr(S_i Hc_max(i,j) S_j^T),
+
+where Hc_k = sum_{l after joint k} T^(l) H^(l) T^(l)T is the composite world pseudo-inertia of all
+bodies beyond joint k.  Lagrange's equations of E_k = 1/2 sum_l tr(dT^(l) H^(l) dT^(l)T) give the
+generalized inertia force sum_l tr(T_i^(l) H^(l) d2T^(l)T) = sum_j m_ij qdd_j + h_i, so the velocity
+terms are
+
+    h_i = sum_{l after i} tr(T_i^(l) H^(l) (sum_mn T_mn^(l) qd_m qd_n)^T) = tr(S_i G_i),
+    G_k = sum_{l after k} T^(l) H^(l) T^(l)T B^(l)T,
+
+with B = A + V V the velocity-product term of the body's frame.  Gravity: E_p,g = sum_l m^(l) g
+J_3 T^(l) r_C^(l) (eq. (4)); its generalized force -dE_p,g/dq_i = -g J_3 S_i Hc_i e_4, because the
+last column of Hc_i is sum_l m^(l) [c^(l); 1] in world coordinates.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .kinematics import matmul4
+
+
+@njit(cache=True)
+def composite_inertias(T, B, body_joint, body_H, n):
+    """Suffix sums Hc_k of world pseudo-inertias and G_k of Hc B^T over the bodies beyond joint k."""
+    Hc = np.zeros((n, 4, 4))
+    G = np.zeros((n, 4, 4))
+    for body in range(body_joint.size):
+        k = body_joint[body]
+        Hw = matmul4(matmul4(T[k], body_H[body]), T[k].T)
+        Hc[k] += Hw
+        G[k] += matmul4(Hw, B[k].T)
+    for k in range(n - 2, -1, -1):
+        Hc[k] += Hc[k + 1]
+        G[k] += G[k + 1]
+    return Hc, G
+
+
+@njit(cache=True)
+def trace_product(X, Y):
+    """tr(X Y) for 4x4 matrices."""
+    total = 0.0
+    for a in range(4):
+        for b in range(4):
+            total += X[a, b] * Y[b, a]
+    return total
+
+
+@njit(cache=True)
+def mass_matrix(S, Hc):
+    """M with m_ij = tr(S_i Hc_max(i,j) S_j^T)."""
+    n = S.shape[0]
+    M = np.empty((n, n))
+    for j in range(n):
+        Y = matmul4(Hc[j], S[j].T)
+        for i in range(j + 1):
+            M[i, j] = trace_product(S[i], Y)
+            M[j, i] = M[i, j]
+    return M
+
+
+@njit(cache=True)
+def velocity_forces(S, G):
+    """h_i = tr(S_i G_i)."""
+    n = S.shape[0]
+    h = np.empty(n)
+    for i in range(n):
+        h[i] = trace_product(S[i], G[i])
+    return h
+
+
+@njit(cache=True)
+def gravity_forces(S, Hc, gravity):
+    """Q_g,i = -g J_3 S_i Hc_i e_4 (gravity of magnitude g along world -z)."""
+    n = S.shape[0]
+    Q = np.empty(n)
+    for i in range(n):
+        Q[i] = -gravity * (S[i, 2, 0] * Hc[i, 0, 3] + S[i, 2, 1] * Hc[i, 1, 3]
+                           + S[i, 2, 2] * Hc[i, 2, 3] + S[i, 2, 3] * Hc[i, 3, 3])
+    return Q

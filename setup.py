@@ -1,0 +1,54 @@
+"""ament_python package setup for crane_reference.
+
+The ROS executable ``node`` (what ``ros2 run crane_reference node`` starts) is installed as a data
+file into ``lib/crane_reference`` instead of a console script, so that a plain ``pip install`` never
+puts a program called ``node`` on the user's PATH (it would shadow Node.js).  The PyPI builds of ROS 2
+Jazzy are an optional extra (``ros``): on a machine with a ROS distribution, rclpy and the message
+packages come from there.
+"""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "crane_reference"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "benchmarks"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"lib/{PACKAGE}", ["scripts/node"]),
+    ],
+    python_requires=">=3.10",
+    install_requires=[
+        "setuptools",
+        "numpy>=1.24",
+        "scipy>=1.10",
+        "numba>=0.58",
+        "PyYAML>=6",
+        "matplotlib>=3.6",
+        "rosbags>=0.10",
+    ],
+    extras_require={
+        "ros": [
+            "ros-jazzy-rclpy[fastrtps]",
+            "ros-jazzy-common-interfaces",
+            "ros-jazzy-std-srvs",
+        ],
+        "test": ["pytest>=7", "pin>=3", "mcap>=1.1", "ruff>=0.5"],
+    },
+    zip_safe=True,
+    maintainer="crane_reference maintainers",
+    maintainer_email="crane-reference@example.org",
+    description="Programmed constrained motion of a flexible-boom crane as a ROS 2 reference.",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "crane-reference = crane_reference.cli:main",
+        ],
+    },
+)
