@@ -83,6 +83,13 @@ class CraneDynamics:
         return point_position_jacobian(q, self._kinds, self._axes, self._origins, m.end_effector_joint,
                                        m.end_effector_point)
 
+    def end_effector_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Position of E and the rotation matrix of link 4's frame (world) at q."""
+        m = self.model
+        T, _ = forward_kinematics(q, self._kinds, self._axes, self._origins)
+        frame = T[m.end_effector_joint]
+        return frame[:3, :3] @ m.end_effector_point + frame[:3, 3], frame[:3, :3].copy()
+
     def kinetic_energy(self, terms: DynamicsTerms, qd: np.ndarray) -> float:
         """E_k = 1/2 qd^T M qd (= 1/2 sum_l tr(dT H dT^T))."""
         return 0.5 * qd @ terms.M @ qd

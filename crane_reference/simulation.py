@@ -1,0 +1,202 @@
+"""The paper's scenario and its time integration, offline (whole runs) and step by step (online).
+
+:class:`Scenario` assembles model -> dynamics -> programmed constraints -> consistent start from a
+:class:`CraneParameters`.  :class:`MotionStepper` advances the generalized-alpha integrator on a fixed
+grid t_k = t0 + k h, lands exactly on the drive's jumps (restarting the method there) and
+accumulates the work of the drive, the constraint forces and the dampers with the trapezoidal rule
+(second order, like the integrator).  :func:`simulate` runs it to an end time; :func:`simulate_reference`
+integrates the same equations with scipy's DOP853 at tight tolerances (resolving every RFE mode), as
+the converged reference for accuracy checks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from .constraints import ConstraintSet, paper_constraints
+from .drive import make_drive
+from .dynamics import CraneDynamics
+from .equilibrium import Equilibrium, static_equilibrium
+from .integration import GeneralizedAlpha, StepState
+from .model import ChainModel, build_model
+from .parameters import CraneParameters, Task
+from .profiles import Constant, QuinticRise
+from .programmed_motion import MotionSolution, ProgrammedMotion
+from .trajectory import Sample, Trajectory, make_sample
+
+Progress = Callable[[float], None]
+
+
+def paper_task_constraints(task: Task, z_static: float) -> ConstraintSet:
+    """(5.1)-(5.2): ellipse a x b and z_E,a rising by z_inc from z_E,s over [0, t_c]."""
+    return paper_constraints(Constant(task.ellipse_a), Constant(task.ellipse_b),
+                             QuinticRise(z_static, task.z_increment, 0.0, task.rise_time))
+
+
+class Scenario:
+    """The crane of ``params`` (``variant`` flexible or rigid) under the programmed constraints of
+    ``task`` (default: the config's), started from its static equilibrium (the column held at
+    configuration (9)'s angle, E at the height z_E,s that configuration (9) gives it)."""
+
+    def __init__(self, params: CraneParameters, variant: str = "flexible", task: Task | None = None):
+        self.params = params
+        self.model: ChainModel = build_model(params, variant)
+        self.task = task or params.task
+        drive = make_drive(params.drive, params.initial.column)
+        self.dynamics = CraneDynamics(self.model, drive, params.damping)
+        self.z_static = float(self.dynamics.end_effector(self.model.initial_q)[0][2])
+        self.motion = ProgrammedMotion(self.dynamics, paper_task_constraints(self.task, self.z_static))
+        self._equilibrium: Equilibrium | None = None
+
+    @property
+    def equilibrium(self) -> Equilibrium:
+        """Static equilibrium at t = 0 (computed once)."""
+        if self._equilibrium is None:
+            self._equilibrium = static_equilibrium(self.motion, self.model.initial_q)
+        return self._equilibrium
+
+
+def _constraint_power(solution: MotionSolution) -> float:
+    """Power of the ideal constraint forces, (A^T lambda) . qd = lambda . b."""
+    return float(solution.multipliers @ solution.constraints.b)
+
+
+class MotionStepper:
+    """Online generalized-alpha integration of a :class:`ProgrammedMotion` with work bookkeeping."""
+
+    def __init__(self, motion: ProgrammedMotion, t0: float, q0: np.ndarray, qd0: np.ndarray,
+                 step: float = 1e-3, rho_inf: float = 0.8):
+        if not step > 0.0:
+            raise ValueError(f"step = {step}: must be > 0 s")
+        self.step_size = step
+        self.integrator = GeneralizedAlpha(motion, rho_inf=rho_inf)
+        self._t0 = t0
+        self._k = 0
+        self.state: StepState = self.integrator.start(t0, q0, qd0)
+        self._work = np.zeros(3)
+        self.sample: Sample = self._sample(self.state, left_limit=False)
+
+    @property
+    def motion(self) -> ProgrammedMotion:
+        return self.integrator.motion
+
+    def _powers(self, state: StepState, left_limit: bool) -> np.ndarray:
+        dyn = self.motion.dynamics
+        j = dyn.model.drive_joint
+        return np.array([dyn.drive.power(state.t, state.q[j], state.qd[j], left_limit),
+                         _constraint_power(state.solution), -dyn.dissipated_power(state.qd)])
+
+    def _sample(self, state: StepState, left_limit: bool) -> Sample:
+        dyn = self.motion.dynamics
+        j = dyn.model.drive_joint
+        terms = state.solution.dynamics
+        return make_sample(state.t, state.q, state.qd, state.solution, j,
+                           dyn.drive.torque(state.t, state.q[j], left_limit),
+                           dyn.kinetic_energy(terms, state.qd), dyn.potential_energy(state.t, state.q, terms),
+                           tuple(self._work))
+
+    def advance(self) -> Sample:
+        """One step to the next grid time, or to a drive jump before it (then restart there)."""
+        t = self.state.t
+        t_next = self._t0 + (self._k + 1) * self.step_size
+        jumps = [b for b in self.motion.dynamics.drive.breakpoints if t < b <= t_next + 1e-9 * self.step_size]
+        on_jump = bool(jumps)
+        if on_jump:
+            t_next = min(jumps)
+        if t_next >= self._t0 + (self._k + 1) * self.step_size - 1e-9 * self.step_size:
+            self._k += 1
+        previous = self._powers(self.state, left_limit=False)
+        new = self.integrator.step(self.state, t_next - t, ends_on_jump=on_jump)
+        new = StepState(t_next, new.q, new.qd, new.solution, new.pseudo_acceleration)
+        self._work += 0.5 * (t_next - t) * (previous + self._powers(new, left_limit=on_jump))
+        self.state = self.integrator.restart(new) if on_jump else new
+        self.sample = self._sample(self.state, left_limit=False)
+        return self.sample
+
+    def snapshot(self) -> tuple[StepState, int, np.ndarray, Sample, ProgrammedMotion]:
+        """Everything needed to continue from the current step later (see :meth:`rewind`)."""
+        return self.state, self._k, self._work.copy(), self.sample, self.integrator.motion
+
+    def rewind(self, snapshot: tuple[StepState, int, np.ndarray, Sample, ProgrammedMotion]) -> None:
+        """Return to a state saved by :meth:`snapshot` (the motion after it is recomputed)."""
+        self.state, self._k, work, self.sample, self.integrator.motion = snapshot
+        self._work = work.copy()
+
+    def retarget(self, constraints: ConstraintSet) -> None:
+        """Continue under new constraints (they must hold at the current state, e.g. a C2 blend that
+        starts now); the method's history restarts at the current state."""
+        self.integrator.motion = ProgrammedMotion(self.motion.dynamics, constraints, tuple(self.motion.dependent),
+                                                  self.motion.min_singular_value)
+        self.state = self.integrator.restart(self.state)
+
+
+def simulate(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, step: float = 1e-3, rho_inf: float = 0.8,
+             t0: float = 0.0, qd0: np.ndarray | None = None, progress: Progress | None = None) -> Trajectory:
+    """Programmed motion from (t0, q0, qd0) to t_end with generalized-alpha; one sample per step."""
+    qd0 = np.zeros_like(q0) if qd0 is None else qd0
+    stepper = MotionStepper(motion, t0, q0, qd0, step, rho_inf)
+    samples = [stepper.sample]
+    while stepper.state.t < t_end - 1e-9 * step:
+        samples.append(stepper.advance())
+        if progress is not None:
+            progress(stepper.state.t)
+    model = motion.dynamics.model
+    return Trajectory.from_samples(model.variant, model.joint_names, model.drive_joint, samples)
+
+
+def simulate_reference(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, sample_times: np.ndarray,
+                       rtol: float = 1e-10, atol: float = 1e-12, t0: float = 0.0) -> Trajectory:
+    """Converged reference: DOP853 on the independent coordinates (dependent ones projected at every
+    evaluation), the three work integrals as extra states, integrated piecewise between drive jumps."""
+    dyn = motion.dynamics
+    model = dyn.model
+    ic = motion.independent
+    n_ic, j = len(ic), model.drive_joint
+    start = GeneralizedAlpha(motion).start(t0, q0, np.zeros_like(q0))
+    guess = [start.q]
+
+    def full_state(t: float, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        q = guess[0].copy()
+        q[ic] = y[:n_ic]
+        q, kinematics = motion.project_positions(t, q)
+        guess[0] = q
+        qd = np.zeros_like(q)
+        qd[ic] = y[n_ic:2 * n_ic]
+        return q, motion.dependent_velocities(t, q, qd, kinematics)
+
+    edges = sorted({t0, t_end, *(b for b in dyn.drive.breakpoints if t0 < b < t_end)})
+    y = np.concatenate([start.q[ic], start.qd[ic], np.zeros(3)])
+    samples: list[Sample] = []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        def rhs(t: float, y: np.ndarray, b: float = b) -> np.ndarray:
+            q, qd = full_state(t, y)
+            solution = motion.solve(t, q, qd, left_limit=t >= b)
+            power = [dyn.drive.power(t, q[j], qd[j], t >= b), _constraint_power(solution), -dyn.dissipated_power(qd)]
+            return np.concatenate([qd[ic], solution.qdd[ic], power])
+
+        inside = sample_times[(sample_times >= a) & ((sample_times < b) | (b == edges[-1]) & (sample_times <= b))]
+        result = solve_ivp(rhs, (a, b), y, method="DOP853", rtol=rtol, atol=atol, dense_output=True)
+        if not result.success:
+            raise RuntimeError(f"DOP853 failed on [{a}, {b}] s: {result.message}")
+        for t in inside:
+            ys = result.sol(t)
+            q, qd = full_state(t, ys)
+            solution = motion.solve(t, q, qd)
+            samples.append(make_sample(t, q, qd, solution, j, dyn.drive.torque(t, q[j]),
+                                       dyn.kinetic_energy(solution.dynamics, qd),
+                                       dyn.potential_energy(t, q, solution.dynamics), tuple(ys[2 * n_ic:])))
+        y = result.y[:, -1]
+    return Trajectory.from_samples(model.variant, model.joint_names, model.drive_joint, samples)
+
+
+def default_scenario(params: CraneParameters, variant: str) -> tuple[Scenario, np.ndarray]:
+    """The scenario and its consistent start configuration."""
+    scenario = Scenario(params, variant)
+    return scenario, scenario.equilibrium.q
+
+
+__all__ = ["MotionStepper", "Scenario", "build_model", "default_scenario", "simulate", "simulate_reference"]

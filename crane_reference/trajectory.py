@@ -1,0 +1,148 @@
+"""Results of a programmed-motion run: samples, interpolation and CSV / NPZ export.
+
+Units: s, m, rad, N, N m, J.  E's pose is given in the world frame {0}; its orientation is the
+rotation of link 4's frame as a quaternion (x, y, z, w).  ``constraint_forces`` are the generalized
+forces A^T lambda of the ideal programmed constraints (the KKT form of (8)), ``drive_torque`` the
+column drive t_dr^(2); their sum is the generalized effort the task and drive require.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import CubicHermiteSpline
+from scipy.spatial.transform import Rotation
+
+from .programmed_motion import MotionSolution
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One instant of the motion."""
+
+    t: float
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    multipliers: np.ndarray
+    constraint_forces: np.ndarray
+    drive_torque: float
+    ee_position: np.ndarray
+    ee_quaternion: np.ndarray
+    ee_velocity: np.ndarray
+    residual: np.ndarray
+    residual_distance: np.ndarray
+    kdc_min_singular_value: float
+    kinetic_energy: float
+    potential_energy: float
+    work_drive: float
+    work_constraints: float
+    work_damping: float
+
+
+def make_sample(t: float, q: np.ndarray, qd: np.ndarray, solution: MotionSolution, drive_joint: int,
+                drive_torque: float, kinetic: float, potential: float, work: tuple[float, float, float]) -> Sample:
+    """Assemble a :class:`Sample` from the solution of (8) at (t, q, qd) and the accumulated work."""
+    dyn, con = solution.dynamics, solution.constraints
+    return Sample(
+        t=t, q=q, qd=qd, qdd=solution.qdd, multipliers=solution.multipliers,
+        constraint_forces=solution.constraint_forces, drive_torque=drive_torque,
+        ee_position=dyn.ee_position, ee_quaternion=Rotation.from_matrix(dyn.ee_rotation).as_quat(),
+        ee_velocity=dyn.ee_jacobian @ qd, residual=con.residual, residual_distance=con.distance,
+        kdc_min_singular_value=solution.kdc_min_singular_value, kinetic_energy=kinetic,
+        potential_energy=potential, work_drive=work[0], work_constraints=work[1], work_damping=work[2],
+    )
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Samples of one run stacked into arrays (first axis: time)."""
+
+    variant: str
+    joint_names: tuple[str, ...]
+    drive_joint: int
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    multipliers: np.ndarray
+    constraint_forces: np.ndarray
+    drive_torque: np.ndarray
+    ee_position: np.ndarray
+    ee_quaternion: np.ndarray
+    ee_velocity: np.ndarray
+    residual: np.ndarray
+    residual_distance: np.ndarray
+    kdc_min_singular_value: np.ndarray
+    kinetic_energy: np.ndarray
+    potential_energy: np.ndarray
+    work_drive: np.ndarray
+    work_constraints: np.ndarray
+    work_damping: np.ndarray
+
+    @classmethod
+    def from_samples(cls, variant: str, joint_names: list[str], drive_joint: int, samples: list[Sample]) -> Trajectory:
+        arrays = {f.name: np.array([getattr(s, f.name) for s in samples]) for f in fields(Sample)}
+        return cls(variant=variant, joint_names=tuple(joint_names), drive_joint=drive_joint, **arrays)
+
+    @property
+    def total_energy(self) -> np.ndarray:
+        return self.kinetic_energy + self.potential_energy
+
+    @property
+    def energy_balance_error(self) -> np.ndarray:
+        """E(t) - E(0) - (work of drive + constraint forces + dampers) [J]; zero for the exact motion."""
+        work = self.work_drive + self.work_constraints + self.work_damping
+        return self.total_energy - self.total_energy[0] - work
+
+    @property
+    def effort(self) -> np.ndarray:
+        """Generalized forces of constraints and drive (N, n)."""
+        effort = self.constraint_forces.copy()
+        effort[:, self.drive_joint] += self.drive_torque
+        return effort
+
+    def coordinate(self, name: str) -> np.ndarray:
+        return self.q[:, self.joint_names.index(name)]
+
+    def interpolate(self, t: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, qd (cubic Hermite: C1 and consistent with the stored rates) and E's position at t."""
+        q = CubicHermiteSpline(self.t, self.q, self.qd, axis=0)(t)
+        qd = CubicHermiteSpline(self.t, self.qd, self.qdd, axis=0)(t)
+        p = CubicHermiteSpline(self.t, self.ee_position, self.ee_velocity, axis=0)(t)
+        return q, qd, p
+
+    def columns(self) -> tuple[list[str], np.ndarray]:
+        """CSV layout: t, one column per joint, ee_x ee_y ee_z, then velocities, E's orientation,
+        residuals, energies and work."""
+        names = ["t", *self.joint_names, "ee_x", "ee_y", "ee_z",
+                 *(f"{n}_velocity" for n in self.joint_names),
+                 "ee_qx", "ee_qy", "ee_qz", "ee_qw",
+                 *(f"constraint{i + 1}_distance_m" for i in range(self.residual.shape[1])),
+                 "drive_torque", "kinetic_energy", "potential_energy", "work_drive", "work_constraints",
+                 "work_damping", "kdc_min_singular_value"]
+        data = np.column_stack([self.t, self.q, self.ee_position, self.qd, self.ee_quaternion,
+                                self.residual_distance, self.drive_torque, self.kinetic_energy,
+                                self.potential_energy, self.work_drive, self.work_constraints, self.work_damping,
+                                self.kdc_min_singular_value])
+        return names, data
+
+    def to_csv(self, path: str | Path) -> None:
+        """Write the CSV at full double precision (17 significant digits)."""
+        names, data = self.columns()
+        np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+
+    def to_npz(self, path: str | Path) -> None:
+        np.savez_compressed(path, joint_names=np.array(self.joint_names), variant=self.variant,
+                            drive_joint=self.drive_joint,
+                            **{f.name: getattr(self, f.name) for f in fields(self)
+                               if f.name not in ("variant", "joint_names", "drive_joint")})
+
+    @classmethod
+    def from_npz(cls, path: str | Path) -> Trajectory:
+        with np.load(path) as data:
+            arrays = {k: data[k] for k in data.files}
+        return cls(variant=str(arrays.pop("variant")), joint_names=tuple(str(n) for n in arrays.pop("joint_names")),
+                   drive_joint=int(arrays.pop("drive_joint")), **arrays)
