@@ -1,18 +1,22 @@
 """Programmed (task) constraints on the end-effector E, eqs. (5.1)-(5.2) and (6.1)-(6.4).
 
-A constraint is written on E's world position p = J T^(4) r_E (eq. (5)) and time, Phi(p, t) = 0.
-With p' = C qd and p'' = C qdd + d (C, d from :mod:`crane_reference.kinematics`) its derivatives are
+A constraint is written on E's world position p = J T^(4) r_E (eq. (5)) and time.  Every constraint
+here is a quadric in p with time-dependent coefficients,
 
-    dPhi/dt   = Phi_p C qd + Phi_t = 0                                    (6.1), (6.2)
-    d2Phi/dt2 = Phi_p (C qdd + d) + p'^T Phi_pp p' + 2 Phi_pt p' + Phi_tt = 0    (6.3), (6.4)
+    Phi(p, t) = p^T Q(t) p + g(t)^T p + c(t)        (Q symmetric),
 
-so each constraint supplies its residual Phi, Jacobian Phi_p, explicit time term Phi_t and convective
-term ``convective = p'^T Phi_pp p' + 2 Phi_pt p' + Phi_tt``.  The solver in
-:mod:`crane_reference.programmed_motion` only sees these four quantities, so another task constraint
-is a new subclass of :class:`EndEffectorConstraint`; nothing in the solver changes.
+which covers the paper's ellipse (5.1) and height (5.2) as well as planes, spheres, cylinders and
+other surfaces.  With p' = C qd and p'' = C qdd + d (C, d from :mod:`crane_reference.kinematics`)
 
-For the ellipse, the paper's u and v are Phi_p C / 2 and (Phi_p d + convective) / 2: it divides (6.3)
-by two, which does not change the motion (only the scale of the multiplier).
+    dPhi/dt   = Phi_p C qd + Phi_t = 0                                     (6.1), (6.2)
+    d2Phi/dt2 = Phi_p (C qdd + d) + convective = 0                         (6.3), (6.4)
+    Phi_p = 2 Q p + g,   Phi_t = p^T Q' p + g'^T p + c',
+    convective = p'^T 2Q p' + 2 (2 Q' p + g')^T p' + p^T Q'' p + g''^T p + c''.
+
+A new task constraint is a new :class:`EndEffectorConstraint` that returns its coefficients and their
+first two time derivatives (:class:`Quadric`); the solver (compiled, :mod:`crane_reference.kernels`)
+does not change.  For the ellipse, the paper's u and v are Phi_p C / 2 and (Phi_p d + convective) / 2:
+it divides (6.3) by two, which changes only the scale of the multiplier.
 """
 
 from __future__ import annotations
@@ -25,24 +29,35 @@ import numpy as np
 from .profiles import Profile
 
 
+@dataclass(frozen=True)
+class Quadric:
+    """Coefficients of Phi = p^T Q p + g^T p + c and their time derivatives: index 0 value, 1 first,
+    2 second derivative (Q: (3, 3, 3), g: (3, 3), c: (3,))."""
+
+    Q: np.ndarray
+    g: np.ndarray
+    c: np.ndarray
+
+    def residual(self, p: np.ndarray) -> float:
+        return float(p @ self.Q[0] @ p + self.g[0] @ p + self.c[0])
+
+    def gradient(self, p: np.ndarray) -> np.ndarray:
+        return 2.0 * self.Q[0] @ p + self.g[0]
+
+    def time_derivative(self, p: np.ndarray) -> float:
+        return float(p @ self.Q[1] @ p + self.g[1] @ p + self.c[1])
+
+    def convective(self, p: np.ndarray, v: np.ndarray) -> float:
+        return float(2.0 * v @ self.Q[0] @ v + 2.0 * (2.0 * self.Q[1] @ p + self.g[1]) @ v
+                     + p @ self.Q[2] @ p + self.g[2] @ p + self.c[2])
+
+
 class EndEffectorConstraint(ABC):
-    """One scalar holonomic constraint Phi(p, t) = 0 on the end-effector position p [m]."""
+    """One scalar holonomic constraint Phi(p, t) = 0, quadric in the end-effector position p [m]."""
 
     @abstractmethod
-    def residual(self, t: float, p: np.ndarray) -> float:
-        """Phi(p, t)."""
-
-    @abstractmethod
-    def gradient(self, t: float, p: np.ndarray) -> np.ndarray:
-        """Phi_p (3,)."""
-
-    @abstractmethod
-    def time_derivative(self, t: float, p: np.ndarray) -> float:
-        """Phi_t (the explicit time dependence)."""
-
-    @abstractmethod
-    def convective(self, t: float, p: np.ndarray, v: np.ndarray) -> float:
-        """v^T Phi_pp v + 2 Phi_pt v + Phi_tt with v = p'."""
+    def quadric(self, t: float) -> Quadric:
+        """Coefficients of Phi at time t with their first and second time derivatives."""
 
 
 @dataclass(frozen=True)
@@ -53,25 +68,17 @@ class EllipseXY(EndEffectorConstraint):
     a: Profile
     b: Profile
 
-    def residual(self, t: float, p: np.ndarray) -> float:
-        a, b = self.a(t)[0], self.b(t)[0]
-        return (p[0] / a) ** 2 + (p[1] / b) ** 2 - 1.0
+    @staticmethod
+    def _inverse_square(profile: Profile, t: float) -> np.ndarray:
+        """1/a^2 and its first two time derivatives."""
+        a, da, dda = profile(t)
+        return np.array([a**-2, -2.0 * da / a**3, -2.0 * dda / a**3 + 6.0 * da**2 / a**4])
 
-    def gradient(self, t: float, p: np.ndarray) -> np.ndarray:
-        a, b = self.a(t)[0], self.b(t)[0]
-        return np.array([2.0 * p[0] / a**2, 2.0 * p[1] / b**2, 0.0])
-
-    def time_derivative(self, t: float, p: np.ndarray) -> float:
-        (a, da, _), (b, db, _) = self.a(t), self.b(t)
-        return -2.0 * p[0] ** 2 * da / a**3 - 2.0 * p[1] ** 2 * db / b**3
-
-    def convective(self, t: float, p: np.ndarray, v: np.ndarray) -> float:
-        (a, da, dda), (b, db, ddb) = self.a(t), self.b(t)
-        quadratic = 2.0 * v[0] ** 2 / a**2 + 2.0 * v[1] ** 2 / b**2
-        mixed = -8.0 * p[0] * v[0] * da / a**3 - 8.0 * p[1] * v[1] * db / b**3
-        explicit = (-2.0 * p[0] ** 2 * (dda / a**3 - 3.0 * da**2 / a**4)
-                    - 2.0 * p[1] ** 2 * (ddb / b**3 - 3.0 * db**2 / b**4))
-        return quadratic + mixed + explicit
+    def quadric(self, t: float) -> Quadric:
+        Q = np.zeros((3, 3, 3))
+        Q[:, 0, 0] = self._inverse_square(self.a, t)
+        Q[:, 1, 1] = self._inverse_square(self.b, t)
+        return Quadric(Q, np.zeros((3, 3)), np.array([-1.0, 0.0, 0.0]))
 
 
 @dataclass(frozen=True)
@@ -80,17 +87,20 @@ class HeightZ(EndEffectorConstraint):
 
     z: Profile
 
-    def residual(self, t: float, p: np.ndarray) -> float:
-        return p[2] - self.z(t)[0]
+    def quadric(self, t: float) -> Quadric:
+        g = np.zeros((3, 3))
+        g[0, 2] = 1.0
+        return Quadric(np.zeros((3, 3, 3)), g, -np.array(self.z(t)))
 
-    def gradient(self, t: float, p: np.ndarray) -> np.ndarray:
-        return np.array([0.0, 0.0, 1.0])
 
-    def time_derivative(self, t: float, p: np.ndarray) -> float:
-        return -self.z(t)[1]
+@dataclass(frozen=True)
+class ConstraintCoefficients:
+    """The quadrics of a constraint set at one time, stacked for the compiled solver:
+    Q (m, 3, 3, 3), g (m, 3, 3), c (m, 3) (second axis: value, first, second time derivative)."""
 
-    def convective(self, t: float, p: np.ndarray, v: np.ndarray) -> float:
-        return -self.z(t)[2]
+    Q: np.ndarray
+    g: np.ndarray
+    c: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -121,21 +131,17 @@ class ConstraintSet:
     def size(self) -> int:
         return len(self.constraints)
 
+    def coefficients(self, t: float) -> ConstraintCoefficients:
+        quadrics = [c.quadric(t) for c in self.constraints]
+        return ConstraintCoefficients(np.array([q.Q for q in quadrics]), np.array([q.g for q in quadrics]),
+                                      np.array([q.c for q in quadrics]))
+
     def residual(self, t: float, p: np.ndarray) -> np.ndarray:
-        return np.array([c.residual(t, p) for c in self.constraints])
+        return np.array([c.quadric(t).residual(p) for c in self.constraints])
 
     def position_jacobian(self, t: float, p: np.ndarray) -> np.ndarray:
         """Phi_p stacked (m, 3)."""
-        return np.array([c.gradient(t, p) for c in self.constraints])
-
-    def terms(self, t: float, p: np.ndarray, C: np.ndarray, d: np.ndarray, qd: np.ndarray) -> ConstraintTerms:
-        """Phi, A = Phi_p C, b = -Phi_t and c = -(Phi_p d + convective) at one state."""
-        v = C @ qd
-        grads = self.position_jacobian(t, p)
-        residual = self.residual(t, p)
-        b = -np.array([c.time_derivative(t, p) for c in self.constraints])
-        c = -(grads @ d) - np.array([con.convective(t, p, v) for con in self.constraints])
-        return ConstraintTerms(residual, grads, grads @ C, b, c)
+        return np.array([c.quadric(t).gradient(p) for c in self.constraints])
 
 
 def paper_constraints(a: Profile, b: Profile, z: Profile) -> ConstraintSet:

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from .parameters import FlexibleDrive, TorqueDrive
 from .profiles import Profile, QuinticRise
 
@@ -36,6 +38,10 @@ class TorqueSource:
     def potential(self, t: float, psi2: float) -> float:
         return 0.0
 
+    def kernel_parameters(self, t: float, left_limit: bool = False) -> np.ndarray:
+        """(tau0, s_dr, psi_a) with t_dr = tau0 + s_dr (psi_a - psi2), for the compiled solver."""
+        return np.array([self.torque(t, 0.0, left_limit), 0.0, 0.0])
+
     def power(self, t: float, psi2: float, psi2_rate: float, left_limit: bool = False) -> float:
         return self.torque(t, psi2, left_limit) * psi2_rate
 
@@ -55,6 +61,10 @@ class SpringDrive:
 
     def potential(self, t: float, psi2: float) -> float:
         return 0.5 * self.stiffness * (self.motor_angle(t)[0] - psi2) ** 2
+
+    def kernel_parameters(self, t: float, left_limit: bool = False) -> np.ndarray:
+        """(tau0, s_dr, psi_a) with t_dr = tau0 + s_dr (psi_a - psi2), for the compiled solver."""
+        return np.array([0.0, self.stiffness, self.motor_angle(t)[0]])
 
     def power(self, t: float, psi2: float, psi2_rate: float, left_limit: bool = False) -> float:
         return self.torque(t, psi2) * self.motor_angle(t)[1]

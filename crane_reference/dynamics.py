@@ -66,6 +66,11 @@ class CraneDynamics:
         self._origins = np.ascontiguousarray([j.origin for j in model.joints], dtype=float)
         self._body_joint = np.array([b.joint for b in model.bodies], dtype=np.int64)
         self._body_H = np.ascontiguousarray([b.inertia.pseudo_inertia() for b in model.bodies], dtype=float)
+        self.chain = (self._kinds, self._axes, self._origins, self._body_joint, self._body_H, float(model.gravity),
+                      int(model.end_effector_joint), np.asarray(model.end_effector_point, dtype=float),
+                      np.ascontiguousarray(model.stiffness, dtype=float),
+                      np.ascontiguousarray(self.damping_matrix, dtype=float), int(model.drive_joint))
+        """Model data in the layout of the compiled solver (:mod:`crane_reference.kernels`)."""
 
     def terms(self, t: float, q: np.ndarray, qd: np.ndarray, left_limit: bool = False) -> DynamicsTerms:
         """Terms at (t, q, qd); ``left_limit`` evaluates the drive just before t (a step ending on a jump)."""

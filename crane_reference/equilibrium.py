@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import root
 
-from .programmed_motion import ProgrammedMotion, velocity_map
+from .programmed_motion import ProgrammedMotion
 
 
 class EquilibriumError(RuntimeError):
@@ -33,11 +33,8 @@ class Equilibrium:
 def reduced_static_forces(motion: ProgrammedMotion, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(B^T Q at qd = 0 [N or N m per independent coordinate], q with q_dc projected)."""
     q, _ = motion.project_positions(t, q)
-    qd = np.zeros_like(q)
-    terms = motion.dynamics.terms(t, q, qd, left_limit=True)
-    con = motion.constraints.terms(t, terms.ee_position, terms.ee_jacobian, terms.ee_bias, qd)
-    B = velocity_map(con.A, motion.independent, motion.dependent)
-    return B.T @ terms.Q, q
+    solution = motion.solve(t, q, np.zeros_like(q), left_limit=True)
+    return solution.velocity_map.T @ solution.dynamics.Q, q
 
 
 def static_equilibrium(motion: ProgrammedMotion, q_start: np.ndarray, t0: float = 0.0,

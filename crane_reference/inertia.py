@@ -56,11 +56,19 @@ def mass_matrix(S, Hc):
     """M with m_ij = tr(S_i Hc_max(i,j) S_j^T)."""
     n = S.shape[0]
     M = np.empty((n, n))
+    Y = np.empty((4, 4))
     for j in range(n):
-        Y = matmul4(Hc[j], S[j].T)
+        for a in range(4):
+            for b in range(4):
+                Y[a, b] = Hc[j, a, 0] * S[j, b, 0] + Hc[j, a, 1] * S[j, b, 1] + Hc[j, a, 2] * S[j, b, 2] \
+                    + Hc[j, a, 3] * S[j, b, 3]
         for i in range(j + 1):
-            M[i, j] = trace_product(S[i], Y)
-            M[j, i] = M[i, j]
+            total = 0.0
+            for a in range(3):
+                for b in range(4):
+                    total += S[i, a, b] * Y[b, a]
+            M[i, j] = total
+            M[j, i] = total
     return M
 
 

@@ -29,9 +29,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import lu_factor, lu_solve
 
-from .programmed_motion import MotionSolution, ProgrammedMotion
+from . import kernels
+from .programmed_motion import MotionSolution, ProgrammedMotion, ProjectionError
 
 
 class IntegrationError(RuntimeError):
@@ -73,7 +73,7 @@ class StepState:
 
 
 class GeneralizedAlpha:
-    """Generalized-alpha stepper for a :class:`ProgrammedMotion`."""
+    """Generalized-alpha stepper for a :class:`ProgrammedMotion` (one compiled call per step)."""
 
     def __init__(self, motion: ProgrammedMotion, rho_inf: float = 0.8, tolerance: float = 1e-12,
                  max_iterations: int = 30):
@@ -81,9 +81,6 @@ class GeneralizedAlpha:
         self.coefficients = GeneralizedAlphaParameters.from_spectral_radius(rho_inf)
         self.tolerance = tolerance
         self.max_iterations = max_iterations
-        model = motion.dynamics.model
-        self._stiffness = model.stiffness
-        self._damping = motion.dynamics.damping_matrix
 
     def start(self, t: float, q: np.ndarray, qd: np.ndarray) -> StepState:
         """Consistent start: q_dc from the position constraints, qd_dc from (7), qdd from (8)."""
@@ -98,43 +95,21 @@ class GeneralizedAlpha:
         solution = self.motion.solve(state.t, state.q, state.qd)
         return StepState(state.t, state.q, state.qd, solution, solution.qdd[self.motion.independent].copy())
 
-    def _evaluate(self, t: float, q_guess: np.ndarray, x: np.ndarray, v: np.ndarray, left_limit: bool):
-        motion = self.motion
-        q = q_guess.copy()
-        q[motion.independent] = x
-        q, kinematics = motion.project_positions(t, q)
-        qd = np.zeros_like(q)
-        qd[motion.independent] = v
-        qd = motion.dependent_velocities(t, q, qd, kinematics)
-        return q, qd, motion.solve(t, q, qd, left_limit)
-
     def step(self, state: StepState, h: float, ends_on_jump: bool = False) -> StepState:
         """Advance ``state`` by h [s].  A step ending on a drive jump (``ends_on_jump``) uses the
         drive's left limit there; continue with :meth:`restart` at the jump."""
         c = self.coefficients
-        ic = self.motion.independent
-        x0, v0 = state.q[ic], state.qd[ic]
-        a0, at0 = state.qdd[ic], state.pseudo_acceleration
-        ratio = (1.0 - c.alpha_f) / (1.0 - c.alpha_m)
-        beta_p, gamma_p = h * h * c.beta * ratio, h * c.gamma * ratio
+        motion = self.motion
         t1 = state.t + h
-        B = state.solution.velocity_map
-        iteration = lu_factor(B.T @ state.solution.dynamics.M @ B + beta_p * (B.T @ self._stiffness @ B)
-                              + gamma_p * (B.T @ self._damping @ B))
-        M_r = B.T @ state.solution.dynamics.M @ B
-        q_guess = state.q + h * state.qd + 0.5 * h * h * state.qdd
-        a1 = a0.copy()
-        for _ in range(self.max_iterations):
-            at1 = ((1.0 - c.alpha_f) * a1 + c.alpha_f * a0 - c.alpha_m * at0) / (1.0 - c.alpha_m)
-            x1 = x0 + h * v0 + h * h * ((0.5 - c.beta) * at0 + c.beta * at1)
-            v1 = v0 + h * ((1.0 - c.gamma) * at0 + c.gamma * at1)
-            q1, qd1, solution = self._evaluate(t1, q_guess, x1, v1, ends_on_jump)
-            q_guess = q1
-            correction = -lu_solve(iteration, M_r @ (a1 - solution.qdd[ic]))
-            a1 = a1 + correction
-            if beta_p * np.max(np.abs(correction)) <= self.tolerance:
-                break
-        else:
-            raise IntegrationError(f"generalized-alpha step from t = {state.t:.6g} s with h = {h:g} s did not converge "
-                                   f"in {self.max_iterations} iterations")
-        return StepState(t1, q1, qd1, solution, at1)
+        k, drive = motion.kernel_inputs(t1, ends_on_jump)
+        previous = state.solution
+        q1, qd1, at1, result, status = kernels.generalized_alpha_step(
+            state.q, state.qd, previous.qdd, state.pseudo_acceleration, previous.dynamics.M, previous.velocity_map,
+            h, c.alpha_m, c.alpha_f, c.gamma, c.beta, k.Q, k.g, k.c, drive, motion.independent, motion.dependent,
+            motion.dynamics.chain, self.tolerance, self.max_iterations, 1e-13)
+        if status == 2:
+            raise ProjectionError(f"position constraints cannot be met at t = {t1:.6g} s: the target is not reachable")
+        if status == 1:
+            raise IntegrationError(f"generalized-alpha step from t = {state.t:.6g} s with h = {h:g} s did not "
+                                   f"converge in {self.max_iterations} iterations")
+        return StepState(t1, q1, qd1, motion.solution_from_evaluation(t1, q1, qd1, result), at1)

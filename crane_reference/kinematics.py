@@ -58,75 +58,122 @@ def joint_motion(kind: int, axis: int, value: float) -> np.ndarray:
 
 @njit(cache=True)
 def forward_kinematics(q: np.ndarray, kinds: np.ndarray, axes: np.ndarray, origins: np.ndarray):
-    """World transforms T_k (n,4,4) of the frames after each joint and the joint twists S_k (n,4,4)."""
+    """World transforms T_k (n,4,4) of the frames after each joint and the joint twists S_k (n,4,4).
+
+    The joint motion is applied column-wise (a rotation about local axis a mixes the two other
+    columns; a translation adds q times column a to the position), and identity offsets are skipped.
+    """
     n = q.size
     T = np.empty((n, 4, 4))
     S = np.zeros((n, 4, 4))
-    previous = np.eye(4)
+    frame = np.eye(4)
     for k in range(n):
-        frame = matmul4(previous, origins[k])
+        origin = origins[k]
+        if k > 0:
+            frame = T[k - 1].copy()
+        if not (origin[0, 0] == 1.0 and origin[1, 1] == 1.0 and origin[2, 2] == 1.0
+                and origin[0, 3] == 0.0 and origin[1, 3] == 0.0 and origin[2, 3] == 0.0):
+            frame = matmul4(frame, origin)
         a = axes[k]
+        T[k] = frame
         if kinds[k] == PRISMATIC:
-            S[k, 0, 3] = frame[0, a]
-            S[k, 1, 3] = frame[1, a]
-            S[k, 2, 3] = frame[2, a]
-        else:
-            wx, wy, wz = frame[0, a], frame[1, a], frame[2, a]
-            px, py, pz = frame[0, 3], frame[1, 3], frame[2, 3]
-            S[k, 0, 1] = -wz
-            S[k, 0, 2] = wy
-            S[k, 1, 0] = wz
-            S[k, 1, 2] = -wx
-            S[k, 2, 0] = -wy
-            S[k, 2, 1] = wx
-            # -w^ p = p x w
-            S[k, 0, 3] = py * wz - pz * wy
-            S[k, 1, 3] = pz * wx - px * wz
-            S[k, 2, 3] = px * wy - py * wx
-        T[k] = matmul4(frame, joint_motion(kinds[k], a, q[k]))
-        previous = T[k]
+            for r in range(3):
+                S[k, r, 3] = frame[r, a]
+                T[k, r, 3] += frame[r, a] * q[k]
+            continue
+        wx, wy, wz = frame[0, a], frame[1, a], frame[2, a]
+        px, py, pz = frame[0, 3], frame[1, 3], frame[2, 3]
+        S[k, 0, 1] = -wz
+        S[k, 0, 2] = wy
+        S[k, 1, 0] = wz
+        S[k, 1, 2] = -wx
+        S[k, 2, 0] = -wy
+        S[k, 2, 1] = wx
+        # -w^ p = p x w
+        S[k, 0, 3] = py * wz - pz * wy
+        S[k, 1, 3] = pz * wx - px * wz
+        S[k, 2, 3] = px * wy - py * wx
+        c, s = np.cos(q[k]), np.sin(q[k])
+        i, j = (a + 1) % 3, (a + 2) % 3
+        for r in range(3):
+            fi, fj = frame[r, i], frame[r, j]
+            T[k, r, i] = c * fi + s * fj
+            T[k, r, j] = c * fj - s * fi
     return T, S
 
 
 @njit(cache=True)
 def velocity_terms(qd: np.ndarray, S: np.ndarray):
-    """Frame velocity twists V_k and the velocity-product acceleration terms B_k = A_k + V_k V_k."""
+    """Frame velocity twists V_k and the velocity-product acceleration terms B_k = A_k + V_k V_k.
+
+    Twists are handled as 6-vectors (w, v) with X = [[w^, v], [0, 0]]; the matrix commutator is
+    [X1, X2] = (w1 x w2, w1 x v2 - w2 x v1), and V V = [[w^ w^, w x v], [0, 0]].
+    """
     n = qd.size
     V = np.zeros((n, 4, 4))
     B = np.zeros((n, 4, 4))
-    V_prev = np.zeros((4, 4))
-    A_prev = np.zeros((4, 4))
+    wx = wy = wz = vx = vy = vz = 0.0
+    awx = awy = awz = avx = avy = avz = 0.0
     for k in range(n):
-        A_k = A_prev + (matmul4(V_prev, S[k]) - matmul4(S[k], V_prev)) * qd[k]
-        V[k] = V_prev + S[k] * qd[k]
-        B[k] = A_k + matmul4(V[k], V[k])
-        V_prev = V[k]
-        A_prev = A_k
+        u = qd[k]
+        sx, sy, sz = S[k, 2, 1], S[k, 0, 2], S[k, 1, 0]
+        tx, ty, tz = S[k, 0, 3], S[k, 1, 3], S[k, 2, 3]
+        # A_k = A_{k-1} + [V_{k-1}, S_k] qd_k
+        awx += (wy * sz - wz * sy) * u
+        awy += (wz * sx - wx * sz) * u
+        awz += (wx * sy - wy * sx) * u
+        avx += ((wy * tz - wz * ty) - (sy * vz - sz * vy)) * u
+        avy += ((wz * tx - wx * tz) - (sz * vx - sx * vz)) * u
+        avz += ((wx * ty - wy * tx) - (sx * vy - sy * vx)) * u
+        wx += sx * u
+        wy += sy * u
+        wz += sz * u
+        vx += tx * u
+        vy += ty * u
+        vz += tz * u
+        V[k, 0, 1], V[k, 0, 2], V[k, 1, 2] = -wz, wy, -wx
+        V[k, 1, 0], V[k, 2, 0], V[k, 2, 1] = wz, -wy, wx
+        V[k, 0, 3], V[k, 1, 3], V[k, 2, 3] = vx, vy, vz
+        ww = wx * wx + wy * wy + wz * wz
+        B[k, 0, 0], B[k, 1, 1], B[k, 2, 2] = wx * wx - ww, wy * wy - ww, wz * wz - ww
+        B[k, 0, 1], B[k, 0, 2] = wx * wy - awz, wx * wz + awy
+        B[k, 1, 0], B[k, 1, 2] = wy * wx + awz, wy * wz - awx
+        B[k, 2, 0], B[k, 2, 1] = wz * wx - awy, wz * wy + awx
+        B[k, 0, 3] = avx + wy * vz - wz * vy
+        B[k, 1, 3] = avy + wz * vx - wx * vz
+        B[k, 2, 3] = avz + wx * vy - wy * vx
     return V, B
+
+
+@njit(cache=True)
+def _point_jacobian(T: np.ndarray, S: np.ndarray, joint: int, point: np.ndarray):
+    """World position p of a point fixed after ``joint`` and its Jacobian C = J [S_1 p ... S_n p] (3, n)."""
+    n = S.shape[0]
+    F = T[joint]
+    p = np.empty(3)
+    for r in range(3):
+        p[r] = F[r, 0] * point[0] + F[r, 1] * point[1] + F[r, 2] * point[2] + F[r, 3]
+    C = np.zeros((3, n))
+    for i in range(joint + 1):
+        for r in range(3):
+            C[r, i] = S[i, r, 0] * p[0] + S[i, r, 1] * p[1] + S[i, r, 2] * p[2] + S[i, r, 3]
+    return p, C
 
 
 @njit(cache=True)
 def point_kinematics(T: np.ndarray, S: np.ndarray, B: np.ndarray, joint: int, point: np.ndarray):
     """Position p, Jacobian C (3,n) and velocity-product acceleration d (3) of a point fixed in the
     frame after ``joint`` (the paper's C = J[T_1 r ... T_n r], d = J sum_ij T_ij qd_i qd_j r)."""
-    n = S.shape[0]
-    r = np.array([point[0], point[1], point[2], 1.0])
-    p_h = T[joint] @ r
-    C = np.zeros((3, n))
-    for i in range(joint + 1):
-        C[:, i] = (S[i] @ p_h)[:3]
-    d = (B[joint] @ p_h)[:3]
-    return p_h[:3].copy(), C, d
+    p, C = _point_jacobian(T, S, joint, point)
+    Bj = B[joint]
+    d = np.empty(3)
+    for r in range(3):
+        d[r] = Bj[r, 0] * p[0] + Bj[r, 1] * p[1] + Bj[r, 2] * p[2] + Bj[r, 3]
+    return p, C, d
 
 
 @njit(cache=True)
 def point_position_jacobian(q, kinds, axes, origins, joint, point):
     """Position and Jacobian of a point fixed after ``joint``, without velocity terms (for projection)."""
     T, S = forward_kinematics(q, kinds, axes, origins)
-    n = q.size
-    r = np.array([point[0], point[1], point[2], 1.0])
-    p_h = T[joint] @ r
-    C = np.zeros((3, n))
-    for i in range(joint + 1):
-        C[:, i] = (S[i] @ p_h)[:3]
-    return p_h[:3].copy(), C
+    return _point_jacobian(T, S, joint, point)

@@ -25,9 +25,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
-from .constraints import ConstraintSet, ConstraintTerms
+from . import kernels
+from .constraints import ConstraintCoefficients, ConstraintSet, ConstraintTerms
 from .dynamics import CraneDynamics, DynamicsTerms
 
 
@@ -56,29 +56,6 @@ class MotionSolution:
         return self.constraints.A.T @ self.multipliers
 
 
-@njit(cache=True)
-def velocity_map(A: np.ndarray, independent: np.ndarray, dependent: np.ndarray) -> np.ndarray:
-    """B = d qd / d qd_ic (n, n_ic): identity rows on ic, Gamma = -K_dc^-1 K_ic rows on dc."""
-    n_ic = independent.size
-    B = np.zeros((A.shape[1], n_ic))
-    for col in range(n_ic):
-        B[independent[col], col] = 1.0
-    gamma = -np.linalg.solve(np.ascontiguousarray(A[:, dependent]), np.ascontiguousarray(A[:, independent]))
-    for row in range(dependent.size):
-        B[dependent[row]] = gamma[row]
-    return B
-
-
-@njit(cache=True)
-def programmed_accelerations(M, h, Q, A, c, B):
-    """Solve (8) for qdd, then lambda from A A^T lambda = A (M qdd + h - Q)."""
-    lhs = np.vstack((B.T @ M, A))
-    rhs = np.concatenate((B.T @ (Q - h), c))
-    qdd = np.linalg.solve(lhs, rhs)
-    multipliers = np.linalg.solve(A @ A.T, A @ (M @ qdd + h - Q))
-    return qdd, multipliers
-
-
 def smallest_singular_value(K: np.ndarray) -> float:
     """Smallest singular value of a square matrix (closed form for 2 x 2, the paper's K_dc)."""
     if K.shape == (2, 2):
@@ -90,15 +67,16 @@ def smallest_singular_value(K: np.ndarray) -> float:
 
 
 class ProgrammedMotion:
-    """Equations (7)-(8) of a crane model under a :class:`ConstraintSet`."""
+    """Equations (7)-(8) of a crane model under a :class:`ConstraintSet` (evaluated by the compiled
+    kernels of :mod:`crane_reference.kernels`)."""
 
     def __init__(self, dynamics: CraneDynamics, constraints: ConstraintSet,
                  dependent: tuple[int, ...] | None = None, min_singular_value: float = 1e-3):
         model = dynamics.model
         self.dynamics = dynamics
         self.constraints = constraints
-        self.dependent = np.array(model.dependent_joints if dependent is None else dependent)
-        self.independent = np.array([k for k in range(model.dof) if k not in self.dependent])
+        self.dependent = np.array(model.dependent_joints if dependent is None else dependent, dtype=np.int64)
+        self.independent = np.array([k for k in range(model.dof) if k not in self.dependent], dtype=np.int64)
         if len(self.dependent) != constraints.size:
             raise ValueError(f"{constraints.size} constraints need as many dependent coordinates, "
                              f"got {len(self.dependent)}")
@@ -108,46 +86,52 @@ class ProgrammedMotion:
     def dof(self) -> int:
         return self.dynamics.model.dof
 
-    def _check_kdc(self, K_dc: np.ndarray) -> float:
-        sigma = smallest_singular_value(K_dc)
+    def check_singularity(self, A: np.ndarray) -> float:
+        """Smallest singular value of K_dc = A[:, dc]; raises if below the minimum."""
+        sigma = smallest_singular_value(A[:, self.dependent])
         if not sigma >= self.min_singular_value:
             raise ConstraintSingularityError(
-                f"smallest singular value of K_dc = {sigma:.3g} m/rad is below {self.min_singular_value:g}: "
+                f"smallest singular value of K_dc = {sigma:.3g} is below {self.min_singular_value:g}: "
                 "the end-effector task is at or near a stretch/fold singularity")
         return sigma
-
-    def dependent_velocities(self, t: float, q: np.ndarray, qd: np.ndarray,
-                             kinematics: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
-        """qd with its dependent part replaced by eq. (7); ``kinematics`` = (p_E, C) at q if known."""
-        p, C = self.dynamics.end_effector(q) if kinematics is None else kinematics
-        A = self.constraints.position_jacobian(t, p) @ C
-        b = -np.array([c.time_derivative(t, p) for c in self.constraints.constraints])
-        qd = qd.copy()
-        qd[self.dependent] = np.linalg.solve(A[:, self.dependent], b - A[:, self.independent] @ qd[self.independent])
-        return qd
 
     def project_positions(self, t: float, q: np.ndarray, tolerance: float = 1e-13,
                           max_iterations: int = 25) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """q with q_dc solved from Phi(q, t) = 0 (Newton, Jacobian K_dc = Phi_p C[:, dc]), and (p_E, C)
         from the last Newton iterate (within ``tolerance`` of the returned q)."""
-        q = q.copy()
-        for _ in range(max_iterations):
-            p, C = self.dynamics.end_effector(q)
-            residual = self.constraints.residual(t, p)
-            K_dc = self.constraints.position_jacobian(t, p) @ C[:, self.dependent]
-            step = np.linalg.solve(K_dc, residual)
-            q[self.dependent] -= step
-            if np.max(np.abs(step)) <= tolerance:
-                return q, (p, C)
-        raise ProjectionError(f"position constraints not met after {max_iterations} Newton iterations at t = {t:.6g} s "
-                              f"(residual {np.max(np.abs(residual)):.3g}): the target is not reachable from here")
+        k = self.constraints.coefficients(t)
+        q, p, C, converged = kernels.project_positions(np.ascontiguousarray(q, dtype=float), k.Q, k.g, k.c,
+                                                       self.independent, self.dependent, self.dynamics.chain,
+                                                       tolerance, max_iterations)
+        if not converged:
+            raise ProjectionError(f"position constraints not met after {max_iterations} Newton iterations at "
+                                  f"t = {t:.6g} s: the target is not reachable from here")
+        return q, (p, C)
+
+    def dependent_velocities(self, t: float, q: np.ndarray, qd: np.ndarray,
+                             kinematics: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+        """qd with its dependent part replaced by eq. (7); ``kinematics`` = (p_E, C) at q if known."""
+        p, C = self.dynamics.end_effector(q) if kinematics is None else kinematics
+        k = self.constraints.coefficients(t)
+        return kernels.dependent_velocities(np.ascontiguousarray(qd, dtype=float), p, C, k.Q, k.g, k.c,
+                                            self.independent, self.dependent)
+
+    def solution_from_evaluation(self, t: float, q: np.ndarray, qd: np.ndarray, result: tuple) -> MotionSolution:
+        """Wrap the arrays returned by :func:`kernels.evaluate` (checks the singularity)."""
+        M, h, Q, Vg, p, R, C, d, residual, grads, A, b, c, B, qdd, multipliers = result
+        sigma = self.check_singularity(A)
+        return MotionSolution(qdd, multipliers, DynamicsTerms(M, h, Q, p, R, C, d, Vg),
+                              ConstraintTerms(residual, grads, A, b, c), B, sigma)
+
+    def kernel_inputs(self, t: float, left_limit: bool = False) -> tuple[ConstraintCoefficients, np.ndarray]:
+        """Constraint coefficients and drive parameters at t for the compiled solver."""
+        return self.constraints.coefficients(t), self.dynamics.drive.kernel_parameters(t, left_limit)
 
     def solve(self, t: float, q: np.ndarray, qd: np.ndarray, left_limit: bool = False) -> MotionSolution:
         """qdd from the programmed motion equations (8) and the multipliers lambda (drive taken just
         before t with ``left_limit``)."""
-        dyn = self.dynamics.terms(t, q, qd, left_limit)
-        con = self.constraints.terms(t, dyn.ee_position, dyn.ee_jacobian, dyn.ee_bias, qd)
-        sigma = self._check_kdc(con.A[:, self.dependent])
-        B = velocity_map(con.A, self.independent, self.dependent)
-        qdd, multipliers = programmed_accelerations(dyn.M, dyn.h, dyn.Q, con.A, con.c, B)
-        return MotionSolution(qdd, multipliers, dyn, con, B, sigma)
+        k, drive = self.kernel_inputs(t, left_limit)
+        q = np.ascontiguousarray(q, dtype=float)
+        qd = np.ascontiguousarray(qd, dtype=float)
+        result = kernels.evaluate(q, qd, k.Q, k.g, k.c, drive, self.independent, self.dependent, self.dynamics.chain)
+        return self.solution_from_evaluation(t, q, qd, result)

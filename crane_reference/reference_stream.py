@@ -26,11 +26,11 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .constraints import ConstraintSet, EllipseXY, HeightZ, paper_constraints
+from .equilibrium import static_equilibrium
 from .integration import IntegrationError
 from .parameters import CraneParameters, FlexibleDrive, Task, TorqueDrive
 from .profiles import Blend, Constant, Profile, QuinticRise
 from .programmed_motion import ConstraintSingularityError, ProgrammedMotion, ProjectionError
-from .equilibrium import static_equilibrium
 from .simulation import MotionStepper, Scenario
 
 RUNNING, PAUSED, ERROR = "RUNNING", "PAUSED", "ERROR"
@@ -187,7 +187,7 @@ class ReferenceStream:
     def _from_sample(self, s) -> ReferenceSample:
         effort = s.constraint_forces.copy()
         effort[self.model.drive_joint] += s.drive_torque
-        return ReferenceSample(s.t, s.q, s.qd, s.qdd, effort, s.ee_position, s.ee_quaternion,
+        return ReferenceSample(s.t, s.q, s.qd, s.qdd, effort, s.ee_position, Rotation.from_matrix(s.ee_rotation).as_quat(),
                                float(np.max(s.residual_distance)), False)
 
     def sample(self, tau: float) -> ReferenceSample:

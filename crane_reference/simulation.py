@@ -12,7 +12,6 @@ the converged reference for accuracy checks.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.integrate import solve_ivp

@@ -20,7 +20,7 @@ from .programmed_motion import MotionSolution
 
 @dataclass(frozen=True)
 class Sample:
-    """One instant of the motion."""
+    """One instant of the motion (E's orientation as the rotation matrix of link 4's frame)."""
 
     t: float
     q: np.ndarray
@@ -30,7 +30,7 @@ class Sample:
     constraint_forces: np.ndarray
     drive_torque: float
     ee_position: np.ndarray
-    ee_quaternion: np.ndarray
+    ee_rotation: np.ndarray
     ee_velocity: np.ndarray
     residual: np.ndarray
     residual_distance: np.ndarray
@@ -49,7 +49,7 @@ def make_sample(t: float, q: np.ndarray, qd: np.ndarray, solution: MotionSolutio
     return Sample(
         t=t, q=q, qd=qd, qdd=solution.qdd, multipliers=solution.multipliers,
         constraint_forces=solution.constraint_forces, drive_torque=drive_torque,
-        ee_position=dyn.ee_position, ee_quaternion=Rotation.from_matrix(dyn.ee_rotation).as_quat(),
+        ee_position=dyn.ee_position, ee_rotation=dyn.ee_rotation,
         ee_velocity=dyn.ee_jacobian @ qd, residual=con.residual, residual_distance=con.distance,
         kdc_min_singular_value=solution.kdc_min_singular_value, kinetic_energy=kinetic,
         potential_energy=potential, work_drive=work[0], work_constraints=work[1], work_damping=work[2],
@@ -85,6 +85,7 @@ class Trajectory:
     @classmethod
     def from_samples(cls, variant: str, joint_names: list[str], drive_joint: int, samples: list[Sample]) -> Trajectory:
         arrays = {f.name: np.array([getattr(s, f.name) for s in samples]) for f in fields(Sample)}
+        arrays["ee_quaternion"] = Rotation.from_matrix(arrays.pop("ee_rotation")).as_quat()
         return cls(variant=variant, joint_names=tuple(joint_names), drive_joint=drive_joint, **arrays)
 
     @property
