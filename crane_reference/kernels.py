@@ -128,7 +128,7 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
     q_guess = q0 + h * qd0 + 0.5 * h * h * qdd0
     a1 = a0.copy()
     status = 1
-    for _ in range(max_iterations):
+    for iteration in range(max_iterations):
         at1 = ((1.0 - alpha_f) * a1 + alpha_f * a0 - alpha_m * at0) / (1.0 - alpha_m)
         x1 = x0 + h * v0 + h * h * ((0.5 - beta) * at0 + beta * at1)
         v1 = v0 + h * ((1.0 - gamma) * at0 + gamma * at1)
@@ -144,7 +144,9 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
         q_guess = q1
         correction = -(iteration_inverse @ (M_r @ (a1 - result[14][independent])))
         a1 = a1 + correction
-        if beta_p * np.max(np.abs(correction)) <= tolerance:
+        # Accept only an iterate that already includes a Newton correction: stopping at the predictor
+        # (possible near rest, where every correction is tiny) would make the step explicit.
+        if iteration > 0 and beta_p * np.max(np.abs(correction)) <= tolerance:
             status = 0
             break
     return q1, qd1, at1, result, status

@@ -128,7 +128,8 @@ def _base_joints() -> list[Joint]:
     return [Joint(name, kind, AXES[axis], np.eye(4)) for name, kind, axis in names]
 
 
-def _boom_joints_and_bodies(boom: Boom, rfe_count: int, first_joint: int) -> tuple[list[Joint], list[Body], np.ndarray, np.ndarray]:
+def _boom_joints_and_bodies(boom: Boom, rfe_count: int,
+                            first_joint: int) -> tuple[list[Joint], list[Body], np.ndarray, np.ndarray]:
     """Luff joint, the RFE spring triples and the element bodies; returns joints, bodies, the boom
     stiffness diagonal for these joints and the element lengths."""
     beam = discretise_beam(boom.length, rfe_count, boom.youngs_modulus, boom.shear_modulus,
@@ -165,8 +166,8 @@ def build_model(params: CraneParameters, variant: str = "flexible") -> ChainMode
     knuckle = len(joints) - 1
     bodies.append(Body("link4", knuckle, params.link4.body))
     if params.payload_mass > 0.0:
-        bodies.append(Body("payload", knuckle,
-                           RigidBody(params.payload_mass, np.asarray(params.link4.end_effector, float), np.zeros((3, 3)))))
+        payload = RigidBody(params.payload_mass, np.asarray(params.link4.end_effector, float), np.zeros((3, 3)))
+        bodies.append(Body("payload", knuckle, payload))
 
     n = len(joints)
     K_support = np.zeros((n, n))

@@ -34,7 +34,7 @@ def figure2(trajectories: list[Trajectory], ellipse: tuple[float, float], path: 
         if {"rigid", "flexible"} <= by_variant.keys():
             rigid, flexible = by_variant["rigid"], by_variant["flexible"]
             difference = flexible.coordinate(name) - np.interp(flexible.t, rigid.t, rigid.coordinate(name))
-            window = max(1, int(round(MEAN_WINDOW / np.median(np.diff(flexible.t)))))
+            window = max(1, round(float(MEAN_WINDOW / np.median(np.diff(flexible.t)))))
             twin = ax.twinx()
             twin.plot(flexible.t, difference, color="0.75", lw=0.5)
             twin.plot(flexible.t, uniform_filter1d(difference, window), color="k", lw=1.2,
@@ -62,7 +62,7 @@ def figure2(trajectories: list[Trajectory], ellipse: tuple[float, float], path: 
     ax.grid(True, alpha=0.3)
     ax = axes[1, 2]
     for tr in trajectories:
-        window = max(1, int(round(MEAN_WINDOW / np.median(np.diff(tr.t)))))
+        window = max(1, round(float(MEAN_WINDOW / np.median(np.diff(tr.t)))))
         worst = maximum_filter1d(tr.residual_distance.max(axis=1), window)
         ax.semilogy(tr.t, np.maximum(worst, 1e-18), lw=1.0, label=tr.variant, **styles[tr.variant])
     ax.set_xlabel("t [s]")

@@ -187,7 +187,8 @@ class ReferenceStream:
     def _from_sample(self, s) -> ReferenceSample:
         effort = s.constraint_forces.copy()
         effort[self.model.drive_joint] += s.drive_torque
-        return ReferenceSample(s.t, s.q, s.qd, s.qdd, effort, s.ee_position, Rotation.from_matrix(s.ee_rotation).as_quat(),
+        quaternion = Rotation.from_matrix(s.ee_rotation).as_quat()
+        return ReferenceSample(s.t, s.q, s.qd, s.qdd, effort, s.ee_position, quaternion,
                                float(np.max(s.residual_distance)), False)
 
     def sample(self, tau: float) -> ReferenceSample:

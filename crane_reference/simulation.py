@@ -12,6 +12,7 @@ the converged reference for accuracy checks.
 from __future__ import annotations
 
 from collections.abc import Callable
+from itertools import pairwise
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -170,7 +171,7 @@ def simulate_reference(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, s
     edges = sorted({t0, t_end, *(b for b in dyn.drive.breakpoints if t0 < b < t_end)})
     y = np.concatenate([start.q[ic], start.qd[ic], np.zeros(3)])
     samples: list[Sample] = []
-    for a, b in zip(edges[:-1], edges[1:], strict=True):
+    for a, b in pairwise(edges):
         def rhs(t: float, y: np.ndarray, b: float = b) -> np.ndarray:
             q, qd = full_state(t, y)
             solution = motion.solve(t, q, qd, left_limit=t >= b)
