@@ -81,6 +81,8 @@ class GeneralizedAlpha:
         self.coefficients = GeneralizedAlphaParameters.from_spectral_radius(rho_inf)
         self.tolerance = tolerance
         self.max_iterations = max_iterations
+        self.last_iterations = 0
+        """Newton iterations of the last step (a diagnostic)."""
 
     def start(self, t: float, q: np.ndarray, qd: np.ndarray) -> StepState:
         """Consistent start: q_dc from the position constraints, qd_dc from (7), qdd from (8)."""
@@ -103,7 +105,7 @@ class GeneralizedAlpha:
         t1 = state.t + h
         k, drive = motion.kernel_inputs(t1, ends_on_jump)
         previous = state.solution
-        q1, qd1, at1, result, status = kernels.generalized_alpha_step(
+        q1, qd1, at1, result, status, iterations = kernels.generalized_alpha_step(
             state.q, state.qd, previous.qdd, state.pseudo_acceleration, previous.dynamics.M, previous.velocity_map,
             h, c.alpha_m, c.alpha_f, c.gamma, c.beta, k.Q, k.g, k.c, drive, motion.independent, motion.dependent,
             motion.dynamics.chain, self.tolerance, self.max_iterations, 1e-13)
@@ -112,4 +114,5 @@ class GeneralizedAlpha:
         if status == 1:
             raise IntegrationError(f"generalized-alpha step from t = {state.t:.6g} s with h = {h:g} s did not "
                                    f"converge in {self.max_iterations} iterations")
+        self.last_iterations = iterations
         return StepState(t1, q1, qd1, motion.solution_from_evaluation(t1, q1, qd1, result), at1)

@@ -117,8 +117,8 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
                            independent, dependent, chain, tolerance, max_iterations, projection_tolerance):
     """One generalized-alpha step on the independent coordinates (see :mod:`crane_reference.integration`).
 
-    Returns q1, qd1, a~1, the evaluation at (q1, qd1), and a status: 0 converged, 1 Newton did not
-    converge, 2 the position constraints could not be solved."""
+    Returns q1, qd1, a~1, the evaluation at (q1, qd1), a status (0 converged, 1 Newton did not converge,
+    2 the position constraints could not be solved) and the number of Newton iterations."""
     K, D = chain[8], chain[9]
     x0, v0, a0 = q0[independent], qd0[independent], qdd0[independent]
     ratio = (1.0 - alpha_f) / (1.0 - alpha_m)
@@ -136,7 +136,7 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
         q1[independent] = x1
         q1, p, C, projected = project_positions(q1, Q, g, c, independent, dependent, chain, projection_tolerance, 25)
         if not projected:
-            return q0, qd0, at0, evaluate(q0, qd0, Q, g, c, drive, independent, dependent, chain), 2
+            return q0, qd0, at0, evaluate(q0, qd0, Q, g, c, drive, independent, dependent, chain), 2, iteration + 1
         qd1 = np.zeros_like(q1)
         qd1[independent] = v1
         qd1 = dependent_velocities(qd1, p, C, Q, g, c, independent, dependent)
@@ -149,4 +149,4 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
         if iteration > 0 and beta_p * np.max(np.abs(correction)) <= tolerance:
             status = 0
             break
-    return q1, qd1, at1, result, status
+    return q1, qd1, at1, result, status, iteration + 1
