@@ -1,9 +1,9 @@
 """Consistent start: static equilibrium of the constrained crane.
 
-At rest (qd = 0, so h = 0) the programmed motion equations (8) reduce to B^T Q(q) = 0 on the
+At rest (qd = 0, so h = 0) the programmed motion equations (8) reduce to P^T Q(q) = 0 on the
 independent directions, together with Phi(q, 0) = 0.  The column is held by the drive at its initial
 angle, so the psi2 row is not balanced by the free system but by the drive's holding torque
-t_hold = -(B^T Q)_psi2, which is reported (zero for the symmetric default layout).  All other
+t_hold = -(P^T Q)_psi2, which is reported (zero for the symmetric default layout).  All other
 independent coordinates (base, RFE angles) are free and settle under gravity and the springs; the
 dependent coordinates follow from the constraints.  The drive's own torque is taken just before t0
 (off for the paper's torque step, zero for a spring drive whose motor angle starts at psi2).
@@ -31,10 +31,11 @@ class Equilibrium:
 
 
 def reduced_static_forces(motion: ProgrammedMotion, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(B^T Q at qd = 0 [N or N m per independent coordinate], q with q_dc projected)."""
+    """(P^T Q at qd = 0 [N or N m per independent coordinate], q with q_dc projected); P = B for ideal
+    constraints, E_ic for servo-constraints (see :class:`ProgrammedMotion`)."""
     q, _ = motion.project_positions(t, q)
     solution = motion.solve(t, q, np.zeros_like(q), left_limit=True)
-    return solution.velocity_map.T @ solution.dynamics.Q, q
+    return motion.projection(solution).T @ solution.dynamics.Q, q
 
 
 def static_equilibrium(motion: ProgrammedMotion, q_start: np.ndarray, t0: float = 0.0,

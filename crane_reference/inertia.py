@@ -22,7 +22,6 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .kinematics import matmul4
 
 
 @njit(cache=True)
@@ -30,14 +29,27 @@ def composite_inertias(T, B, body_joint, body_H, n):
     """Suffix sums Hc_k of world pseudo-inertias and G_k of Hc B^T over the bodies beyond joint k."""
     Hc = np.zeros((n, 4, 4))
     G = np.zeros((n, 4, 4))
+    TH = np.empty((4, 4))
+    Hw = np.empty((4, 4))
     for body in range(body_joint.size):
         k = body_joint[body]
-        Hw = matmul4(matmul4(T[k], body_H[body]), T[k].T)
-        Hc[k] += Hw
-        G[k] += matmul4(Hw, B[k].T)
+        Tk, H, Bk = T[k], body_H[body], B[k]
+        for a in range(4):
+            for b in range(4):
+                TH[a, b] = Tk[a, 0] * H[0, b] + Tk[a, 1] * H[1, b] + Tk[a, 2] * H[2, b] + Tk[a, 3] * H[3, b]
+        for a in range(4):
+            for b in range(a, 4):
+                Hw[a, b] = TH[a, 0] * Tk[b, 0] + TH[a, 1] * Tk[b, 1] + TH[a, 2] * Tk[b, 2] + TH[a, 3] * Tk[b, 3]
+                Hw[b, a] = Hw[a, b]
+        for a in range(4):
+            for b in range(4):
+                Hc[k, a, b] += Hw[a, b]
+                G[k, a, b] += Hw[a, 0] * Bk[b, 0] + Hw[a, 1] * Bk[b, 1] + Hw[a, 2] * Bk[b, 2] + Hw[a, 3] * Bk[b, 3]
     for k in range(n - 2, -1, -1):
-        Hc[k] += Hc[k + 1]
-        G[k] += G[k + 1]
+        for a in range(4):
+            for b in range(4):
+                Hc[k, a, b] += Hc[k + 1, a, b]
+                G[k, a, b] += G[k + 1, a, b]
     return Hc, G
 
 

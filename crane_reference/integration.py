@@ -108,7 +108,7 @@ class GeneralizedAlpha:
         q1, qd1, at1, result, status, iterations = kernels.generalized_alpha_step(
             state.q, state.qd, previous.qdd, state.pseudo_acceleration, previous.dynamics.M, previous.velocity_map,
             h, c.alpha_m, c.alpha_f, c.gamma, c.beta, k.Q, k.g, k.c, drive, motion.independent, motion.dependent,
-            motion.dynamics.chain, self.tolerance, self.max_iterations, 1e-13)
+            motion.dynamics.chain, motion.servo, self.tolerance, self.max_iterations, 1e-13)
         if status == 2:
             raise ProjectionError(f"position constraints cannot be met at t = {t1:.6g} s: the target is not reachable")
         if status == 1:

@@ -96,8 +96,22 @@ def dependent_velocities(qd, p, C, Q, g, c, independent, dependent):
 
 
 @njit(cache=True)
-def evaluate(q, qd, Q, g, c, drive, independent, dependent, chain):
-    """Everything (8) needs and gives at (q, qd): dynamics terms, constraint terms, B, qdd, lambda."""
+def projection_matrix(B, independent, servo):
+    """Rows of the dynamics kept in (8): P = B for ideal constraints (projection on the directions the
+    constraints allow), P = E_ic (the unactuated coordinates' own rows) for servo-constraints."""
+    if not servo:
+        return B
+    P = np.zeros_like(B)
+    for col in range(independent.size):
+        P[independent[col], col] = 1.0
+    return P
+
+
+@njit(cache=True)
+def evaluate(q, qd, Q, g, c, drive, independent, dependent, chain, servo):
+    """Everything (8) needs and gives at (q, qd): dynamics terms, constraint terms, B, qdd, the
+    reactions (lambda for ideal constraints, the dependent joints' torques tau for servo-constraints)
+    and the generalized force they exert, M qdd + h - Q (= A^T lambda, or E_dc tau)."""
     kinds, axes, origins, body_joint, body_H, gravity, ee_joint, ee_point, K, D, drive_joint = chain
     M, h, Qg, Vg, p, R, C, d = chain_terms(q, qd, kinds, axes, origins, body_joint, body_H, gravity, ee_joint,
                                            ee_point)
@@ -105,16 +119,21 @@ def evaluate(q, qd, Q, g, c, drive, independent, dependent, chain):
     forces[drive_joint] += drive[0] + drive[1] * (drive[2] - q[drive_joint])
     residual, grads, A, b, c_acc = constraint_terms(p, C @ qd, C, d, Q, g, c)
     B = velocity_map(A, independent, dependent)
-    lhs = np.vstack((B.T @ M, A))
-    rhs = np.concatenate((B.T @ (forces - h), c_acc))
+    P = projection_matrix(B, independent, servo)
+    lhs = np.vstack((P.T @ M, A))
+    rhs = np.concatenate((P.T @ (forces - h), c_acc))
     qdd = np.linalg.solve(lhs, rhs)
-    multipliers = np.linalg.solve(A @ A.T, A @ (M @ qdd + h - forces))
-    return M, h, forces, Vg, p, R, C, d, residual, grads, A, b, c_acc, B, qdd, multipliers
+    reaction_force = M @ qdd + h - forces
+    if servo:
+        reactions = reaction_force[dependent]
+    else:
+        reactions = np.linalg.solve(A @ A.T, A @ reaction_force)
+    return M, h, forces, Vg, p, R, C, d, residual, grads, A, b, c_acc, B, qdd, reactions, reaction_force
 
 
 @njit(cache=True)
 def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamma, beta, Q, g, c, drive,
-                           independent, dependent, chain, tolerance, max_iterations, projection_tolerance):
+                           independent, dependent, chain, servo, tolerance, max_iterations, projection_tolerance):
     """One generalized-alpha step on the independent coordinates (see :mod:`crane_reference.integration`).
 
     Returns q1, qd1, a~1, the evaluation at (q1, qd1), a status (0 converged, 1 Newton did not converge,
@@ -123,8 +142,9 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
     x0, v0, a0 = q0[independent], qd0[independent], qdd0[independent]
     ratio = (1.0 - alpha_f) / (1.0 - alpha_m)
     beta_p, gamma_p = h * h * beta * ratio, h * gamma * ratio
-    M_r = B0.T @ M0 @ B0
-    iteration_inverse = np.linalg.inv(M_r + beta_p * (B0.T @ K @ B0) + gamma_p * (B0.T @ D @ B0))
+    P0 = projection_matrix(B0, independent, servo)
+    M_r = P0.T @ M0 @ B0
+    iteration_inverse = np.linalg.inv(M_r + beta_p * (P0.T @ K @ B0) + gamma_p * (P0.T @ D @ B0))
     q_guess = q0 + h * qd0 + 0.5 * h * h * qdd0
     a1 = a0.copy()
     status = 1
@@ -136,11 +156,11 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
         q1[independent] = x1
         q1, p, C, projected = project_positions(q1, Q, g, c, independent, dependent, chain, projection_tolerance, 25)
         if not projected:
-            return q0, qd0, at0, evaluate(q0, qd0, Q, g, c, drive, independent, dependent, chain), 2, iteration + 1
+            return q0, qd0, at0, evaluate(q0, qd0, Q, g, c, drive, independent, dependent, chain, servo), 2, iteration + 1
         qd1 = np.zeros_like(q1)
         qd1[independent] = v1
         qd1 = dependent_velocities(qd1, p, C, Q, g, c, independent, dependent)
-        result = evaluate(q1, qd1, Q, g, c, drive, independent, dependent, chain)
+        result = evaluate(q1, qd1, Q, g, c, drive, independent, dependent, chain, servo)
         q_guess = q1
         correction = -(iteration_inverse @ (M_r @ (a1 - result[14][independent])))
         a1 = a1 + correction

@@ -39,21 +39,25 @@ class ProjectionError(RuntimeError):
     """The position constraints could not be solved for the dependent coordinates."""
 
 
+REALISATIONS = ("ideal", "servo")
+
+
 @dataclass(frozen=True)
 class MotionSolution:
-    """The result of (8) at one state."""
+    """The result of (8) at one state.
+
+    ``reactions`` are the Lagrange multipliers lambda of Phi (ideal constraints) or the dependent
+    joints' torques tau [N m] (servo-constraints); ``constraint_forces`` the generalized force they
+    exert, M qdd + h - Q (= A^T lambda, or tau on the dependent coordinates).
+    """
 
     qdd: np.ndarray
-    multipliers: np.ndarray
+    reactions: np.ndarray
+    constraint_forces: np.ndarray
     dynamics: DynamicsTerms
     constraints: ConstraintTerms
     velocity_map: np.ndarray
     kdc_min_singular_value: float
-
-    @property
-    def constraint_forces(self) -> np.ndarray:
-        """Generalized constraint forces A^T lambda (n,)."""
-        return self.constraints.A.T @ self.multipliers
 
 
 def smallest_singular_value(K: np.ndarray) -> float:
@@ -68,10 +72,22 @@ def smallest_singular_value(K: np.ndarray) -> float:
 
 class ProgrammedMotion:
     """Equations (7)-(8) of a crane model under a :class:`ConstraintSet` (evaluated by the compiled
-    kernels of :mod:`crane_reference.kernels`)."""
+    kernels of :mod:`crane_reference.kernels`).
+
+    ``realisation`` says who enforces the constraints.  ``"ideal"`` (the paper): ideal forces at E,
+    and the dynamic rows of (8) are projected with B on the directions the constraints leave free.
+    ``"servo"`` (Blajer and Kolodziejczyk's servo-constraints): torques tau on the dependent joints
+    (luff and knuckle), M qdd + h = Q + E_dc tau with A qdd = c; the dynamic rows kept are those of the
+    unactuated coordinates, P = E_ic instead of B, and tau = (M qdd + h - Q)_dc.
+    """
 
     def __init__(self, dynamics: CraneDynamics, constraints: ConstraintSet,
-                 dependent: tuple[int, ...] | None = None, min_singular_value: float = 1e-3):
+                 dependent: tuple[int, ...] | None = None, min_singular_value: float = 1e-3,
+                 realisation: str = "ideal"):
+        if realisation not in REALISATIONS:
+            raise ValueError(f"realisation = {realisation!r}: must be one of {', '.join(REALISATIONS)}")
+        self.realisation = realisation
+        self.servo = realisation == "servo"
         model = dynamics.model
         self.dynamics = dynamics
         self.constraints = constraints
@@ -118,10 +134,14 @@ class ProgrammedMotion:
 
     def solution_from_evaluation(self, t: float, q: np.ndarray, qd: np.ndarray, result: tuple) -> MotionSolution:
         """Wrap the arrays returned by :func:`kernels.evaluate` (checks the singularity)."""
-        M, h, Q, Vg, p, R, C, d, residual, grads, A, b, c, B, qdd, multipliers = result
+        M, h, Q, Vg, p, R, C, d, residual, grads, A, b, c, B, qdd, reactions, reaction_force = result
         sigma = self.check_singularity(A)
-        return MotionSolution(qdd, multipliers, DynamicsTerms(M, h, Q, p, R, C, d, Vg),
+        return MotionSolution(qdd, reactions, reaction_force, DynamicsTerms(M, h, Q, p, R, C, d, Vg),
                               ConstraintTerms(residual, grads, A, b, c), B, sigma)
+
+    def projection(self, solution: MotionSolution) -> np.ndarray:
+        """P of (8) at a solution: B (ideal constraints) or E_ic (servo-constraints)."""
+        return kernels.projection_matrix(solution.velocity_map, self.independent, self.servo)
 
     def kernel_inputs(self, t: float, left_limit: bool = False) -> tuple[ConstraintCoefficients, np.ndarray]:
         """Constraint coefficients and drive parameters at t for the compiled solver."""
@@ -133,5 +153,6 @@ class ProgrammedMotion:
         k, drive = self.kernel_inputs(t, left_limit)
         q = np.ascontiguousarray(q, dtype=float)
         qd = np.ascontiguousarray(qd, dtype=float)
-        result = kernels.evaluate(q, qd, k.Q, k.g, k.c, drive, self.independent, self.dependent, self.dynamics.chain)
+        result = kernels.evaluate(q, qd, k.Q, k.g, k.c, drive, self.independent, self.dependent, self.dynamics.chain,
+                                  self.servo)
         return self.solution_from_evaluation(t, q, qd, result)

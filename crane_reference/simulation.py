@@ -60,9 +60,9 @@ class Scenario:
         return self._equilibrium
 
 
-def _constraint_power(solution: MotionSolution) -> float:
-    """Power of the ideal constraint forces, (A^T lambda) . qd = lambda . b."""
-    return float(solution.multipliers @ solution.constraints.b)
+def _constraint_power(solution: MotionSolution, qd: np.ndarray) -> float:
+    """Power of the constraint (or servo) generalized forces, (M qdd + h - Q) . qd."""
+    return float(solution.constraint_forces @ qd)
 
 
 class MotionStepper:
@@ -88,7 +88,7 @@ class MotionStepper:
         dyn = self.motion.dynamics
         j = dyn.model.drive_joint
         return np.array([dyn.drive.power(state.t, state.q[j], state.qd[j], left_limit),
-                         _constraint_power(state.solution), -dyn.dissipated_power(state.qd)])
+                         _constraint_power(state.solution, state.qd), -dyn.dissipated_power(state.qd)])
 
     def _sample(self, state: StepState, left_limit: bool) -> Sample:
         dyn = self.motion.dynamics
@@ -175,7 +175,8 @@ def simulate_reference(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, s
         def rhs(t: float, y: np.ndarray, b: float = b) -> np.ndarray:
             q, qd = full_state(t, y)
             solution = motion.solve(t, q, qd, left_limit=t >= b)
-            power = [dyn.drive.power(t, q[j], qd[j], t >= b), _constraint_power(solution), -dyn.dissipated_power(qd)]
+            power = [dyn.drive.power(t, q[j], qd[j], t >= b), _constraint_power(solution, qd),
+                     -dyn.dissipated_power(qd)]
             return np.concatenate([qd[ic], solution.qdd[ic], power])
 
         inside = sample_times[(sample_times >= a) & ((sample_times < b) | (b == edges[-1]) & (sample_times <= b))]

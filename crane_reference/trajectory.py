@@ -1,9 +1,10 @@
 """Results of a programmed-motion run: samples, interpolation and CSV / NPZ export.
 
 Units: s, m, rad, N, N m, J.  E's pose is given in the world frame {0}; its orientation is the
-rotation of link 4's frame as a quaternion (x, y, z, w).  ``constraint_forces`` are the generalized
-forces A^T lambda of the ideal programmed constraints (the KKT form of (8)), ``drive_torque`` the
-column drive t_dr^(2); their sum is the generalized effort the task and drive require.
+rotation of link 4's frame as a quaternion (x, y, z, w).  ``reactions`` are the multipliers lambda
+(ideal constraints) or the dependent joints' torques (servo-constraints); ``constraint_forces`` the
+generalized force they exert (A^T lambda, the KKT form of (8), or tau on the dependent joints);
+``drive_torque`` the column drive t_dr^(2); their sum is the generalized effort task and drive require.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ class Sample:
     q: np.ndarray
     qd: np.ndarray
     qdd: np.ndarray
-    multipliers: np.ndarray
+    reactions: np.ndarray
     constraint_forces: np.ndarray
     drive_torque: float
     ee_position: np.ndarray
@@ -47,7 +48,7 @@ def make_sample(t: float, q: np.ndarray, qd: np.ndarray, solution: MotionSolutio
     """Assemble a :class:`Sample` from the solution of (8) at (t, q, qd) and the accumulated work."""
     dyn, con = solution.dynamics, solution.constraints
     return Sample(
-        t=t, q=q, qd=qd, qdd=solution.qdd, multipliers=solution.multipliers,
+        t=t, q=q, qd=qd, qdd=solution.qdd, reactions=solution.reactions,
         constraint_forces=solution.constraint_forces, drive_torque=drive_torque,
         ee_position=dyn.ee_position, ee_rotation=dyn.ee_rotation,
         ee_velocity=dyn.ee_jacobian @ qd, residual=con.residual, residual_distance=con.distance,
@@ -67,7 +68,7 @@ class Trajectory:
     q: np.ndarray
     qd: np.ndarray
     qdd: np.ndarray
-    multipliers: np.ndarray
+    reactions: np.ndarray
     constraint_forces: np.ndarray
     drive_torque: np.ndarray
     ee_position: np.ndarray
