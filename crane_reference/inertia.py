@@ -23,7 +23,6 @@ import numpy as np
 from numba import njit
 
 
-
 @njit(cache=True)
 def composite_inertias(T, B, body_joint, body_H, n):
     """Suffix sums Hc_k of world pseudo-inertias and G_k of Hc B^T over the bodies beyond joint k."""

@@ -124,10 +124,7 @@ def evaluate(q, qd, Q, g, c, drive, independent, dependent, chain, servo):
     rhs = np.concatenate((P.T @ (forces - h), c_acc))
     qdd = np.linalg.solve(lhs, rhs)
     reaction_force = M @ qdd + h - forces
-    if servo:
-        reactions = reaction_force[dependent]
-    else:
-        reactions = np.linalg.solve(A @ A.T, A @ reaction_force)
+    reactions = reaction_force[dependent] if servo else np.linalg.solve(A @ A.T, A @ reaction_force)
     return M, h, forces, Vg, p, R, C, d, residual, grads, A, b, c_acc, B, qdd, reactions, reaction_force
 
 
@@ -154,7 +151,8 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
         v1 = v0 + h * ((1.0 - gamma) * at0 + gamma * at1)
         q1 = q_guess.copy()
         q1[independent] = x1
-        q1, p, C, projected = project_positions(q1, Q, g, c, independent, dependent, chain, projection_tolerance, 25)
+        q1, p, C, projected = project_positions(q1, Q, g, c, independent, dependent, chain,
+                                                projection_tolerance, 25)
         if not projected:
             return q0, qd0, at0, evaluate(q0, qd0, Q, g, c, drive, independent, dependent, chain, servo), 2, iteration + 1
         qd1 = np.zeros_like(q1)
