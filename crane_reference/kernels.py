@@ -154,7 +154,8 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
         q1, p, C, projected = project_positions(q1, Q, g, c, independent, dependent, chain,
                                                 projection_tolerance, 25)
         if not projected:
-            return q0, qd0, at0, evaluate(q0, qd0, Q, g, c, drive, independent, dependent, chain, servo), 2, iteration + 1
+            held = evaluate(q0, qd0, Q, g, c, drive, independent, dependent, chain, servo)
+            return q0, qd0, at0, held, 2, iteration + 1
         qd1 = np.zeros_like(q1)
         qd1[independent] = v1
         qd1 = dependent_velocities(qd1, p, C, Q, g, c, independent, dependent)
