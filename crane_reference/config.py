@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import numbers
 import os
+import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
@@ -96,6 +97,18 @@ def default_config_path() -> Path:
     return installed
 
 
+class _Yaml12FloatLoader(yaml.SafeLoader):
+    """SafeLoader that also reads YAML 1.2 floats such as ``1e6`` and ``2.1e11`` as numbers (YAML 1.1,
+    which PyYAML implements, requires a dot and a signed exponent)."""
+
+
+_Yaml12FloatLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:\d+\.?\d*|\.\d+)[eE][-+]?\d+$"),
+    list("-+0123456789."),
+)
+
+
 def load_config(path: str | os.PathLike[str] | None = None) -> CraneParameters:
     """Read and validate a crane description; ``None`` loads :func:`default_config_path`.
 
@@ -105,7 +118,7 @@ def load_config(path: str | os.PathLike[str] | None = None) -> CraneParameters:
     file = default_config_path() if path is None else Path(path)
     try:
         with file.open(encoding="utf-8") as stream:
-            data = yaml.safe_load(stream)
+            data = yaml.load(stream, Loader=_Yaml12FloatLoader)
     except (OSError, UnicodeDecodeError) as err:
         raise ConfigError(f"{file}: cannot read: {err}") from err
     except yaml.YAMLError as err:

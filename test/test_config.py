@@ -287,3 +287,13 @@ def test_invalid_file_names_the_file(tmp_path: Path, data: dict[str, Any]) -> No
 def test_missing_file(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"nowhere\.yaml: cannot read"):
         load_config(tmp_path / "nowhere.yaml")
+
+
+def test_yaml_1_2_exponent_floats_are_numbers(tmp_path):
+    """PyYAML (YAML 1.1) reads ``2.1e11`` as a string; the loader accepts it as the number it is."""
+    text = default_config_path().read_text().replace("2.1e+11", "2.1e11").replace("8.1e+10", "81e9")
+    path = tmp_path / "exponents.yaml"
+    path.write_text(text)
+    params = load_config(path)
+    assert params.boom.youngs_modulus == 2.1e11
+    assert params.boom.shear_modulus == 8.1e10
