@@ -83,10 +83,6 @@ class ChainModel:
         """Index of the coordinate called ``name``."""
         return self.joint_names.index(name)
 
-    @property
-    def independent_joints(self) -> np.ndarray:
-        return np.array([k for k in range(self.dof) if k not in self.dependent_joints])
-
 
 def homogeneous(rotation: np.ndarray | None = None, translation=(0.0, 0.0, 0.0)) -> np.ndarray:
     """4x4 homogeneous transformation [[R, p], [0, 1]]."""

@@ -193,11 +193,3 @@ def simulate_reference(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, s
         y = result.y[:, -1]
     return Trajectory.from_samples(model.variant, model.joint_names, model.drive_joint, samples)
 
-
-def default_scenario(params: CraneParameters, variant: str) -> tuple[Scenario, np.ndarray]:
-    """The scenario and its consistent start configuration."""
-    scenario = Scenario(params, variant)
-    return scenario, scenario.equilibrium.q
-
-
-__all__ = ["MotionStepper", "Scenario", "build_model", "default_scenario", "simulate", "simulate_reference"]
