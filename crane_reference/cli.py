@@ -1,4 +1,4 @@
-"""Command line: ``crane-reference simulate | urdf | node``."""
+"""Command line: ``crane-reference simulate | urdf | node | record | modes | analyze``."""
 
 from __future__ import annotations
 
@@ -40,6 +40,10 @@ def _variants(choice: str) -> list[str]:
 
 
 def simulate_command(args: argparse.Namespace) -> int:
+    if args.bag is not None:
+        from .bag_export import export_command
+
+        return export_command(args)
     from .plotting import figure2
     from .simulation import Scenario, simulate
 
@@ -84,6 +88,37 @@ def node_command(args: argparse.Namespace, ros_args: list[str]) -> int:
     return node_main(ros_args)
 
 
+def record_command(args: argparse.Namespace) -> int:
+    from .recorder import record_command as record
+
+    return record(args)
+
+
+def modes_command(args: argparse.Namespace) -> int:
+    from .modal import modes_report
+
+    if not (np.isfinite(args.t) and args.t >= 0.0) or args.count < 1:
+        print(f"crane-reference: --t {args.t} must be >= 0 s and --count {args.count} >= 1", file=sys.stderr)
+        return 2
+    try:
+        modes_report(load_config(args.config), args.model, args.t, args.count, args.realisation, args.out)
+    except RuntimeError as error:  # the motion up to --t could not be computed (e.g. unstable servo-constraints)
+        print(f"crane-reference: {error}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def analyze_command(args: argparse.Namespace) -> int:
+    from .vibration import analyze
+
+    if not (np.isfinite(args.duration) and args.duration > 0 and args.step > 0):
+        print(f"crane-reference: --duration {args.duration} and --step {args.step} must be > 0 s", file=sys.stderr)
+        return 2
+    analyze(load_config(args.config), args.out, args.duration, args.step, args.rho_inf)
+    print(f"wrote deflection.png, spectra.png, differences.png, efforts.png, summary.json and summary.md to {args.out}")
+    return 0
+
+
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="crane-reference", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -95,10 +130,37 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--step", type=float, default=1e-3, help="integrator step [s] (default 1e-3)")
     s.add_argument("--rho-inf", type=float, default=0.8,
                    help="generalized-alpha spectral radius at infinite frequency, 0..1 (default 0.8)")
+    s.add_argument("--bag", metavar="DIR", help="instead of CSV/NPZ/Figure 2, write the node's topics as a rosbag2 "
+                   "bag (new directory DIR), stamped with simulated time; --model both records flexible")
+    s.add_argument("--rate", type=int, default=100, metavar="HZ", help="--bag: publish rate (default 100)")
+    s.add_argument("--bag-storage", choices=["mcap", "sqlite3"], default="mcap", help="--bag: storage (default mcap)")
+    s.add_argument("--bag-version", type=int, choices=[9, 8], default=9,
+                   help="--bag: metadata version, 9 (Jazzy, default) or 8 (Humble)")
     u = sub.add_parser("urdf", help="print the URDF of a model variant")
     u.add_argument("--config")
     u.add_argument("--model", choices=VARIANTS, default="flexible")
     sub.add_parser("node", help="run the ROS 2 node (arguments after 'node' go to ROS)", add_help=False)
+    r = sub.add_parser("record", help="record topics to a rosbag2 bag (default: the node's joint_states, "
+                       "end-effector pose and diagnostics) until SIGINT/SIGTERM or --duration")
+    r.add_argument("topics", nargs="*", metavar="TOPIC", help="topics to record (default: the node's)")
+    r.add_argument("-o", "--output", metavar="DIR", help="new bag directory (default rosbag2_YYYY_MM_DD-HH_MM_SS)")
+    r.add_argument("--storage", choices=["mcap", "sqlite3"], default="mcap", help="storage (default mcap)")
+    r.add_argument("--version", type=int, choices=[9, 8], default=9,
+                   help="metadata version, 9 (Jazzy, default) or 8 (Humble)")
+    r.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: at SIGINT/SIGTERM)")
+    m = sub.add_parser("modes", help="natural frequencies and mode shapes of the constrained crane at time t")
+    m.add_argument("--config")
+    m.add_argument("--t", type=float, default=0.0, help="time of the motion [s] (default 0: the static equilibrium)")
+    m.add_argument("--model", choices=VARIANTS, default="flexible")
+    m.add_argument("--count", type=int, default=12, help="modes in the table and the drawing (default 12)")
+    m.add_argument("--realisation", choices=["ideal", "servo"], default="ideal", help="constraint realisation")
+    m.add_argument("--out", default="results", help="directory of the PNG (default ./results)")
+    a = sub.add_parser("analyze", help="boom vibration, spectra vs modes, rigid vs flexible, both realisations")
+    a.add_argument("--config")
+    a.add_argument("--out", default="results/analysis", help="output directory (default ./results/analysis)")
+    a.add_argument("--duration", type=float, default=10.0, help="simulated time [s] (default 10)")
+    a.add_argument("--step", type=float, default=2.5e-4, help="integrator step [s] (default 2.5e-4)")
+    a.add_argument("--rho-inf", type=float, default=0.8, help="generalized-alpha rho_inf (default 0.8)")
     return p
 
 
@@ -110,7 +172,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "simulate" and not (np.isfinite(args.duration) and args.duration > 0):
         parser().error(f"--duration {args.duration}: must be a finite number of seconds > 0")
     try:
-        return {"simulate": simulate_command, "urdf": urdf_command}[args.command](args)
+        return {"simulate": simulate_command, "urdf": urdf_command, "record": record_command, "modes": modes_command,
+                "analyze": analyze_command}[args.command](args)
     except ConfigError as error:
         print(f"crane-reference: {error}", file=sys.stderr)
         return 2

@@ -1,0 +1,178 @@
+"""Benchmark of the crane_reference node: publishing rate, timing and re-target latency.
+
+For each rate (default 100, 500 and 1000 Hz) it starts ``python -m crane_reference.node`` in its own
+process (an isolated ROS domain, localhost only), subscribes to ``joint_states`` from this process
+and, after a warm-up, records for ``--duration`` seconds (default 30):
+
+* achieved rate: messages received / duration;
+* period: standard deviation of the time between receptions, and the p99 and maximum of
+  |period - 1 / rate| (the period error);
+* delivery lag: reception time - stamp (both system time), mean and p99;
+* missed samples: stamps absent from the received sequence, plus the samples the node itself held
+  or skipped because it ran late (from /diagnostics: held_late, skipped);
+* CPU share of the node process (user + system time / wall time, 100 % = one core) and the solver's
+  real-time factor it reports;
+* latency from a parameter change (``ellipse.a``, through the parameter service) to the reception of
+  the first sample that uses it (the node reports that sample's stamp in /diagnostics as
+  ``retarget_stamp_s``), over ``--changes`` changes.
+
+Run: ``.venv/bin/python benchmarks/bench_node.py [--duration 30] [--rates 100 500 1000] [--model flexible]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from sensor_msgs.msg import JointState
+
+NS = 10**9
+NODE = "crane_reference"
+WARM_UP = 2.0  # [s] after the first message
+CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+
+
+@dataclass
+class Recorder:
+    """Receptions of joint_states (monotonic and system time, stamp) and the last diagnostics values."""
+
+    monotonic: list[int] = field(default_factory=list)
+    system: list[int] = field(default_factory=list)
+    stamps: list[int] = field(default_factory=list)
+    diagnostics: dict[str, str] = field(default_factory=dict)
+
+    def joint_state(self, msg: JointState) -> None:
+        self.monotonic.append(time.monotonic_ns())
+        self.system.append(time.time_ns())
+        self.stamps.append(msg.header.stamp.sec * NS + msg.header.stamp.nanosec)
+
+    def diagnostic(self, msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name.startswith(NODE):
+                self.diagnostics = {kv.key: kv.value for kv in status.values}
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process [s]."""
+    with open(f"/proc/{pid}/stat", encoding="ascii") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
+
+
+def spin_for(executor: SingleThreadedExecutor, seconds: float) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        executor.spin_once(timeout_sec=min(0.05, max(end - time.monotonic(), 0.0)))
+
+
+def spin_until(executor: SingleThreadedExecutor, condition, timeout: float) -> bool:
+    end = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > end:
+            return False
+        executor.spin_once(timeout_sec=0.01)
+    return True
+
+
+def measure_latency(executor: SingleThreadedExecutor, client: AsyncParameterClient, recorder: Recorder,
+                    changes: int) -> list[float]:
+    """Seconds from sending each ellipse.a change to receiving the first sample that uses it."""
+    latencies = []
+    for i in range(changes):
+        previous = recorder.diagnostics.get("retarget_stamp_s")
+        sent = time.monotonic_ns()
+        future = client.set_parameters([Parameter("ellipse.a", value=3.1 if i % 2 == 0 else 3.0)])
+        if not spin_until(executor, future.done, 10.0) or not future.result().results[0].successful:
+            raise RuntimeError(f"parameter change {i} failed: {future.result() if future.done() else 'timeout'}")
+        if not spin_until(executor, lambda p=previous: recorder.diagnostics.get("retarget_stamp_s") not in (None, p),
+                          5.0):
+            raise RuntimeError("the node did not report the re-target in /diagnostics")
+        effective = round(float(recorder.diagnostics["retarget_stamp_s"]) * NS)
+        spin_until(executor, lambda e=effective: recorder.stamps and recorder.stamps[-1] >= e, 10.0)
+        first = next(i for i, s in enumerate(recorder.stamps) if s >= effective)
+        latencies.append((recorder.monotonic[first] - sent) / NS)
+        spin_for(executor, 1.0)
+    return latencies
+
+
+def run(rate: int, duration: float, model: str, changes: int, domain: int) -> dict[str, float]:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    node = subprocess.Popen([sys.executable, "-m", "crane_reference.node", "--ros-args", "-p",
+                             f"publish_rate:={rate}", "-p", f"model:={model}", "-p", "status_period:=3600.0"],
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    subscriber = Node("bench_subscriber", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(subscriber)
+    recorder = Recorder()
+    subscriber.create_subscription(JointState, "/joint_states", recorder.joint_state, 10000)
+    subscriber.create_subscription(DiagnosticArray, "/diagnostics", recorder.diagnostic, 100)
+    client = AsyncParameterClient(subscriber, NODE)
+    try:
+        if not spin_until(executor, lambda: recorder.stamps, 60.0):
+            raise RuntimeError(f"no joint_states within 60 s: {node.stderr.read() if node.poll() is not None else ''}")
+        spin_for(executor, WARM_UP)
+        first, cpu0, t0 = len(recorder.stamps), cpu_seconds(node.pid), time.monotonic()
+        before = {k: float(recorder.diagnostics.get(k, 0)) for k in ("held_late", "skipped")}
+        spin_for(executor, duration)
+        wall, cpu = time.monotonic() - t0, cpu_seconds(node.pid) - cpu0
+        last = len(recorder.stamps)
+        spin_until(executor, lambda: float(recorder.diagnostics.get("published", 0)) > 0, 2.0)
+        late = {k: float(recorder.diagnostics.get(k, 0)) - before[k] for k in before}
+        factor = recorder.diagnostics.get("real_time_factor", "nan")
+        latencies = measure_latency(executor, client, recorder, changes) if changes else [float("nan")]
+    finally:
+        node.send_signal(signal.SIGINT)
+        _, stderr = node.communicate(timeout=30)
+        executor.shutdown()
+        subscriber.destroy_node()
+        context.try_shutdown()
+    received = np.array(recorder.monotonic[first:last]) / NS
+    stamps = np.array(recorder.stamps[first:last])
+    lag = (np.array(recorder.system[first:last]) - stamps) / NS
+    periods = np.diff(received)
+    error = np.abs(periods - 1.0 / rate)
+    expected = (stamps[-1] - stamps[0]) * rate // NS + 1
+    return {
+        "rate_hz": rate, "achieved_hz": len(received) / wall, "period_std_ms": 1e3 * periods.std(),
+        "period_error_p99_ms": 1e3 * np.percentile(error, 99), "period_error_max_ms": 1e3 * error.max(),
+        "lag_mean_ms": 1e3 * lag.mean(), "lag_p99_ms": 1e3 * np.percentile(lag, 99),
+        "missed": int(expected - len(stamps)), "held_late": int(late["held_late"]), "skipped": int(late["skipped"]),
+        "cpu_percent": 100.0 * cpu / wall, "real_time_factor": float(factor),
+        "latency_median_ms": 1e3 * float(np.median(latencies)), "latency_max_ms": 1e3 * float(np.max(latencies)),
+        "exit_code": node.returncode, "traceback": "Traceback" in stderr,
+    }
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--duration", type=float, default=30.0, help="measured seconds per rate (default 30)")
+    parser.add_argument("--rates", type=int, nargs="+", default=[100, 500, 1000])
+    parser.add_argument("--model", choices=("flexible", "rigid"), default="flexible")
+    parser.add_argument("--changes", type=int, default=5, help="parameter changes for the latency (default 5)")
+    parser.add_argument("--domain-id", type=int, default=os.getpid() % 100 + 1)
+    args = parser.parse_args()
+    rows = [run(rate, args.duration, args.model, args.changes, args.domain_id) for rate in args.rates]
+    print(f"crane_reference node, {args.model} model, {args.duration:g} s per rate, {os.cpu_count()} CPUs")
+    for key in rows[0]:
+        cells = "".join(f"{row[key]:>12.3f}" if isinstance(row[key], float) else f"{row[key]!s:>12}" for row in rows)
+        print(f"{key:<22}{cells}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,337 @@
+"""rosbag2 bags without ROS: a writer (:class:`BagWriter`), the node's topics (:class:`ReferenceBag`) and
+the offline export of the reference (:func:`export_reference`).
+
+:class:`BagWriter` wraps ``rosbags.rosbag2.Writer``: MCAP or SQLite 3 storage, metadata version 9
+(Jazzy, the default) or 8 (Humble reads it), every topic registered with its message definition and
+RIHS01 type hash from rosbags' ROS 2 Jazzy typestore (the hashes equal the message packages'
+``share/<pkg>/msg/<Msg>.json``) and the offered QoS profiles.  Messages are written already serialized
+(CDR), with a timestamp in integer nanoseconds.  The live recorder (:mod:`crane_reference.recorder`)
+uses it; it needs no ROS installation.
+
+:class:`ReferenceBag` writes the node's topics (joint states, end-effector pose, diagnostics) with the
+messages built by :mod:`crane_reference.messages` from rosbags' classes, so they are the node's
+messages.  (rclpy's ``serialize_message`` is no alternative: its buffers can carry up to 8 bytes of
+junk after the message, which rosbags rejects on reading.)
+
+:func:`export_reference` writes what the node publishes, computed offline: a
+:class:`~crane_reference.reference_stream.ReferenceStream` stepped and sampled at the publish rate,
+written through a :class:`ReferenceBag`, so the messages are the node's for the same parameters.
+Time is simulated time: sample k has header stamp and bag timestamp ``start_ns + k * 10**9 // rate``
+(:func:`~crane_reference.messages.stamp_at`).  ``crane-reference simulate --bag DIR [--rate HZ]`` runs
+it (:func:`export_command`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import queue
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import Future
+from functools import partial
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+from rosbags.interfaces import Connection, Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+from rosbags.typesys import Stores, get_typestore
+
+from . import messages
+from .cli import ProgressBar
+from .config import load_config
+from .parameters import CraneParameters, TorqueDrive
+from .reference_stream import ERROR, ReferenceSample, ReferenceStream
+
+STORAGES = ("mcap", "sqlite3")
+VERSIONS = (9, 8)
+NODE_NAME = "crane_reference"  # the node's default name (crane_reference.node.NODE_NAME)
+JOINT_STATES = "/joint_states"
+END_EFFECTOR_POSE = f"/{NODE_NAME}/end_effector_pose"
+DIAGNOSTICS = "/diagnostics"
+TOPIC_TYPES = {
+    JOINT_STATES: "sensor_msgs/msg/JointState",
+    END_EFFECTOR_POSE: "geometry_msgs/msg/PoseStamped",
+    DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray",
+}
+DEFAULT_TOPICS = tuple(TOPIC_TYPES)
+MAX_RATE = 1000  # [Hz], upper bound of the node's publish_rate parameter
+DIAGNOSTICS_PERIOD_NS = 10**9  # the node publishes /diagnostics at 1 Hz
+QUEUE_SIZE = 100_000  # messages waiting for the writer thread before write() blocks
+RELEASE_KEEP = 1.0  # [s] of computed motion kept behind the sample being exported
+INFINITE = QosTime(sec=9223372036, nsec=854775807)  # RMW_DURATION_INFINITE as rosbag2 writes it
+NODE_QOS = Qos(  # what the node's publishers offer: depth 10, reliable, volatile, no deadline or lifespan
+    history=QosHistory.KEEP_LAST, depth=10, reliability=QosReliability.RELIABLE,
+    durability=QosDurability.VOLATILE, deadline=INFINITE, lifespan=INFINITE,
+    liveliness=QosLiveliness.AUTOMATIC, liveliness_lease_duration=INFINITE,
+    avoid_ros_namespace_conventions=False)
+
+
+class BagError(RuntimeError):
+    """A bag that cannot be written as asked (existing path, unknown storage or type, closed bag...)."""
+
+
+def jazzy_typestore() -> Any:
+    """rosbags' typestore of ROS 2 Jazzy."""
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def directory_size(path: Path) -> int:
+    """Bytes in the files directly inside ``path`` (0 if it does not exist)."""
+    return sum(f.stat().st_size for f in path.iterdir() if f.is_file()) if path.is_dir() else 0
+
+
+class BagWriter:
+    """A rosbag2 bag being written: topics added by name, type and offered QoS; serialized messages
+    written with a timestamp in nanoseconds.
+
+    Thread-safe: every storage operation runs on one writer thread of its own (SQLite connections
+    belong to the thread that made them), so :meth:`write` only queues the message and never waits on
+    the disk unless :data:`QUEUE_SIZE` messages are pending.  A context manager that closes the bag on
+    exit, also after an exception (what was written stays readable).
+    """
+
+    def __init__(self, path: Path | str, storage: str = "mcap", version: int = 9, typestore: Any = None) -> None:
+        """Create the bag directory ``path`` (which must not exist) and open the storage.
+
+        ``storage`` is one of :data:`STORAGES`, ``version`` the metadata version (9: Jazzy, 8: Humble);
+        ``typestore`` defaults to rosbags' Jazzy typestore.  Raises :class:`BagError`.
+        """
+        if storage not in STORAGES:
+            raise BagError(f"storage {storage!r}: must be one of {', '.join(STORAGES)}")
+        if version not in VERSIONS:
+            raise BagError(f"bag version {version!r}: must be 9 (Jazzy) or 8 (Humble)")
+        self.path = Path(path)
+        if self.path.exists():
+            raise BagError(f"{self.path} exists already: give a new directory for the bag")
+        self.storage, self.version = storage, version
+        self.typestore = typestore if typestore is not None else jazzy_typestore()
+        self._writer = Writer(self.path, version=version, storage_plugin=StoragePlugin[storage.upper()])
+        self._connections: dict[str, Connection] = {}
+        self._types: dict[str, str] = {}
+        self.counts: dict[str, int] = {}  # messages given to write() per topic
+        self._lock = threading.Lock()
+        self._requests: queue.Queue[tuple[Callable[..., Any], tuple, Future | None] | None] = queue.Queue(QUEUE_SIZE)
+        self._failure: BaseException | None = None
+        self._thread = threading.Thread(target=self._serve, name=f"bag writer {self.path.name}", daemon=True)
+        self._thread.start()
+        self._open = True
+        try:
+            self._call(self._writer.open)
+        except (WriterError, OSError) as error:
+            self._stop()
+            raise BagError(f"cannot create the bag {self.path}: {error}") from error
+
+    def _serve(self) -> None:
+        """Writer thread: run the queued storage operations in order until the stop request (None)."""
+        while (request := self._requests.get()) is not None:
+            function, args, future = request
+            try:
+                result = function(*args)
+            except BaseException as error:  # reported to the caller, or at the next write / close
+                if future is not None:
+                    future.set_exception(error)
+                elif self._failure is None:
+                    self._failure = error
+            else:
+                if future is not None:
+                    future.set_result(result)
+
+    def _call(self, function: Callable[..., Any], *args: Any) -> Any:
+        """Run ``function(*args)`` on the writer thread after every queued operation; its result."""
+        future: Future = Future()
+        self._requests.put((function, args, future))
+        return future.result()
+
+    def _stop(self) -> None:
+        self._open = False
+        self._requests.put(None)
+        self._thread.join()
+
+    def add_topic(self, name: str, msgtype: str, qos: Iterable[Qos] = ()) -> None:
+        """Register topic ``name`` of type ``msgtype`` (e.g. ``sensor_msgs/msg/JointState``) with the QoS
+        profiles its publishers offer.  Raises :class:`BagError` for an unknown type or a topic added twice."""
+        if msgtype not in self.typestore.types:
+            raise BagError(f"{name}: type {msgtype} is not in the typestore, its definition is unknown")
+        with self._lock:
+            self._check_open()
+            if name in self._connections:
+                raise BagError(f"topic {name} is in the bag already")
+            self._connections[name] = self._call(partial(
+                self._writer.add_connection, typestore=self.typestore, serialization_format="cdr",
+                offered_qos_profiles=list(qos)), name, msgtype)
+            self._types[name] = msgtype
+            self.counts[name] = 0
+
+    def write(self, name: str, data: bytes | memoryview, stamp_ns: int) -> None:
+        """Queue one serialized (CDR) message of topic ``name`` with timestamp ``stamp_ns`` for writing.
+        Raises :class:`BagError` if an earlier write failed."""
+        with self._lock:
+            self._check_open()
+            connection = self._connections.get(name)
+            if connection is None:
+                raise BagError(f"topic {name} was not added to the bag")
+            self._requests.put((self._writer.write, (connection, stamp_ns, bytes(data)), None))
+            self.counts[name] += 1
+
+    def write_message(self, name: str, message: Any, stamp_ns: int) -> None:
+        """Serialize a message of the typestore's classes (rosbags) and write it."""
+        self.write(name, self.typestore.serialize_cdr(message, self._types[name]), stamp_ns)
+
+    def size(self) -> int:
+        """Bytes of the bag on disk so far (messages still queued or in the storage's open chunk excluded)."""
+        return directory_size(self.path)
+
+    def close(self) -> None:
+        """Write every queued message, the indexes and metadata.yaml, and stop the writer thread; the bag
+        is complete afterwards.  Idempotent.  Raises :class:`BagError` if a write had failed (the bag is
+        closed all the same, with the messages written before the failure)."""
+        with self._lock:
+            if not self._open:
+                return
+            try:
+                self._call(self._writer.close)
+            finally:
+                self._stop()
+            if self._failure is not None:
+                raise BagError(f"writing to {self.path} failed: {self._failure}") from self._failure
+
+    def _check_open(self) -> None:
+        if not self._open:
+            raise BagError(f"the bag {self.path} is closed")
+        if self._failure is not None:
+            raise BagError(f"writing to {self.path} failed: {self._failure}") from self._failure
+
+    def __enter__(self) -> BagWriter:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        self.close()
+
+
+# --- the node's topics -----------------------------------------------------------------------------
+
+
+class ReferenceBag:
+    """The node's topics in a bag, with the messages of :mod:`crane_reference.messages` built from rosbags'
+    classes: joint states and end-effector pose of each sample, and diagnostics.  The offline export
+    writes through it, and so can the node (to record itself, stamped with the sample stamps).
+
+    The topic names default to those of a node named :data:`NODE_NAME` in the root namespace; a node
+    passes its publishers' ``topic_name``.
+    """
+
+    def __init__(self, bag: BagWriter, *, joint_states: str = JOINT_STATES,
+                 end_effector_pose: str = END_EFFECTOR_POSE, diagnostics: str = DIAGNOSTICS) -> None:
+        self.bag = bag
+        self.types = messages.rosbags_types(bag.typestore)
+        self.joint_states, self.end_effector_pose, self.diagnostics = joint_states, end_effector_pose, diagnostics
+        for topic, default in ((joint_states, JOINT_STATES), (end_effector_pose, END_EFFECTOR_POSE),
+                               (diagnostics, DIAGNOSTICS)):
+            bag.add_topic(topic, TOPIC_TYPES[default], [NODE_QOS])
+
+    def write_sample(self, stamp_ns: int, joint_names: Sequence[str], frame_id: str, sample: ReferenceSample) -> None:
+        """joint_states and the end-effector pose of ``sample``, header stamp and bag timestamp ``stamp_ns``."""
+        self.bag.write_message(self.joint_states, messages.joint_state(self.types, stamp_ns, joint_names, sample),
+                               stamp_ns)
+        self.bag.write_message(self.end_effector_pose,
+                               messages.end_effector_pose(self.types, stamp_ns, frame_id, sample), stamp_ns)
+
+    def write_diagnostics(self, stamp_ns: int, name: str, hardware_id: str, level: int, message: str,
+                          values: Mapping[str, object]) -> None:
+        """/diagnostics (arguments of :func:`crane_reference.messages.diagnostics`)."""
+        self.bag.write_message(self.diagnostics, messages.diagnostics(self.types, stamp_ns, name, hardware_id, level,
+                                                                      message, values), stamp_ns)
+
+
+# --- offline export of the reference ---------------------------------------------------------------
+
+
+def node_stream(config: CraneParameters, variant: str = "flexible", step: float = 1e-3,
+                rho_inf: float = 0.8) -> ReferenceStream:
+    """The stream the node builds for ``config`` with its parameters at their defaults (the torque drive
+    rebuilt from start and duration as the node does, so that the motion is the same to the bit)."""
+    drive = config.drive
+    if isinstance(drive, TorqueDrive):
+        drive = TorqueDrive(torque=drive.torque, start=drive.start, end=drive.start + (drive.end - drive.start))
+    return ReferenceStream(config, variant, step, drive=drive, rho_inf=rho_inf)
+
+
+def export_reference(bag: BagWriter, stream: ReferenceStream, rate: int, duration: float, *,
+                     frame_id: str = "world", node_name: str = NODE_NAME, start_ns: int = 0,
+                     progress: Callable[[float], None] | None = None) -> int:
+    """Write samples k = 0 .. floor(duration * rate) of ``stream`` (a fresh one: publish time 0 is its
+    start) to ``bag`` on the node's topics (:class:`ReferenceBag`), as the node publishes them at ``rate``
+    Hz from ``start_ns``: joint_states and end-effector pose at every sample, /diagnostics every second of
+    simulated time.  ``progress`` is called with the simulated time.  Returns the number of samples."""
+    if not (isinstance(rate, int) and 1 <= rate <= MAX_RATE):
+        raise ValueError(f"rate = {rate!r}: must be an integer in [1, {MAX_RATE}] Hz")
+    if not (math.isfinite(duration) and duration >= 0):
+        raise ValueError(f"duration = {duration!r}: must be a finite number of seconds >= 0")
+    reference = ReferenceBag(bag)
+    count = math.floor(duration * rate + 1e-9) + 1
+    next_diagnostics = DIAGNOSTICS_PERIOD_NS
+    last_wall, last_motion = time.perf_counter(), 0.0
+    for k in range(count):
+        tau = k / rate
+        stream.compute(tau)
+        sample = stream.sample(tau)
+        stamp = messages.stamp_at(start_ns, k, rate)
+        reference.write_sample(stamp, stream.joint_names, frame_id, sample)
+        if stamp - start_ns >= next_diagnostics:
+            next_diagnostics += DIAGNOSTICS_PERIOD_NS
+            wall = time.perf_counter()
+            factor = (sample.t - last_motion) / (wall - last_wall)
+            last_wall, last_motion = wall, sample.t
+            level, message = ((messages.ERROR, f"{ERROR}: {stream.last_error}") if stream.state == ERROR
+                              else (messages.OK, stream.state))
+            values = {
+                "state": stream.state,
+                "motion_time_s": f"{sample.t:.6f}",
+                "constraint_residual_m": f"{sample.residual_distance:.3e}",
+                "real_time_factor": f"{factor:.3f}",
+                "publish_rate_hz": rate,
+                "achieved_rate_hz": f"{float(rate):.3f}",
+                "published": k + 1,
+                "held_late": 0,
+                "skipped": 0,
+                "held_non_finite": 0,
+                "targets": str(stream.targets),
+                "last_error": stream.last_error,
+            }
+            reference.write_diagnostics(stamp, f"{node_name}: reference", f"/{node_name}", level, message, values)
+        stream.release(tau, RELEASE_KEEP)
+        if progress is not None:
+            progress(tau)
+    return count
+
+
+def export_command(args: argparse.Namespace) -> int:
+    """``crane-reference simulate --bag DIR [--rate HZ] [--bag-storage S] [--bag-version V]``: the bag
+    instead of CSV/NPZ/Figure 2, for one model variant (``--model both``, the default, records the
+    node's default, flexible)."""
+    if not 1 <= args.rate <= MAX_RATE:
+        print(f"crane-reference: --rate {args.rate}: must be an integer in [1, {MAX_RATE}] Hz", file=sys.stderr)
+        return 2
+    variant = "flexible" if args.model == "both" else args.model
+    config = load_config(args.config)
+    try:
+        bag = BagWriter(args.bag, args.bag_storage, args.bag_version)
+    except BagError as error:
+        print(f"crane-reference: --bag: {error}", file=sys.stderr)
+        return 2
+    wall = time.perf_counter()
+    bar = ProgressBar(variant, args.duration)
+    with bag:
+        samples = export_reference(bag, node_stream(config, variant, args.step, args.rho_inf), args.rate,
+                                   args.duration, progress=bar)
+    bar.close()
+    wall = time.perf_counter() - wall
+    counts = ", ".join(f"{topic} {count}" for topic, count in bag.counts.items())
+    print(f"{variant}: {samples} samples at {args.rate} Hz ({args.duration:g} s simulated in {wall:.2f} s wall) "
+          f"written to {bag.path} ({bag.storage}, version {bag.version}, {bag.size() / 1e6:.2f} MB): {counts}")
+    return 0

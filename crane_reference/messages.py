@@ -1,0 +1,247 @@
+"""Every ROS message crane_reference publishes, built from a :class:`~crane_reference.reference_stream.ReferenceSample`.
+
+The builders never import a message package themselves: they take a :class:`MessageTypes`, a small
+namespace of message constructors and array converters, so that the same code makes
+
+* rclpy messages for the live node (:func:`rclpy_types`), and
+* rosbags messages for writing rosbag2 files offline without ROS (:func:`rosbags_types`, from rosbags'
+  Jazzy typestore).
+
+Every field is passed by keyword (rosbags' message classes are dataclasses without defaults), float
+arrays go through :attr:`MessageTypes.float64_array` (``array.array('d')`` for rclpy, a float64 numpy
+array for rosbags), byte-typed fields through :attr:`MessageTypes.byte`.
+
+Stamps are integer nanoseconds (``stamp_ns``); sample k of a stream published at ``rate`` Hz from
+``start_ns`` is stamped ``start_ns + k * 10**9 // rate`` by the node, never with the time it is sent.
+"""
+
+from __future__ import annotations
+
+import array
+import itertools
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .reference_stream import ReferenceSample
+
+NANOSECONDS = 10**9
+ELLIPSE_SEGMENTS = 128
+ELLIPSE_NAMESPACE = "target_ellipse"
+TRAIL_NAMESPACE = "end_effector_trail"
+LINE_WIDTH = 0.03  # [m], width of the marker lines
+ELLIPSE_COLOR = (0.1, 0.6, 1.0, 1.0)  # r, g, b, a
+TRAIL_COLOR = (1.0, 0.4, 0.1, 1.0)
+# diagnostic_msgs/DiagnosticStatus levels
+OK, WARN, ERROR, STALE = 0, 1, 2, 3
+
+
+@dataclass(frozen=True)
+class MessageTypes:
+    """Message constructors (called with every field by keyword) and the converters for array and
+    byte fields of one message implementation."""
+
+    Time: Callable[..., Any]
+    Duration: Callable[..., Any]
+    Header: Callable[..., Any]
+    String: Callable[..., Any]
+    ColorRGBA: Callable[..., Any]
+    Point: Callable[..., Any]
+    Quaternion: Callable[..., Any]
+    Vector3: Callable[..., Any]
+    Pose: Callable[..., Any]
+    PoseStamped: Callable[..., Any]
+    JointState: Callable[..., Any]
+    JointTrajectory: Callable[..., Any]
+    JointTrajectoryPoint: Callable[..., Any]
+    KeyValue: Callable[..., Any]
+    DiagnosticStatus: Callable[..., Any]
+    DiagnosticArray: Callable[..., Any]
+    CompressedImage: Callable[..., Any]
+    MeshFile: Callable[..., Any]
+    Marker: Callable[..., Any]
+    MarkerArray: Callable[..., Any]
+    float64_array: Callable[[np.ndarray], Any]
+    uint8_array: Callable[[bytes], Any]
+    byte: Callable[[int], Any]
+
+
+def rclpy_types() -> MessageTypes:
+    """Constructors of the rclpy message classes (ROS 2 Python message packages)."""
+    from builtin_interfaces.msg import Duration, Time
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3
+    from sensor_msgs.msg import CompressedImage, JointState
+    from std_msgs.msg import ColorRGBA, Header, String
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+    from visualization_msgs.msg import Marker, MarkerArray, MeshFile
+
+    return MessageTypes(
+        Time=Time, Duration=Duration, Header=Header, String=String, ColorRGBA=ColorRGBA, Point=Point,
+        Quaternion=Quaternion, Vector3=Vector3, Pose=Pose, PoseStamped=PoseStamped, JointState=JointState,
+        JointTrajectory=JointTrajectory, JointTrajectoryPoint=JointTrajectoryPoint, KeyValue=KeyValue,
+        DiagnosticStatus=DiagnosticStatus, DiagnosticArray=DiagnosticArray, CompressedImage=CompressedImage,
+        MeshFile=MeshFile, Marker=Marker, MarkerArray=MarkerArray,
+        float64_array=lambda values: array.array("d", np.ascontiguousarray(values, dtype=np.float64).tobytes()),
+        uint8_array=lambda data: array.array("B", data),
+        byte=lambda value: bytes((value,)),
+    )
+
+
+def rosbags_types(typestore: Any = None) -> MessageTypes:
+    """Constructors of rosbags' message dataclasses (default: its ROS 2 Jazzy typestore)."""
+    if typestore is None:
+        from rosbags.typesys import Stores, get_typestore
+
+        typestore = get_typestore(Stores.ROS2_JAZZY)
+    types = typestore.types
+    return MessageTypes(
+        Time=types["builtin_interfaces/msg/Time"],
+        Duration=types["builtin_interfaces/msg/Duration"],
+        Header=types["std_msgs/msg/Header"],
+        String=types["std_msgs/msg/String"],
+        ColorRGBA=types["std_msgs/msg/ColorRGBA"],
+        Point=types["geometry_msgs/msg/Point"],
+        Quaternion=types["geometry_msgs/msg/Quaternion"],
+        Vector3=types["geometry_msgs/msg/Vector3"],
+        Pose=types["geometry_msgs/msg/Pose"],
+        PoseStamped=types["geometry_msgs/msg/PoseStamped"],
+        JointState=types["sensor_msgs/msg/JointState"],
+        JointTrajectory=types["trajectory_msgs/msg/JointTrajectory"],
+        JointTrajectoryPoint=types["trajectory_msgs/msg/JointTrajectoryPoint"],
+        KeyValue=types["diagnostic_msgs/msg/KeyValue"],
+        DiagnosticStatus=types["diagnostic_msgs/msg/DiagnosticStatus"],
+        DiagnosticArray=types["diagnostic_msgs/msg/DiagnosticArray"],
+        CompressedImage=types["sensor_msgs/msg/CompressedImage"],
+        MeshFile=types["visualization_msgs/msg/MeshFile"],
+        Marker=types["visualization_msgs/msg/Marker"],
+        MarkerArray=types["visualization_msgs/msg/MarkerArray"],
+        float64_array=lambda values: np.array(values, dtype=np.float64),
+        uint8_array=lambda data: np.frombuffer(bytes(data), dtype=np.uint8).copy(),
+        byte=int,
+    )
+
+
+# --- basic types ----------------------------------------------------------------------------------
+
+
+def stamp_at(start_ns: int, k: int, rate: int) -> int:
+    """Stamp [ns] of sample k of a stream at ``rate`` Hz that starts at ``start_ns`` (exact when the rate
+    divides 10^9 ns, otherwise rounded down to the nanosecond without accumulating an error)."""
+    return start_ns + k * NANOSECONDS // rate
+
+
+def time_msg(types: MessageTypes, stamp_ns: int) -> Any:
+    """builtin_interfaces/Time of a non-negative time in nanoseconds."""
+    return types.Time(sec=stamp_ns // NANOSECONDS, nanosec=stamp_ns % NANOSECONDS)
+
+
+def duration_msg(types: MessageTypes, duration_ns: int) -> Any:
+    """builtin_interfaces/Duration (nanosec in [0, 10^9), sec rounded towards minus infinity)."""
+    return types.Duration(sec=duration_ns // NANOSECONDS, nanosec=duration_ns % NANOSECONDS)
+
+
+def header(types: MessageTypes, stamp_ns: int, frame_id: str) -> Any:
+    return types.Header(stamp=time_msg(types, stamp_ns), frame_id=frame_id)
+
+
+def _point(types: MessageTypes, xyz: Sequence[float]) -> Any:
+    return types.Point(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
+
+
+def _color(types: MessageTypes, rgba: Sequence[float]) -> Any:
+    return types.ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]), a=float(rgba[3]))
+
+
+def _pose(types: MessageTypes, position: Sequence[float], quaternion: Sequence[float]) -> Any:
+    """geometry_msgs/Pose from a position and a quaternion (x, y, z, w)."""
+    x, y, z, w = (float(v) for v in quaternion)
+    return types.Pose(position=_point(types, position), orientation=types.Quaternion(x=x, y=y, z=z, w=w))
+
+
+# --- published messages ---------------------------------------------------------------------------
+
+
+def joint_state(types: MessageTypes, stamp_ns: int, joint_names: Sequence[str], sample: ReferenceSample) -> Any:
+    """sensor_msgs/JointState: positions, velocities and the generalized efforts of constraints and
+    drive, one entry per joint name (header.frame_id empty, as for every JointState)."""
+    return types.JointState(
+        header=header(types, stamp_ns, ""),
+        name=list(joint_names),
+        position=types.float64_array(sample.q),
+        velocity=types.float64_array(sample.qd),
+        effort=types.float64_array(sample.effort),
+    )
+
+
+def end_effector_pose(types: MessageTypes, stamp_ns: int, frame_id: str, sample: ReferenceSample) -> Any:
+    """geometry_msgs/PoseStamped of E (position, and orientation of the last link) in ``frame_id``."""
+    return types.PoseStamped(header=header(types, stamp_ns, frame_id),
+                             pose=_pose(types, sample.ee_position, sample.ee_quaternion))
+
+
+def reference_preview(types: MessageTypes, stamp_ns: int, frame_id: str, joint_names: Sequence[str],
+                      offsets_ns: Sequence[int], samples: Sequence[ReferenceSample]) -> Any:
+    """trajectory_msgs/JointTrajectory starting at ``stamp_ns``: point i is ``samples[i]`` at
+    time_from_start ``offsets_ns[i]`` (which must increase strictly)."""
+    if len(offsets_ns) != len(samples):
+        raise ValueError(f"{len(offsets_ns)} offsets for {len(samples)} preview samples")
+    if any(b <= a for a, b in itertools.pairwise(offsets_ns)) or (offsets_ns and offsets_ns[0] <= 0):
+        raise ValueError(f"preview offsets must be positive and increase strictly, got {list(offsets_ns)}")
+    points = [types.JointTrajectoryPoint(
+        positions=types.float64_array(s.q),
+        velocities=types.float64_array(s.qd),
+        accelerations=types.float64_array(s.qdd),
+        effort=types.float64_array(s.effort),
+        time_from_start=duration_msg(types, offset),
+    ) for offset, s in zip(offsets_ns, samples, strict=True)]
+    return types.JointTrajectory(header=header(types, stamp_ns, frame_id), joint_names=list(joint_names),
+                                 points=points)
+
+
+def diagnostics(types: MessageTypes, stamp_ns: int, name: str, hardware_id: str, level: int, message: str,
+                values: Mapping[str, object]) -> Any:
+    """diagnostic_msgs/DiagnosticArray with one status; ``values`` become key/value strings."""
+    status = types.DiagnosticStatus(
+        level=types.byte(level), name=name, message=message, hardware_id=hardware_id,
+        values=[types.KeyValue(key=key, value=str(value)) for key, value in values.items()])
+    return types.DiagnosticArray(header=header(types, stamp_ns, ""), status=[status])
+
+
+def _line_strip(types: MessageTypes, stamp_ns: int, frame_id: str, namespace: str,
+                points: np.ndarray, rgba: Sequence[float]) -> Any:
+    """A LINE_STRIP marker through ``points`` (N, 3) in ``frame_id``; every Marker field given."""
+    return types.Marker(
+        header=header(types, stamp_ns, frame_id), ns=namespace, id=0, type=types.Marker.LINE_STRIP,
+        action=types.Marker.ADD, pose=_pose(types, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),
+        scale=types.Vector3(x=LINE_WIDTH, y=0.0, z=0.0), color=_color(types, rgba),
+        lifetime=duration_msg(types, 0), frame_locked=False, points=[_point(types, p) for p in points], colors=[],
+        texture_resource="", texture=types.CompressedImage(header=header(types, 0, ""), format="",
+                                                           data=types.uint8_array(b"")),
+        uv_coordinates=[], text="", mesh_resource="",
+        mesh_file=types.MeshFile(filename="", data=types.uint8_array(b"")),
+        mesh_use_embedded_materials=False,
+    )
+
+
+def ellipse_points(a: float, b: float, z: float, segments: int = ELLIPSE_SEGMENTS) -> np.ndarray:
+    """Closed polyline (segments + 1, 3) of the ellipse (x/a)^2 + (y/b)^2 = 1 at height z."""
+    phi = np.linspace(0.0, 2.0 * np.pi, segments + 1)
+    return np.column_stack([a * np.cos(phi), b * np.sin(phi), np.full_like(phi, z)])
+
+
+def markers(types: MessageTypes, stamp_ns: int, frame_id: str, ellipse: tuple[float, float, float],
+            trail: np.ndarray) -> Any:
+    """visualization_msgs/MarkerArray: the target ellipse (a, b, z) and E's trail (N, 3), as LINE_STRIPs."""
+    return types.MarkerArray(markers=[
+        _line_strip(types, stamp_ns, frame_id, ELLIPSE_NAMESPACE, ellipse_points(*ellipse), ELLIPSE_COLOR),
+        _line_strip(types, stamp_ns, frame_id, TRAIL_NAMESPACE, np.asarray(trail, dtype=float).reshape(-1, 3),
+                    TRAIL_COLOR),
+    ])
+
+
+def robot_description(types: MessageTypes, urdf: str) -> Any:
+    """std_msgs/String with the URDF (for robot_state_publisher / RViz)."""
+    return types.String(data=urdf)

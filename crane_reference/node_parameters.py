@@ -1,0 +1,197 @@
+"""The ROS parameters of the crane_reference node: one declared, validated table (ros2_controllers style).
+
+:data:`PARAMETERS` lists every parameter with its type, default, description, unit, allowed range or
+choices and whether it is read-only (structural: fixed once the node runs).  From it come the
+``ParameterDescriptor`` (:meth:`ParameterSpec.descriptor`, with a ``FloatingPointRange`` or
+``IntegerRange``), the validation (:func:`check`, a reason naming the parameter and what is allowed)
+and the declaration (:func:`declare`).
+
+Integer values for double parameters (``-p ellipse.a:=3``, ``ellipse.a: 3`` in a YAML file, or
+``ros2 param set /crane_reference ellipse.a 3``) are accepted: rclpy 7 checks a statically typed
+parameter's type before any user callback and rejects them, so
+
+* at start-up, :func:`declare` first declares the parameter with ``dynamic_typing=True`` to read the
+  override of any type, undeclares it and declares it again, statically typed, with the value
+  converted to float (``ignore_override=True``);
+* at run time, :func:`coerce_parameters` is a *pre*-set callback (``Node.add_pre_set_parameters_callback``,
+  run before rclpy's type and range checks) that turns such integers into doubles.
+
+Values from the crane description: the defaults of the task (``ellipse.*``, ``z.*``) and of the drive
+(``drive.*``) are the config file's ``task`` and ``drive`` sections.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Any
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from .model import VARIANTS
+from .parameters import CraneParameters, TorqueDrive
+
+Value = bool | int | float | str
+BOOL, INTEGER, DOUBLE, STRING = (Parameter.Type.BOOL, Parameter.Type.INTEGER, Parameter.Type.DOUBLE,
+                                 Parameter.Type.STRING)
+_TYPE_NAMES = {BOOL: "a boolean", INTEGER: "an integer", DOUBLE: "a number", STRING: "a string"}
+
+
+class ParameterError(ValueError):
+    """A parameter value that :func:`check` rejects (the message is the reason)."""
+
+
+def _torque_drive(config: CraneParameters) -> TorqueDrive:
+    """The config's torque drive, or the default torque profile if the config has a flexible drive."""
+    return config.drive if isinstance(config.drive, TorqueDrive) else TorqueDrive()
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """One node parameter.  ``bounds`` are inclusive [low, high] (as in ROS ranges); ``choices`` the
+    allowed strings (empty: any non-empty string, unless ``empty_allowed``); ``from_config`` gives the
+    default from the crane description instead of ``default``."""
+
+    name: str
+    type: Parameter.Type
+    default: Value
+    description: str
+    unit: str = ""
+    bounds: tuple[float, float] | None = None
+    choices: tuple[str, ...] = ()
+    empty_allowed: bool = False
+    read_only: bool = False
+    from_config: Callable[[CraneParameters], Value] | None = None
+
+    def default_for(self, config: CraneParameters | None) -> Value:
+        """Default value, taken from ``config`` where the parameter comes from the crane description."""
+        if self.from_config is not None and config is not None:
+            return self.coerce(self.from_config(config))
+        return self.default
+
+    def allowed(self) -> str:
+        """What the parameter accepts, in words (used in every rejection reason)."""
+        unit = f" {self.unit}" if self.unit else ""
+        if self.choices:
+            return f"must be one of {', '.join(map(repr, self.choices))}"
+        if self.bounds is not None:
+            low, high = self.bounds
+            integers = " (integers accepted)" if self.type is DOUBLE else ""
+            return f"must be {_TYPE_NAMES[self.type]} in [{low:g}, {high:g}]{unit}{integers}"
+        if self.type is STRING and not self.empty_allowed:
+            return "must be a non-empty string"
+        return f"must be {_TYPE_NAMES[self.type]}"
+
+    def descriptor(self) -> ParameterDescriptor:
+        """Statically typed ParameterDescriptor with description, range and read-only flag."""
+        descriptor = ParameterDescriptor(
+            name=self.name, type=self.type.value, read_only=self.read_only,
+            description=f"{self.description}{f' [{self.unit}]' if self.unit else ''}",
+            additional_constraints=self.allowed())
+        if self.bounds is not None and self.type is DOUBLE:
+            descriptor.floating_point_range = [FloatingPointRange(
+                from_value=float(self.bounds[0]), to_value=float(self.bounds[1]), step=0.0)]
+        elif self.bounds is not None:
+            descriptor.integer_range = [IntegerRange(
+                from_value=int(self.bounds[0]), to_value=int(self.bounds[1]), step=1)]
+        return descriptor
+
+    def coerce(self, value: Any) -> Any:
+        """An integer for a double parameter as a float; every other value unchanged."""
+        if self.type is DOUBLE and isinstance(value, int) and not isinstance(value, bool):
+            return float(value)
+        return value
+
+    def check(self, value: Any) -> str | None:
+        """``None`` if ``value`` (already coerced) is allowed, else the reason, naming the parameter."""
+        python_type = {BOOL: bool, INTEGER: int, DOUBLE: float, STRING: str}[self.type]
+        wrong_type = not isinstance(value, python_type) or (python_type is int and isinstance(value, bool))
+        invalid = (wrong_type
+                   or (self.type is DOUBLE and not math.isfinite(value))
+                   or (self.bounds is not None and not self.bounds[0] <= value <= self.bounds[1])
+                   or (self.choices and value not in self.choices)
+                   or (self.type is STRING and not self.empty_allowed and not value))
+        return f"{self.name} = {value!r}: {self.allowed()}" if invalid else None
+
+
+PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec("config_file", STRING, "", "Crane description YAML (format of config/crane.yaml); "
+                  "'' loads the packaged default", empty_allowed=True, read_only=True),
+    ParameterSpec("model", STRING, "flexible", "Crane model variant: 'flexible' (rigid finite element boom) "
+                  "or 'rigid' (one boom element)", choices=VARIANTS, read_only=True),
+    ParameterSpec("integrator.step", DOUBLE, 1e-3, "Step of the generalized-alpha integrator", "s",
+                  (1e-5, 1e-2), read_only=True),
+    ParameterSpec("publish_rate", INTEGER, 100, "Rate of joint_states and ~/end_effector_pose; sample k is "
+                  "stamped start + k / publish_rate", "Hz", (1, 1000), read_only=True),
+    ParameterSpec("frame_id", STRING, "world", "Frame of ~/end_effector_pose, ~/reference_preview and ~/markers "
+                  "(the world frame {0} of the crane)"),
+    ParameterSpec("ellipse.a", DOUBLE, 3.0, "Semi-axis of E's ellipse along world x (constraint (5.1)); "
+                  "default: task.ellipse_a of the config file", "m", (0.1, 20.0),
+                  from_config=lambda c: c.task.ellipse_a),
+    ParameterSpec("ellipse.b", DOUBLE, 2.0, "Semi-axis of E's ellipse along world y (constraint (5.1)); "
+                  "default: task.ellipse_b of the config file", "m", (0.1, 20.0),
+                  from_config=lambda c: c.task.ellipse_b),
+    ParameterSpec("z.increment", DOUBLE, 0.2, "Rise of E's height above its static value z_E,s (constraint "
+                  "(5.2)); default: task.z_increment of the config file", "m", (-10.0, 10.0),
+                  from_config=lambda c: c.task.z_increment),
+    ParameterSpec("z.rise_time", DOUBLE, 5.0, "Duration t_c of the quintic height rise (5.2); default: "
+                  "task.rise_time of the config file", "s", (0.01, 3600.0),
+                  from_config=lambda c: c.task.rise_time),
+    ParameterSpec("drive.torque", DOUBLE, 4000.0, "Column drive torque of the torque profile (from drive.start "
+                  "of the config file for drive.duration); default: the config file's torque drive; unused "
+                  "if the config file has a flexible drive", "N m", (-1e6, 1e6), read_only=True,
+                  from_config=lambda c: _torque_drive(c).torque),
+    ParameterSpec("drive.duration", DOUBLE, 1.0, "Duration of the column drive torque; default: end - start of "
+                  "the config file's torque drive; unused if the config file has a flexible drive", "s",
+                  (1e-3, 3600.0), read_only=True,
+                  from_config=lambda c: _torque_drive(c).end - _torque_drive(c).start),
+    ParameterSpec("blend_time", DOUBLE, 2.0, "Duration of the C2 blend of the constraint parameters after a "
+                  "change of ellipse.* or z.*", "s", (0.01, 600.0)),
+    ParameterSpec("preview.horizon", DOUBLE, 1.0, "Time span of ~/reference_preview", "s", (0.01, 10.0)),
+    ParameterSpec("preview.points", INTEGER, 10, "Points of ~/reference_preview, evenly spaced over the horizon "
+                  "(the first one horizon / points after the sample)", "", (1, 1000)),
+    ParameterSpec("preview.rate", DOUBLE, 10.0, "Rate of ~/reference_preview (every round(publish_rate / "
+                  "preview.rate)-th sample, at least every sample)", "Hz", (0.1, 1000.0)),
+    ParameterSpec("autostart", BOOL, True, "Start the motion at once; if false, hold the static-equilibrium "
+                  "start until ~/pause is called with data: false", read_only=True),
+    ParameterSpec("status_period", DOUBLE, 5.0, "Period of the one-line status log", "s", (0.1, 3600.0)),
+)
+SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PARAMETERS}
+TARGET_PARAMETERS = {"ellipse.a": "ellipse_a", "ellipse.b": "ellipse_b", "z.increment": "z_increment",
+                     "z.rise_time": "rise_time"}
+
+
+def coerce_parameters(parameters: list[Parameter]) -> list[Parameter]:
+    """Pre-set callback: integer values of double parameters become doubles (all else unchanged)."""
+    return [Parameter(p.name, DOUBLE, float(p.value))
+            if p.name in SPECS and SPECS[p.name].type is DOUBLE and p.type_ is INTEGER else p
+            for p in parameters]
+
+
+def check(parameters: Iterable[Parameter]) -> str | None:
+    """``None`` if every parameter of the table has an allowed value, else the first reason."""
+    for parameter in parameters:
+        spec = SPECS.get(parameter.name)
+        reason = spec.check(spec.coerce(parameter.value)) if spec is not None else None
+        if reason is not None:
+            return reason
+    return None
+
+
+def declare(node: Node, spec: ParameterSpec, config: CraneParameters | None = None) -> Value:
+    """Declare ``spec`` on ``node`` (override, else its default for ``config``) and return the value.
+
+    The override may be an integer for a double parameter (see the module doc for the two-step
+    declaration); a value :meth:`ParameterSpec.check` rejects raises :class:`ParameterError`.
+    """
+    probe = ParameterDescriptor(dynamic_typing=True)
+    value = spec.coerce(node.declare_parameter(spec.name, spec.default_for(config), probe).value)
+    node.undeclare_parameter(spec.name)
+    reason = spec.check(value)
+    if reason is not None:
+        raise ParameterError(reason)
+    node.declare_parameter(spec.name, value, spec.descriptor(), ignore_override=True)
+    return value

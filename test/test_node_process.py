@@ -1,0 +1,58 @@
+"""The node as a process (``python -m crane_reference.node``): it publishes, SIGINT ends it with exit
+code 0 and no traceback, and a start-up error exits 1 with the reason and no traceback."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+ENV = {**os.environ, "ROS_DOMAIN_ID": str((os.getpid() + 50) % 100 + 1), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+NODE_YAML = Path(__file__).resolve().parent.parent / "config" / "node.yaml"
+
+
+def start(*ros_args: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "crane_reference.node", "--ros-args", *ros_args], env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_publishes_and_exits_cleanly_on_sigint() -> None:
+    process = start("--params-file", str(NODE_YAML), "-p", "publish_rate:=50", "-p", "ellipse.a:=3")
+    os.environ.update({k: ENV[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    received: list[JointState] = []
+    try:
+        node = Node("listener", context=context)
+        node.create_subscription(JointState, "/joint_states", received.append, 100)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        deadline = time.monotonic() + 60.0
+        while len(received) < 20 and time.monotonic() < deadline and process.poll() is None:
+            executor.spin_once(timeout_sec=0.1)
+        node.destroy_node()
+    finally:
+        context.try_shutdown()
+        process.send_signal(signal.SIGINT)
+        stdout, stderr = process.communicate(timeout=30)
+    assert len(received) >= 20, stderr
+    assert len(received[-1].name) == len(received[-1].position) == 24
+    assert process.returncode == 0, stderr
+    assert "Traceback" not in stderr and "Traceback" not in stdout, stderr
+    assert "publishing the flexible crane's reference at 50 Hz" in stderr
+
+
+def test_start_up_error_names_the_parameter() -> None:
+    process = start("-p", "ellipse.a:=30")
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 1
+    assert "cannot start: ellipse.a = 30.0: must be a number in [0.1, 20] m" in stderr
+    assert "Traceback" not in stderr

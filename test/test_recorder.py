@@ -1,0 +1,307 @@
+"""Live recording (crane_reference.recorder): in-process, stopped by SIGINT/SIGTERM, and of the running node."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rclpy
+from mcap.reader import make_reader
+from rclpy.context import Context
+from rclpy.duration import Duration
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from test_bag_export import installed_type_hash, metadata, read_bag, stamp_ns
+
+from crane_reference import cli
+from crane_reference.bag_export import (
+    DEFAULT_TOPICS,
+    DIAGNOSTICS,
+    END_EFFECTOR_POSE,
+    JOINT_STATES,
+    TOPIC_TYPES,
+    BagWriter,
+    export_reference,
+    node_stream,
+)
+from crane_reference.config import load_config
+from crane_reference.recorder import (
+    message_class,
+    record,
+    rosbags_qos,
+    subscription_qos,
+)
+
+# An isolated ROS graph for this test process (and the subprocesses it starts).
+os.environ["ROS_DOMAIN_ID"] = str(20 + os.getpid() % 180)
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+ROOT = Path(__file__).resolve().parents[1]
+INFINITE = QosTime(sec=9223372036, nsec=854775807)
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+@pytest.fixture
+def context():
+    """One initialized rclpy context per test."""
+    context = Context()
+    rclpy.init(context=context)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+def wait_for(condition, timeout: float, what: str, period: float = 0.01) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"waited {timeout} s for {what}")
+        time.sleep(period)
+
+
+def joint_state(k: int) -> JointState:
+    """Test message k: its stamp is k ms and its position k, so that any loss or reordering shows."""
+    message = JointState(name=["a", "b"], position=[float(k), -float(k)], velocity=[0.5, 0.25], effort=[])
+    message.header.stamp.sec, message.header.stamp.nanosec = divmod(k * 10**6, 10**9)
+    return message
+
+
+class StatusReader:
+    """Collects a recorder subprocess's stderr (its status lines) on a thread."""
+
+    def __init__(self, process: subprocess.Popen) -> None:
+        self.lines: list[str] = []
+        self._thread = threading.Thread(target=lambda: self.lines.extend(iter(process.stderr.readline, "")),
+                                        daemon=True)
+        self._thread.start()
+
+    def count(self, topic: str) -> int:
+        """Messages of ``topic`` in the latest status line (0 before any)."""
+        for line in reversed(self.lines):
+            match = re.search(rf" {re.escape(topic)} (\d+)", line)
+            if match:
+                return int(match.group(1))
+        return 0
+
+    def text(self) -> str:
+        return "".join(self.lines)
+
+
+def python_command(*args: str) -> list[str]:
+    return [sys.executable, "-m", *args]
+
+
+def test_qos_conversions():
+    qos = rosbags_qos(QoSProfile(depth=7, reliability=ReliabilityPolicy.BEST_EFFORT,
+                                 durability=DurabilityPolicy.TRANSIENT_LOCAL, deadline=Duration(seconds=1.5)))
+    assert qos == Qos(QosHistory.KEEP_LAST, 7, QosReliability.BEST_EFFORT, QosDurability.TRANSIENT_LOCAL,
+                      QosTime(1, 500_000_000), QosTime(0, 0), QosLiveliness.SYSTEM_DEFAULT, QosTime(0, 0), False)
+    reliable, best_effort = QoSProfile(depth=1), QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+    assert subscription_qos([reliable, LATCHED]).reliability == ReliabilityPolicy.RELIABLE
+    assert subscription_qos([reliable, LATCHED]).durability == DurabilityPolicy.VOLATILE
+    assert subscription_qos([LATCHED]).durability == DurabilityPolicy.TRANSIENT_LOCAL
+    assert subscription_qos([reliable, best_effort]).reliability == ReliabilityPolicy.BEST_EFFORT
+    assert message_class("std_msgs/msg/String") is String
+
+
+@pytest.mark.parametrize(("storage", "version"), [("mcap", 9), ("sqlite3", 8)])
+def test_record_in_process(context, tmp_path, storage, version):
+    """Known messages published in this process are recorded with their types, hashes, offered QoS, values
+    and receive-time stamps; a topic that appears during the recording (latched) is added then."""
+    count = 200
+    publisher_node = rclpy.create_node("recorder_test_publisher", context=context)
+    joints = publisher_node.create_publisher(JointState, "/recorder_test/joints", 10)
+    path = tmp_path / "bag"
+    stop = threading.Event()
+    result = {}
+    with BagWriter(path, storage, version) as bag:
+        thread = threading.Thread(target=lambda: result.update(recorder=record(
+            bag, ["/recorder_test/joints", "recorder_test/latched"], stop, context=context)))
+        thread.start()
+        try:
+            wait_for(lambda: joints.get_subscription_count() > 0, 20.0, "the recorder's subscription")
+            sent = []
+            for k in range(count):
+                sent.append(publisher_node.get_clock().now().nanoseconds)
+                joints.publish(joint_state(k))
+                time.sleep(0.002)
+            latched = publisher_node.create_publisher(String, "/recorder_test/latched", LATCHED)
+            latched.publish(String(data="robot description"))  # before the recorder subscribes
+            wait_for(lambda: latched.get_subscription_count() > 0, 20.0, "the recorder's latched subscription")
+            wait_for(lambda: bag.counts.get("/recorder_test/latched") == 1, 5.0, "the latched message")
+            wait_for(lambda: bag.counts["/recorder_test/joints"] == count, 5.0, "every message")
+            stopped = publisher_node.get_clock().now().nanoseconds
+        finally:
+            stop.set()
+            thread.join()
+    recorder = result["recorder"]
+    assert recorder.received == {"/recorder_test/joints": count, "/recorder_test/latched": 1}
+    connections, by_topic = read_bag(path)
+    assert {topic: c.msgtype for topic, c in connections.items()} == {
+        "/recorder_test/joints": "sensor_msgs/msg/JointState", "/recorder_test/latched": "std_msgs/msg/String"}
+    for connection in connections.values():
+        assert connection.digest == installed_type_hash(connection.msgtype)
+    (joints_qos,) = connections["/recorder_test/joints"].ext.offered_qos_profiles
+    (latched_qos,) = connections["/recorder_test/latched"].ext.offered_qos_profiles
+    assert (joints_qos.reliability, joints_qos.durability) == (QosReliability.RELIABLE, QosDurability.VOLATILE)
+    assert (latched_qos.reliability, latched_qos.durability) == (QosReliability.RELIABLE,
+                                                                 QosDurability.TRANSIENT_LOCAL)
+    assert joints_qos.deadline == joints_qos.lifespan == INFINITE
+    received = by_topic["/recorder_test/joints"]
+    assert [list(m.position) for _, m, _ in received] == [[float(k), -float(k)] for k in range(count)]
+    assert [stamp_ns(m.header) for _, m, _ in received] == [k * 10**6 for k in range(count)]
+    assert all(list(m.name) == ["a", "b"] and list(m.velocity) == [0.5, 0.25] for _, m, _ in received)
+    times = [t for t, _, _ in received]
+    assert all(s <= t <= stopped for s, t in zip(sent, times, strict=True)), "receive time between send and stop"
+    assert times == sorted(times)
+    assert by_topic["/recorder_test/latched"][0][1].data == "robot description"
+    assert metadata(path)["version"] == version
+    if storage == "mcap":
+        (mcap_file,) = path.glob("*.mcap")
+        with mcap_file.open("rb") as stream:
+            reader = make_reader(stream)
+            decoded = [(c.topic, s.name, m.log_time, m.data) for s, c, m in reader.iter_messages(log_time_order=True)]
+        assert [d for d in decoded if d[0] == "/recorder_test/joints"] == [
+            ("/recorder_test/joints", "sensor_msgs/msg/JointState", t, raw) for t, _, raw in received]
+    publisher_node.destroy_node()
+
+
+def test_record_arguments(tmp_path, capsys):
+    (tmp_path / "exists").mkdir()
+    assert cli.main(["record", "-o", str(tmp_path / "exists")]) == 2
+    assert "exists already" in capsys.readouterr().err
+    assert cli.main(["record", "-o", str(tmp_path / "new"), "--duration", "-1"]) == 2
+    assert "--duration -1" in capsys.readouterr().err
+    assert cli.main(["record", "-o", str(tmp_path / "new"), "/joint_states", "bad topic"]) == 2
+    assert "'bad topic' is invalid" in capsys.readouterr().err
+    for bad in (["--storage", "rosbag"], ["--version", "7"]):
+        with pytest.raises(SystemExit):
+            cli.main(["record", "-o", str(tmp_path / "new"), *bad])
+        assert "invalid choice" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
+
+
+@pytest.mark.parametrize(("signum", "storage"), [(signal.SIGINT, "mcap"), (signal.SIGTERM, "sqlite3")],
+                         ids=["SIGINT-mcap", "SIGTERM-sqlite3"])
+def test_signal_leaves_a_complete_bag(context, tmp_path, signum, storage):
+    """A recorder stopped by a signal while messages stream in writes every message it received: its
+    count at exit equals the bag's, and the bag holds messages 0 .. n-1 of those published, none missing."""
+    rate, topic = 500, "/signal_test/joints"
+    node = rclpy.create_node("signal_test_publisher", context=context)
+    publisher = node.create_publisher(JointState, topic, 10)
+    path = tmp_path / "bag"
+    process = subprocess.Popen(python_command("crane_reference.cli", "record", "-o", str(path), "--storage", storage,
+                                              topic), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+    try:
+        wait_for(lambda: publisher.get_subscription_count() > 0, 30.0, "the recorder's subscription")
+        start, sent, signalled = time.monotonic(), 0, None
+        while time.monotonic() - start < 1.5:
+            publisher.publish(joint_state(sent))
+            sent += 1
+            if signalled is None and sent == rate:  # about 1 s into the run, messages still streaming
+                process.send_signal(signum)
+                signalled = sent
+            time.sleep(max(0.0, sent / rate - (time.monotonic() - start)))
+        out, err = process.communicate(timeout=20)
+    finally:
+        process.kill()
+    assert process.returncode == 0, err
+    received = int(re.search(rf"{topic}: received (\d+), written (\d+)", out).group(1))
+    assert re.search(rf"recording {path}.*{topic} \d+", err), "status line"
+    connections, by_topic = read_bag(path)
+    positions = [m.position[0] for _, m, _ in by_topic[topic]]
+    assert len(positions) == received == connections[topic].msgcount
+    assert positions == [float(k) for k in range(received)], "a contiguous prefix of what was published"
+    assert signalled - rate // 2 <= received <= sent, (signalled, received, sent)
+    node.destroy_node()
+
+
+def test_live_node_matches_offline_export(context, tmp_path):
+    """`crane-reference record` (default topics) of the running node agrees with `simulate --bag` for the
+    same parameters: joint states and poses at the same stamps equal to 1e-9; same topics and types."""
+    rate, model = 50, "rigid"
+    log = tmp_path / "node.log"
+    with log.open("w") as log_file:
+        node = subprocess.Popen(python_command("crane_reference.node", "--ros-args", "-p", f"publish_rate:={rate}",
+                                               "-p", f"model:={model}"), cwd=ROOT, stdout=log_file, stderr=log_file)
+    probe = rclpy.create_node("live_test_probe", context=context)
+    live = tmp_path / "live"
+    try:
+        wait_for(lambda: all(probe.get_publishers_info_by_topic(t) for t in DEFAULT_TOPICS), 60.0,
+                 "the node's publishers", period=0.1)
+        publishing = time.monotonic()  # the node publishes from about now on
+        recorder = subprocess.Popen(python_command("crane_reference.cli", "record", "-o", str(live)), cwd=ROOT,
+                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        status = StatusReader(recorder)
+        try:
+            wait_for(lambda: status.count(JOINT_STATES) >= 3 * rate, 60.0, "3 s of joint states", period=0.1)
+            recorder.send_signal(signal.SIGINT)
+            recorder.wait(timeout=20)
+        finally:
+            recorder.kill()
+        published_for = time.monotonic() - publishing
+        assert recorder.returncode == 0, status.text()
+    finally:
+        node.send_signal(signal.SIGINT)
+        try:
+            node.wait(timeout=20)
+        finally:
+            node.kill()
+        probe.destroy_node()
+    assert node.returncode == 0, log.read_text()
+    connections, by_topic = read_bag(live)
+    assert {t: c.msgtype for t, c in connections.items()} == TOPIC_TYPES
+    assert all(c.digest == installed_type_hash(c.msgtype) for c in connections.values())
+    joints, poses = by_topic[JOINT_STATES], by_topic[END_EFFECTOR_POSE]
+    assert len(joints) >= 3 * rate and by_topic[DIAGNOSTICS]
+    assert all(t >= stamp_ns(m.header) for t, m, _ in joints), "received after its stamp"
+    diagnostics = {kv.key: kv.value for kv in by_topic[DIAGNOSTICS][-1][1].status[0].values}
+    assert diagnostics["held_late"] == diagnostics["skipped"] == "0", diagnostics
+
+    # Sample index k of each live message: stamps are start + k * period; find k of one by its positions.
+    stamps = np.array([stamp_ns(m.header) for _, m, _ in joints])
+    period = 10**9 // rate
+    assert np.all((stamps - stamps[0]) % period == 0)
+    offset = (stamps - stamps[0]) // period
+    offline = tmp_path / "offline"
+    with BagWriter(offline) as bag:
+        export_reference(bag, node_stream(load_config(None), model), rate, published_for + 2.0)
+    offline_connections, offline_topics = read_bag(offline)
+    assert {t: (c.msgtype, c.digest) for t, c in offline_connections.items()} == {
+        t: (c.msgtype, c.digest) for t, c in connections.items()}
+    q_offline = np.array([m.position for _, m, _ in offline_topics[JOINT_STATES]])
+    middle = len(joints) // 2
+    k_middle = int(np.argmin(np.abs(q_offline - joints[middle][1].position).max(axis=1)))
+    ks = k_middle + offset - offset[middle]
+    assert ks[0] >= 0 and ks[-1] < len(q_offline)
+    live_poses = {stamp_ns(m.header): m for _, m, _ in poses}
+    assert set(live_poses) <= set(stamps.tolist()) and len(live_poses) >= len(joints) - rate // 2, \
+        "poses at the joint states' stamps (subscriptions may match up to a few samples apart)"
+    # The node advances its stream's publish time by summing 1 / rate, the export uses k / rate: the sample
+    # times differ by ~1e-13 s, which moves positions and velocities by far less than 1e-9 but the efforts
+    # (constraint forces of ~1e4 N m interpolated between integrator steps) by up to ~1e-8 N m.
+    tolerances = {"position": 1e-9, "velocity": 1e-9, "effort": 1e-6}
+    errors = dict.fromkeys([*tolerances, "pose"], 0.0)
+    for k, stamp, (_, live_joint, _) in zip(ks, stamps, joints, strict=True):
+        (_, joint, _), (_, pose, _) = offline_topics[JOINT_STATES][k], offline_topics[END_EFFECTOR_POSE][k]
+        assert list(live_joint.name) == list(joint.name)
+        for field in tolerances:
+            errors[field] = max(errors[field], np.abs(getattr(live_joint, field) - getattr(joint, field)).max())
+        live_pose = live_poses.get(int(stamp))
+        if live_pose is not None:
+            assert live_pose.header.frame_id == pose.header.frame_id == "world"
+            for part, names in (("position", "xyz"), ("orientation", "xyzw")):
+                errors["pose"] = max(errors["pose"], *(abs(getattr(getattr(live_pose.pose, part), n)
+                                                           - getattr(getattr(pose.pose, part), n)) for n in names))
+    assert all(errors[name] <= tolerance for name, tolerance in {**tolerances, "pose": 1e-9}.items()), errors
+    offline_keys = {kv.key for kv in offline_topics[DIAGNOSTICS][0][1].status[0].values}
+    assert offline_keys <= set(diagnostics)
