@@ -16,14 +16,14 @@
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from circle_constraint import CircleXZ
 
 from crane_reference.cli import main
 from crane_reference.config import load_config
-from crane_reference.constraints import ConstraintSet, EndEffectorConstraint, Quadric
+from crane_reference.constraints import ConstraintSet
 from crane_reference.drive import TorqueSource
 from crane_reference.dynamics import CraneDynamics
 from crane_reference.equilibrium import reduced_static_forces
@@ -87,18 +87,6 @@ def test_spring_mass_frequency():
     model = point_mass_chain("z", np.array([[k]]), m, 9.81)
     modes = modal_analysis(linearise_chain(CraneDynamics(model, NO_DRIVE), 0.0, np.array([-m * 9.81 / k])))
     assert modes.frequencies[0] == pytest.approx(np.sqrt(k / m) / (2.0 * np.pi), rel=1e-12)
-
-
-@dataclass(frozen=True)
-class CircleXZ(EndEffectorConstraint):
-    """x^2 + z^2 - R^2 = 0."""
-
-    radius: float
-
-    def quadric(self, t: float) -> Quadric:
-        Q = np.zeros((3, 3, 3))
-        Q[0] = np.diag([1.0, 0.0, 1.0])
-        return Quadric(Q, np.zeros((3, 3)), np.array([-self.radius**2, 0.0, 0.0]))
 
 
 def test_mass_on_a_circle_is_a_pendulum():

@@ -23,13 +23,14 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from circle_constraint import CircleXZ
 from scipy import signal
 from scipy.integrate import solve_ivp
 from scipy.interpolate import CubicSpline
 
 from crane_reference.cli import main
 from crane_reference.config import load_config
-from crane_reference.constraints import ConstraintSet, EndEffectorConstraint, Quadric, paper_constraints
+from crane_reference.constraints import ConstraintSet, paper_constraints
 from crane_reference.drive import TorqueSource, make_drive
 from crane_reference.dynamics import CraneDynamics
 from crane_reference.equilibrium import static_equilibrium
@@ -80,18 +81,6 @@ def test_trapezoidal_frequency_closed_form():
     f = np.array([1.0, 27.0, 119.0, 430.0, 1700.0])
     exact = 2.0 * np.arctan(np.pi * f * h) / (2.0 * np.pi * h)
     assert generalized_alpha_frequency(f, h, 1.0) == pytest.approx(exact, rel=1e-12)
-
-
-@dataclass(frozen=True)
-class CircleXZ(EndEffectorConstraint):
-    """x^2 + z^2 - R^2 = 0."""
-
-    radius: float
-
-    def quadric(self, t: float) -> Quadric:
-        Q = np.zeros((3, 3, 3))
-        Q[0] = np.diag([1.0, 0.0, 1.0])
-        return Quadric(Q, np.zeros((3, 3)), np.array([-self.radius**2, 0.0, 0.0]))
 
 
 def test_integrated_pendulum_period(params):
