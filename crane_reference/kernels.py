@@ -5,6 +5,7 @@ quadric constraints in :mod:`crane_reference.constraints`, equations (7)-(8) and
 partitioning in :mod:`crane_reference.programmed_motion`, the generalized-alpha method in
 :mod:`crane_reference.integration`.  Here they are fused so that one integration step is one call:
 the time-dependent data (constraint coefficients, drive) enter as numbers evaluated at the step's end.
+The kernels release the GIL (``nogil``), so a ROS node's publishing thread runs while the solver steps.
 
 ``chain`` is the tuple (kinds, axes, origins, body_joint, body_H, gravity, ee_joint, ee_point, K, D,
 drive_joint) and ``drive`` the tuple (tau0, s_dr, psi_a): the drive's generalized force on psi2 is
@@ -20,7 +21,7 @@ from .dynamics import chain_terms
 from .kinematics import point_position_jacobian
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def quadric_values(p, Q, g, c):
     """Phi (m,) and Phi_p (m, 3) of stacked quadrics at p (value level, index 0)."""
     m = Q.shape[0]
@@ -33,7 +34,7 @@ def quadric_values(p, Q, g, c):
     return residual, grads
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def constraint_terms(p, v, C, d, Q, g, c):
     """Phi, Phi_p, A = Phi_p C, b = -Phi_t and c_acc = -(Phi_p d + convective) of stacked quadrics."""
     residual, grads = quadric_values(p, Q, g, c)
@@ -48,7 +49,7 @@ def constraint_terms(p, v, C, d, Q, g, c):
     return residual, grads, grads @ C, b, c_acc
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def velocity_map(A, independent, dependent):
     """B = d qd / d qd_ic (n, n_ic): identity rows on ic, Gamma = -K_dc^-1 K_ic rows on dc (eq. (7))."""
     n_ic = independent.size
@@ -61,7 +62,7 @@ def velocity_map(A, independent, dependent):
     return B
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def project_positions(q, Q, g, c, independent, dependent, chain, tolerance, max_iterations):
     """q with q_dc solved from Phi(q) = 0 by Newton (Jacobian K_dc); also (p, C) of the last iterate
     and whether it converged."""
@@ -78,7 +79,7 @@ def project_positions(q, Q, g, c, independent, dependent, chain, tolerance, max_
     return q, p, C, False
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dependent_velocities(qd, p, C, Q, g, c, independent, dependent):
     """qd with qd_dc = K_dc^-1 (b - K_ic qd_ic), eq. (7)."""
     _, grads = quadric_values(p, Q, g, c)
@@ -95,7 +96,7 @@ def dependent_velocities(qd, p, C, Q, g, c, independent, dependent):
     return qd
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def projection_matrix(B, independent, servo):
     """Rows of the dynamics kept in (8): P = B for ideal constraints (projection on the directions the
     constraints allow), P = E_ic (the unactuated coordinates' own rows) for servo-constraints."""
@@ -107,7 +108,7 @@ def projection_matrix(B, independent, servo):
     return P
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def evaluate(q, qd, Q, g, c, drive, independent, dependent, chain, servo):
     """Everything (8) needs and gives at (q, qd): dynamics terms, constraint terms, B, qdd, the
     reactions (lambda for ideal constraints, the dependent joints' torques tau for servo-constraints)
@@ -128,7 +129,7 @@ def evaluate(q, qd, Q, g, c, drive, independent, dependent, chain, servo):
     return M, h, forces, Vg, p, R, C, d, residual, grads, A, b, c_acc, B, qdd, reactions, reaction_force
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamma, beta, Q, g, c, drive,
                            independent, dependent, chain, servo, tolerance, max_iterations, projection_tolerance):
     """One generalized-alpha step on the independent coordinates (see :mod:`crane_reference.integration`).

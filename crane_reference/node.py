@@ -87,7 +87,7 @@ from .reference_stream import (
 from .urdf import model_to_urdf
 
 NODE_NAME = "crane_reference"
-LOOKAHEAD = 0.5  # [s] of frames kept ready ahead of publishing
+LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
 COMMAND_LEAD = 0.25  # [s] from the next sample to publish to the one a command takes effect at
 COMPUTE_SLICE = 0.005  # [s] of wall time the worker holds the stream per compute call
 FRAME_BATCH = 20  # frames sampled per hold of the stream lock
@@ -109,12 +109,14 @@ class StartupError(RuntimeError):
 
 @dataclass(frozen=True)
 class Frame:
-    """Sample k of the reference, at stream publish time ``tau``, with its preview (or None)."""
+    """Sample k of the reference, at stream publish time ``tau``, with its preview (or None) over
+    ``horizon`` seconds."""
 
     k: int
     tau: float
     sample: ReferenceSample
-    preview: list[ReferenceSample] | None
+    preview: list[ReferenceSample] | None = None
+    horizon: float = 0.0
 
 
 def _finite(sample: ReferenceSample) -> bool:
@@ -170,6 +172,7 @@ class CraneReferenceNode(Node):
         self._last: ReferenceSample | None = None
         self._last_stamp = 0
         self._achieved_rate = 0.0
+        self._late_reported = 0
         self._fault = ""
         self._counters = {"published": 0, "held_late": 0, "skipped": 0, "held_non_finite": 0}
         self._compute = {"wall": 0.0, "motion": 0.0}
@@ -234,13 +237,15 @@ class CraneReferenceNode(Node):
         try:
             while not self._stop.is_set():
                 with self._lock:
-                    k = max(self._gen_k, self._next_k)  # renumbered if publishing had to hold
+                    k = max(self._gen_k, self._next_k)  # the stream time goes on from gen_tau: no jump
                     tau, generation, next_preview_k = self._gen_tau, self._generation, self._next_preview_k
                     room = self._lookahead - (k - self._next_k)
                 frames, next_preview_k, busy = self._make_frames(k, tau, min(room, FRAME_BATCH), next_preview_k)
                 with self._lock:
                     if generation != self._generation:
                         continue
+                    if frames and frames[0].k < self._next_k:  # publishing held meanwhile: continue after it
+                        frames = [replace(f, k=f.k + self._next_k - frames[0].k) for f in frames]
                     if frames:
                         self._frames.extend(frames)
                         self._gen_k, self._gen_tau = frames[-1].k + 1, frames[-1].tau + 1.0 / self._rate
@@ -273,7 +278,7 @@ class CraneReferenceNode(Node):
             for i in range(count):
                 t = tau + i * dt
                 if stream.state == ERROR:  # hold the last sample made, not the stream's (computed further ahead)
-                    frames.append(Frame(k + i, t, _held(last), None))
+                    frames.append(Frame(k + i, t, _held(last)))
                     continue
                 if t > stream.computed_until - TIME_TOLERANCE:
                     break
@@ -281,7 +286,7 @@ class CraneReferenceNode(Node):
                 if k + i >= next_preview_k and stream.computed_until >= t + horizon:
                     preview = stream.preview(t, horizon, points)
                     next_preview_k = k + i + self._preview_decimation()
-                frames.append(self._checked(Frame(k + i, t, stream.sample(t), preview), last))
+                frames.append(self._checked(Frame(k + i, t, stream.sample(t), preview, horizon), last))
                 last = frames[-1].sample
             stream.release(tau, RELEASE_KEEP + LOOKAHEAD)
             busy = stream.computed_until < ahead
@@ -299,7 +304,7 @@ class CraneReferenceNode(Node):
         self._fault = f"non-finite sample at stream time {frame.tau:.3f} s: holding the last valid one"
         self.get_logger().error(self._fault, throttle_duration_sec=1.0)
         self._counters["held_non_finite"] += 1
-        return Frame(frame.k, frame.tau, _held(last_valid), None)
+        return Frame(frame.k, frame.tau, _held(last_valid))
 
     # -- commands (executor threads) ------------------------------------------------------------------
 
@@ -444,19 +449,18 @@ class CraneReferenceNode(Node):
         if frame is None:
             if self._last is None:
                 return
-            sample, preview = _held(self._last), None
+            frame = Frame(k, math.nan, _held(self._last))
             self._counters["held_late"] += 1
-        else:
-            sample, preview = frame.sample, frame.preview
+        sample = frame.sample
         types, frame_id = self._types, self._values["frame_id"]
         stamp = messages.stamp_at(self._start_ns, k, self._rate)
         self._joint_pub.publish(messages.joint_state(types, stamp, self._joint_names, sample))
         self._pose_pub.publish(messages.end_effector_pose(types, stamp, frame_id, sample))
-        if preview is not None:
-            horizon_ns = round(self._values["preview.horizon"] * NANOSECONDS)
-            offsets = [(i + 1) * horizon_ns // len(preview) for i in range(len(preview))]
+        if frame.preview is not None:
+            horizon_ns, count = round(frame.horizon * NANOSECONDS), len(frame.preview)
+            offsets = [(i + 1) * horizon_ns // count for i in range(count)]
             self._preview_pub.publish(messages.reference_preview(types, stamp, frame_id, self._joint_names, offsets,
-                                                                 preview))
+                                                                 frame.preview))
         if k % max(1, round(self._rate / TRAIL_RATE)) == 0:
             self._trail.append(sample.ee_position)
         self._last, self._last_stamp = sample, stamp
@@ -487,14 +491,16 @@ class CraneReferenceNode(Node):
             return
         rate, factor = self._rates()
         self._achieved_rate = rate
+        late, self._late_reported = (self._counters["held_late"] + self._counters["skipped"] - self._late_reported,
+                                     self._counters["held_late"] + self._counters["skipped"])
         stream = self._stream
         sample = self._last
         level = messages.OK
         message = stream.state
         if stream.state == ERROR or self._fault:
             level, message = messages.ERROR, f"{stream.state}: {stream.last_error or self._fault}"
-        elif self._counters["held_late"] or self._counters["skipped"]:
-            level, message = messages.WARN, f"{stream.state}: solver or publisher late (see held_late, skipped)"
+        elif late > 0:
+            level, message = messages.WARN, f"{stream.state}: {late} samples held or skipped (solver or publisher late)"
         values = {
             "state": stream.state,
             "motion_time_s": f"{sample.t:.6f}" if sample else "",
@@ -502,7 +508,7 @@ class CraneReferenceNode(Node):
             "real_time_factor": f"{factor:.3f}",
             "publish_rate_hz": self._rate,
             "achieved_rate_hz": f"{rate:.3f}",
-            **{key: value for key, value in self._counters.items()},
+            **self._counters,
             "frames_ready": len(self._frames),
             **{f"{name}_stamp_s": f"{stamp:.6f}" for name, stamp in self._effective.items()},
             "targets": str(stream.targets),
@@ -526,7 +532,7 @@ class CraneReferenceNode(Node):
             f"rate={self._achieved_rate:.1f} Hz state={self._stream.state}")
 
     def destroy_node(self) -> None:
-        """Stop the solver and publisher threads , then destroy the node."""
+        """Stop the solver and publisher threads, then destroy the node."""
         self._stop.set()
         with self._lock:
             self._lock.notify_all()

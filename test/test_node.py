@@ -41,7 +41,7 @@ from crane_reference import messages
 from crane_reference.config import load_config
 from crane_reference.drive import make_drive
 from crane_reference.dynamics import CraneDynamics
-from crane_reference.node import CraneReferenceNode, Frame
+from crane_reference.node import LOOKAHEAD, CraneReferenceNode, Frame
 from crane_reference.node_parameters import PARAMETERS, SPECS
 from crane_reference.programmed_motion import ConstraintSingularityError
 from crane_reference.reference_stream import ReferenceStream, TaskTargets
@@ -204,9 +204,12 @@ def test_rate_sizes_and_stamps(ros: Harness) -> None:
     node = ros.start(publish_rate=200)
     time.sleep(0.2)
     t0 = time.monotonic()
-    time.sleep(2.0)
-    counted = sum(1 for t, _ in list(ros.received["joint_states"]) if t0 <= t < t0 + 2.0)
-    assert 380 <= counted <= 420, f"{counted} joint_states in 2 s at 200 Hz"
+    time.sleep(6.0)
+    # Arrivals in three consecutive 2 s windows; the median one within 5 % (a busy machine can delay one
+    # window's edge by more than the 100 ms that 5 % allow; the stamps below show no sample is lost).
+    arrivals = np.array([t for t, _ in list(ros.received["joint_states"])])
+    counts = [int(np.sum((arrivals >= t0 + 2.0 * i) & (arrivals < t0 + 2.0 * (i + 1)))) for i in range(3)]
+    assert 380 <= sorted(counts)[1] <= 420, f"{counts} joint_states in 2 s windows at 200 Hz"
     data = ros.samples()
     dof = len(node._joint_names)
     assert data["q"].shape[1] == data["qd"].shape[1] == data["effort"].shape[1] == dof == 24
@@ -484,10 +487,10 @@ def test_solver_failure_holds_and_reports_error(ros: Harness) -> None:
     ros.wait_for(lambda: node._stream.state == "ERROR", "the stream's ERROR state")
     ros.wait_for(lambda: any(m.status[0].level == messages.rclpy_types().byte(messages.ERROR)
                              for _, m in list(ros.received["diagnostics"])), "an ERROR diagnostic")
-    failed = ros.samples()["stamp"][-1]  # the frames computed before the failure are published first
-    ros.wait_until_stamp(failed + NS)
+    failed = ros.samples()["stamp"][-1]  # the frames made before the failure (LOOKAHEAD) are published first
+    ros.wait_until_stamp(failed + round((LOOKAHEAD + 0.5) * NS))
     data = ros.samples(after_ns=failed - NS // 2)
-    held = data["stamp"] > failed + NS // 2
+    held = data["stamp"] > failed + round(LOOKAHEAD * NS)
     assert np.all(data["qd"][held] == 0.0) and np.all(data["q"][held] == data["q"][-1])
     assert np.all(np.isfinite(data["q"]))
     assert_continuous(data["q"], data["qd"], 0.01)  # held where the published motion stopped
