@@ -386,11 +386,8 @@ class CraneReferenceNode(Node):
             self._status_timer.reset()
         if any(name in TARGET_PARAMETERS for name in names):
             targets = self._targets()
-            try:
-                k = self._command(lambda tau: self._stream.retarget(tau, targets))
-            except UnreachableTargetError as error:
-                self.get_logger().error(f"re-target to {targets} failed, the motion goes on unchanged: {error}")
-                return
+            # the targets passed check_targets in the on-set callback
+            k = self._command(lambda tau: self._stream.retarget(tau, targets, checked=True))
             self._effective["retarget"] = self._stamp_s(k)
             self.get_logger().info(f"re-targeting to {targets} from the sample stamped {self._stamp_s(k):.6f} s "
                                    f"over {self._values['blend_time']:g} s")

@@ -263,10 +263,12 @@ class ReferenceStream:
                     raise UnreachableTargetError(f"{where} is too near a stretch/fold singularity (smallest singular "
                                                  f"value of K_dc {sigma:.3g} < {self.singular_value_margin:g})")
 
-    def retarget(self, tau: float, targets: TaskTargets) -> None:
+    def retarget(self, tau: float, targets: TaskTargets, checked: bool = False) -> None:
         """Blend the constraint parameters to ``targets`` from the first computed instant at or after
-        publish time tau (C2, over the blend time); raises UnreachableTargetError first if needed."""
-        self.check_targets(targets)
+        publish time tau (C2, over the blend time).  Unless the caller has just run
+        :meth:`check_targets` itself (``checked``), it does so first and may raise UnreachableTargetError."""
+        if not checked:
+            self.check_targets(targets)
         t = self.motion_time(tau)
         self.compute(tau)
         k = min(bisect.bisect_left(self._times, t - 1e-12), len(self._times) - 1)

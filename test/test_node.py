@@ -367,9 +367,9 @@ def spy(obj: Any, name: str) -> list[tuple]:
     calls: list[tuple] = []
     original = getattr(obj, name)
 
-    def wrapper(*args: Any) -> Any:
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
         calls.append(args)
-        return original(*args)
+        return original(*args, **kwargs)
 
     setattr(obj, name, wrapper)
     return calls
