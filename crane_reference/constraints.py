@@ -13,10 +13,21 @@ other surfaces.  With p' = C qd and p'' = C qdd + d (C, d from :mod:`crane_refer
     Phi_p = 2 Q p + g,   Phi_t = p^T Q' p + g'^T p + c',
     convective = p'^T 2Q p' + 2 (2 Q' p + g')^T p' + p^T Q'' p + g''^T p + c''.
 
-A new task constraint is a new :class:`EndEffectorConstraint` that returns its coefficients and their
-first two time derivatives (:class:`Quadric`); the solver (compiled, :mod:`crane_reference.kernels`)
-does not change.  For the ellipse, the paper's u and v are Phi_p C / 2 and (Phi_p d + convective) / 2:
-it divides (6.3) by two, which changes only the scale of the multiplier.
+First-order (velocity) task constraints are quadrics in z = (p, p') [m, m/s],
+
+    Psi(p, p', t) = z^T Q(t) z + g(t)^T z + c(t)        (Q symmetric, 6 x 6),
+
+e.g. a prescribed areal rate of E about the column axis, x y' - y x' = r(t) (:class:`ArealRate`).
+Their velocity form is Psi = 0 itself, and their acceleration form
+
+    dPsi/dt = Psi_v (C qdd + d) + Psi_p p' + Psi_t = 0,
+    (Psi_p, Psi_v) = 2 Q z + g,   Psi_t = z^T Q' z + g'^T z + c'.
+
+A new task constraint is a new :class:`EndEffectorConstraint` (holonomic: writes the coefficients of
+a :class:`Quadric` with their first two time derivatives) or :class:`EndEffectorRateConstraint` (first
+order: a :class:`RateQuadric` with its first time derivative); the solver (compiled,
+:mod:`crane_reference.kernels`) does not change.  For the ellipse, the paper's u and v are Phi_p C / 2
+and (Phi_p d + convective) / 2: it divides (6.3) by two, which changes only the scale of the multiplier.
 """
 
 from __future__ import annotations
@@ -52,12 +63,50 @@ class Quadric:
                      + p @ self.Q[2] @ p + self.g[2] @ p + self.c[2])
 
 
+@dataclass(frozen=True)
+class RateQuadric:
+    """Coefficients of Psi = z^T Q z + g^T z + c in z = (p, p') and their first time derivative: index 0
+    value, 1 first derivative (Q: (2, 6, 6), g: (2, 6), c: (2,))."""
+
+    Q: np.ndarray
+    g: np.ndarray
+    c: np.ndarray
+
+    def residual(self, p: np.ndarray, v: np.ndarray) -> float:
+        z = np.concatenate((p, v))
+        return float(z @ self.Q[0] @ z + self.g[0] @ z + self.c[0])
+
+
 class EndEffectorConstraint(ABC):
     """One scalar holonomic constraint Phi(p, t) = 0, quadric in the end-effector position p [m]."""
 
+    order = 0
+
     @abstractmethod
+    def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
+        """Write the coefficients of Phi at time t with their first and second time derivatives into
+        zeroed arrays Q (3, 3, 3), g (3, 3), c (3,) (layout of :class:`Quadric`)."""
+
     def quadric(self, t: float) -> Quadric:
-        """Coefficients of Phi at time t with their first and second time derivatives."""
+        Q, g, c = np.zeros((3, 3, 3)), np.zeros((3, 3)), np.zeros(3)
+        self.write(t, Q, g, c)
+        return Quadric(Q, g, c)
+
+
+class EndEffectorRateConstraint(ABC):
+    """One scalar first-order constraint Psi(p, p', t) = 0, quadric in E's position and velocity."""
+
+    order = 1
+
+    @abstractmethod
+    def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
+        """Write the coefficients of Psi at time t with their first time derivative into zeroed arrays
+        Q (2, 6, 6), g (2, 6), c (2,) (layout of :class:`RateQuadric`)."""
+
+    def quadric(self, t: float) -> RateQuadric:
+        Q, g, c = np.zeros((2, 6, 6)), np.zeros((2, 6)), np.zeros(2)
+        self.write(t, Q, g, c)
+        return RateQuadric(Q, g, c)
 
 
 @dataclass(frozen=True)
@@ -69,16 +118,15 @@ class EllipseXY(EndEffectorConstraint):
     b: Profile
 
     @staticmethod
-    def _inverse_square(profile: Profile, t: float) -> np.ndarray:
+    def _inverse_square(profile: Profile, t: float) -> tuple[float, float, float]:
         """1/a^2 and its first two time derivatives."""
         a, da, dda = profile(t)
-        return np.array([a**-2, -2.0 * da / a**3, -2.0 * dda / a**3 + 6.0 * da**2 / a**4])
+        return a**-2, -2.0 * da / a**3, -2.0 * dda / a**3 + 6.0 * da**2 / a**4
 
-    def quadric(self, t: float) -> Quadric:
-        Q = np.zeros((3, 3, 3))
+    def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
         Q[:, 0, 0] = self._inverse_square(self.a, t)
         Q[:, 1, 1] = self._inverse_square(self.b, t)
-        return Quadric(Q, np.zeros((3, 3)), np.array([-1.0, 0.0, 0.0]))
+        c[0] = -1.0
 
 
 @dataclass(frozen=True)
@@ -87,61 +135,95 @@ class HeightZ(EndEffectorConstraint):
 
     z: Profile
 
-    def quadric(self, t: float) -> Quadric:
-        g = np.zeros((3, 3))
+    def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
         g[0, 2] = 1.0
-        return Quadric(np.zeros((3, 3, 3)), g, -np.array(self.z(t)))
+        c[:] = self.z(t)
+        c *= -1.0
+
+
+@dataclass(frozen=True)
+class ArealRate(EndEffectorRateConstraint):
+    """Psi = x y' - y x' - r(t) [m^2/s]: twice the areal velocity of E's horizontal projection about
+    the world z axis (the column axis) is prescribed.  On an ellipse x = a cos(theta), y = b sin(theta)
+    with constant axes, x y' - y x' = a b theta', so r = a b omega(t) makes E run along the ellipse with
+    the parametric angle rate omega(t) (a prescribed speed along the path)."""
+
+    rate: Profile
+
+    def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
+        Q[0, 0, 4] = Q[0, 4, 0] = 0.5  # x y'
+        Q[0, 1, 3] = Q[0, 3, 1] = -0.5  # -y x'
+        r, dr, _ = self.rate(t)
+        c[0], c[1] = -r, -dr
 
 
 @dataclass(frozen=True)
 class ConstraintCoefficients:
-    """The quadrics of a constraint set at one time, stacked for the compiled solver:
-    Q (m, 3, 3, 3), g (m, 3, 3), c (m, 3) (second axis: value, first, second time derivative)."""
+    """The quadrics of a constraint set at one time, stacked for the compiled solver in z = (p, p'):
+    Q (m, 3, 6, 6), g (m, 3, 6), c (m, 3) (second axis: value, first, second time derivative; a
+    holonomic row uses the p block only, a first-order row the value and first derivative only) and
+    the order of each row (0 holonomic, 1 first order)."""
 
     Q: np.ndarray
     g: np.ndarray
     c: np.ndarray
+    order: np.ndarray
 
 
 @dataclass(frozen=True)
 class ConstraintTerms:
-    """Stacked constraint quantities at one state, in generalized coordinates:
-    residual Phi (m,), A = Phi_q = Phi_p C (m, n), velocity equation A qd = b, acceleration equation
-    A qdd = c; ``gradients`` Phi_p (m, 3) for the distance of E from each constraint surface."""
+    """Stacked constraint quantities at one state, in generalized coordinates: ``residual`` Phi
+    (holonomic rows) or Psi (first-order rows); ``gradients`` Phi_p or Psi_v (m, 3), the direction in
+    which each row constrains E; the velocity-level Jacobian A = gradients C (m, n); the acceleration
+    equation A qdd = c; ``distance`` |residual| / |gradients|, E's first-order distance from the
+    constraint surface [m] (holonomic) or velocity error [m/s] (first order); ``velocity_residual``
+    dPhi/dt (holonomic) or Psi (first order), zero on a consistent state."""
 
     residual: np.ndarray
     gradients: np.ndarray
     A: np.ndarray
-    b: np.ndarray
     c: np.ndarray
-
-    @property
-    def distance(self) -> np.ndarray:
-        """First-order distance of E from each constraint surface, |Phi| / |Phi_p| [m]."""
-        return np.abs(self.residual) / np.linalg.norm(self.gradients, axis=1)
+    distance: np.ndarray
+    velocity_residual: np.ndarray
 
 
 @dataclass(frozen=True)
 class ConstraintSet:
     """The programmed constraints imposed together (the paper: ellipse and height)."""
 
-    constraints: tuple[EndEffectorConstraint, ...]
+    constraints: tuple[EndEffectorConstraint | EndEffectorRateConstraint, ...]
 
     @property
     def size(self) -> int:
         return len(self.constraints)
 
+    @property
+    def orders(self) -> np.ndarray:
+        """0 for a holonomic, 1 for a first-order constraint, per row."""
+        return np.array([c.order for c in self.constraints], dtype=np.int64)
+
     def coefficients(self, t: float) -> ConstraintCoefficients:
-        quadrics = [c.quadric(t) for c in self.constraints]
-        return ConstraintCoefficients(np.array([q.Q for q in quadrics]), np.array([q.g for q in quadrics]),
-                                      np.array([q.c for q in quadrics]))
+        m = self.size
+        Q, g, c = np.zeros((m, 3, 6, 6)), np.zeros((m, 3, 6)), np.zeros((m, 3))
+        for i, constraint in enumerate(self.constraints):
+            if constraint.order == 0:
+                constraint.write(t, Q[i, :, :3, :3], g[i, :, :3], c[i])
+            else:
+                constraint.write(t, Q[i, :2], g[i, :2], c[i, :2])
+        return ConstraintCoefficients(Q, g, c, self.orders)
+
+    def _holonomic(self) -> tuple[EndEffectorConstraint, ...]:
+        if any(c.order != 0 for c in self.constraints):
+            raise TypeError("position residuals and Phi_p are defined for holonomic constraints only")
+        return self.constraints
 
     def residual(self, t: float, p: np.ndarray) -> np.ndarray:
-        return np.array([c.quadric(t).residual(p) for c in self.constraints])
+        """Phi(p, t) stacked (m,) (holonomic constraints)."""
+        return np.array([c.quadric(t).residual(p) for c in self._holonomic()])
 
     def position_jacobian(self, t: float, p: np.ndarray) -> np.ndarray:
-        """Phi_p stacked (m, 3)."""
-        return np.array([c.quadric(t).gradient(p) for c in self.constraints])
+        """Phi_p stacked (m, 3) (holonomic constraints)."""
+        return np.array([c.quadric(t).gradient(p) for c in self._holonomic()])
 
 
 def paper_constraints(a: Profile, b: Profile, z: Profile) -> ConstraintSet:

@@ -4,9 +4,10 @@
 * :class:`SpringDrive` - the paper's flexible drive, E_p,dr = 1/2 s_dr (psi_a - psi2)^2, i.e. the
   generalized force -dE_p,dr/dpsi2 = s_dr (psi_a(t) - psi2), following a motor angle psi_a(t).
 
-Both give the power they feed into the system, for the energy balance: a torque source delivers
-t_dr * dpsi2/dt; for the spring drive the stored energy E_p,dr is counted as potential energy and
-the motor feeds s_dr (psi_a - psi2) * dpsi_a/dt.
+Both hand the compiled solver (tau0, s_dr, psi_a, dpsi_a/dt) with t_dr = tau0 + s_dr (psi_a - psi2);
+the energies and powers of the drive follow from these (:func:`crane_reference.dynamics.energy_accounts`):
+a torque source delivers t_dr * dpsi2/dt; for the spring drive the stored energy E_p,dr is counted as
+potential energy and the motor feeds s_dr (psi_a - psi2) * dpsi_a/dt.
 """
 
 from __future__ import annotations
@@ -35,15 +36,9 @@ class TorqueSource:
         on = self.start < t <= self.end if left_limit else self.start <= t < self.end
         return self.torque_value if on else 0.0
 
-    def potential(self, t: float, psi2: float) -> float:
-        return 0.0
-
     def kernel_parameters(self, t: float, left_limit: bool = False) -> np.ndarray:
-        """(tau0, s_dr, psi_a) with t_dr = tau0 + s_dr (psi_a - psi2), for the compiled solver."""
-        return np.array([self.torque(t, 0.0, left_limit), 0.0, 0.0])
-
-    def power(self, t: float, psi2: float, psi2_rate: float, left_limit: bool = False) -> float:
-        return self.torque(t, psi2, left_limit) * psi2_rate
+        """(tau0, s_dr, psi_a, dpsi_a/dt) with t_dr = tau0 + s_dr (psi_a - psi2), for the compiled solver."""
+        return np.array([self.torque(t, 0.0, left_limit), 0.0, 0.0, 0.0])
 
 
 @dataclass(frozen=True)
@@ -59,15 +54,10 @@ class SpringDrive:
         """s_dr (psi_a(t) - psi2); continuous in t, so ``left_limit`` changes nothing."""
         return self.stiffness * (self.motor_angle(t)[0] - psi2)
 
-    def potential(self, t: float, psi2: float) -> float:
-        return 0.5 * self.stiffness * (self.motor_angle(t)[0] - psi2) ** 2
-
     def kernel_parameters(self, t: float, left_limit: bool = False) -> np.ndarray:
-        """(tau0, s_dr, psi_a) with t_dr = tau0 + s_dr (psi_a - psi2), for the compiled solver."""
-        return np.array([0.0, self.stiffness, self.motor_angle(t)[0]])
-
-    def power(self, t: float, psi2: float, psi2_rate: float, left_limit: bool = False) -> float:
-        return self.torque(t, psi2) * self.motor_angle(t)[1]
+        """(tau0, s_dr, psi_a, dpsi_a/dt) with t_dr = tau0 + s_dr (psi_a - psi2), for the compiled solver."""
+        angle, rate, _ = self.motor_angle(t)
+        return np.array([0.0, self.stiffness, angle, rate])
 
 
 Drive = TorqueSource | SpringDrive

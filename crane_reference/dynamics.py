@@ -39,6 +39,23 @@ def chain_terms(q, qd, kinds, axes, origins, body_joint, body_H, gravity, ee_joi
     return M, h, Qg, potential_g, p, T[ee_joint, :3, :3].copy(), C, d
 
 
+@njit(cache=True)
+def energy_accounts(q, qd, M, gravity_potential, K, D, drive, drive_joint):
+    """Energies and powers at (q, qd) for the energy balance, with ``drive`` = (tau0, s_dr, psi_a, dpsi_a/dt):
+
+    E_k = 1/2 qd^T M qd,  E_p = E_p,g + 1/2 q^T K q + 1/2 s_dr (psi_a - psi2)^2,
+    t_dr = tau0 + s_dr (psi_a - psi2),
+    P_dr = tau0 dpsi2/dt + s_dr (psi_a - psi2) dpsi_a/dt   (what the torque source or the motor feeds in),
+    P_D = -qd^T D qd   (the dampers' power, <= 0).
+
+    Returns the array (E_k, E_p, t_dr, P_dr, P_D)."""
+    j = drive_joint
+    stretch = drive[2] - q[j]
+    return np.array([0.5 * (qd @ (M @ qd)), gravity_potential + 0.5 * (q @ (K @ q)) + 0.5 * drive[1] * stretch**2,
+                     drive[0] + drive[1] * stretch, drive[0] * qd[j] + drive[1] * stretch * drive[3],
+                     -(qd @ (D @ qd))])
+
+
 @dataclass(frozen=True)
 class DynamicsTerms:
     """Everything eqs. (6)-(8) need at one (t, q, qd)."""
@@ -95,15 +112,8 @@ class CraneDynamics:
         frame = T[m.end_effector_joint]
         return frame[:3, :3] @ m.end_effector_point + frame[:3, 3], frame[:3, :3].copy()
 
-    def kinetic_energy(self, terms: DynamicsTerms, qd: np.ndarray) -> float:
-        """E_k = 1/2 qd^T M qd (= 1/2 sum_l tr(dT H dT^T))."""
-        return 0.5 * qd @ terms.M @ qd
-
-    def potential_energy(self, t: float, q: np.ndarray, terms: DynamicsTerms) -> float:
-        """E_p = E_p,g + 1/2 q^T K q + E_p,dr."""
-        return (terms.gravity_potential + 0.5 * q @ self.model.stiffness @ q
-                + self.drive.potential(t, q[self.model.drive_joint]))
-
-    def dissipated_power(self, qd: np.ndarray) -> float:
-        """Power lost in the Rayleigh dampers, qd^T D qd >= 0."""
-        return qd @ self.damping_matrix @ qd
+    def accounts(self, t: float, q: np.ndarray, qd: np.ndarray, terms: DynamicsTerms,
+                 left_limit: bool = False) -> np.ndarray:
+        """(E_k, E_p, t_dr, P_dr, P_D) at (t, q, qd), see :func:`energy_accounts`."""
+        return energy_accounts(q, qd, terms.M, terms.gravity_potential, self.model.stiffness, self.damping_matrix,
+                               self.drive.kernel_parameters(t, left_limit), self.model.drive_joint)

@@ -8,8 +8,8 @@ the time-dependent data (constraint coefficients, drive) enter as numbers evalua
 The kernels release the GIL (``nogil``), so a ROS node's publishing thread runs while the solver steps.
 
 ``chain`` is the tuple (kinds, axes, origins, body_joint, body_H, gravity, ee_joint, ee_point, K, D,
-drive_joint) and ``drive`` the tuple (tau0, s_dr, psi_a): the drive's generalized force on psi2 is
-tau0 + s_dr (psi_a - psi2) (a torque source has s_dr = 0).
+drive_joint) and ``drive`` the array (tau0, s_dr, psi_a, dpsi_a/dt): the drive's generalized force on
+psi2 is tau0 + s_dr (psi_a - psi2) (a torque source has s_dr = 0).
 """
 
 from __future__ import annotations
@@ -17,36 +17,164 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .dynamics import chain_terms
+from .dynamics import chain_terms, energy_accounts
 from .kinematics import point_position_jacobian
 
 
 @njit(cache=True, nogil=True)
-def quadric_values(p, Q, g, c):
-    """Phi (m,) and Phi_p (m, 3) of stacked quadrics at p (value level, index 0)."""
-    m = Q.shape[0]
-    residual = np.empty(m)
-    grads = np.empty((m, 3))
-    for i in range(m):
-        Qp = Q[i, 0] @ p
-        residual[i] = p @ Qp + g[i, 0] @ p + c[i, 0]
-        grads[i] = 2.0 * Qp + g[i, 0]
+def _quadratic_form(Q, x, y):
+    """x^T Q y over the leading len(x) x len(y) block of Q."""
+    total = 0.0
+    for a in range(x.size):
+        for b in range(y.size):
+            total += x[a] * Q[a, b] * y[b]
+    return total
+
+
+@njit(cache=True, nogil=True)
+def _form_gradient(Q, g, x):
+    """2 Q x + g over the leading len(x) block."""
+    n = x.size
+    out = np.empty(n)
+    for a in range(n):
+        total = g[a]
+        for b in range(n):
+            total += 2.0 * Q[a, b] * x[b]
+        out[a] = total
+    return out
+
+
+@njit(cache=True, nogil=True)
+def holonomic_values(p, Q, g, c, order):
+    """Phi (n_h,) and Phi_p (n_h, 3) of the holonomic rows at p (value level, index 0)."""
+    rows = np.flatnonzero(order == 0)
+    residual = np.empty(rows.size)
+    grads = np.empty((rows.size, 3))
+    for k in range(rows.size):
+        i = rows[k]
+        residual[k] = _quadratic_form(Q[i, 0], p, p) + g[i, 0, :3] @ p + c[i, 0]
+        grads[k] = _form_gradient(Q[i, 0], g[i, 0], p)
     return residual, grads
 
 
 @njit(cache=True, nogil=True)
-def constraint_terms(p, v, C, d, Q, g, c):
-    """Phi, Phi_p, A = Phi_p C, b = -Phi_t and c_acc = -(Phi_p d + convective) of stacked quadrics."""
-    residual, grads = quadric_values(p, Q, g, c)
+def velocity_residual(p, v, Q, g, c, order):
+    """Velocity-level residuals, dPhi/dt = Phi_p v + Phi_t (holonomic rows) or Psi (first-order rows),
+    and their gradients with respect to v, Phi_p or Psi_v (m, 3)."""
     m = Q.shape[0]
-    b = np.empty(m)
-    c_acc = np.empty(m)
+    residual = np.empty(m)
+    grads = np.empty((m, 3))
+    z = np.concatenate((p, v))
     for i in range(m):
-        b[i] = -(p @ Q[i, 1] @ p + g[i, 1] @ p + c[i, 1])
-        convective = (2.0 * v @ Q[i, 0] @ v + 2.0 * (2.0 * Q[i, 1] @ p + g[i, 1]) @ v
-                      + p @ Q[i, 2] @ p + g[i, 2] @ p + c[i, 2])
-        c_acc[i] = -(grads[i] @ d + convective)
-    return residual, grads, grads @ C, b, c_acc
+        if order[i] == 0:
+            grads[i] = _form_gradient(Q[i, 0], g[i, 0], p)
+            residual[i] = grads[i] @ v + _quadratic_form(Q[i, 1], p, p) + g[i, 1, :3] @ p + c[i, 1]
+        else:
+            grads[i] = _form_gradient(Q[i, 0], g[i, 0], z)[3:]
+            residual[i] = _quadratic_form(Q[i, 0], z, z) + g[i, 0] @ z + c[i, 0]
+    return residual, grads
+
+
+@njit(cache=True, nogil=True)
+def constraint_terms(p, v, C, d, Q, g, c, order):
+    """Residuals (Phi or Psi), gradients (Phi_p or Psi_v), A = gradients C, c of A qdd = c, the
+    distances |residual| / |gradient| and the velocity-level residuals (dPhi/dt or Psi) (see
+    :mod:`crane_reference.constraints`)."""
+    m = Q.shape[0]
+    residual = np.empty(m)
+    rate = np.empty(m)
+    grads = np.empty((m, 3))
+    c_acc = np.empty(m)
+    z = np.concatenate((p, v))
+    for i in range(m):
+        if order[i] == 0:
+            grads[i] = _form_gradient(Q[i, 0], g[i, 0], p)
+            residual[i] = _quadratic_form(Q[i, 0], p, p) + g[i, 0, :3] @ p + c[i, 0]
+            rate[i] = grads[i] @ v + _quadratic_form(Q[i, 1], p, p) + g[i, 1, :3] @ p + c[i, 1]
+            convective = (2.0 * _quadratic_form(Q[i, 0], v, v) + 2.0 * (_form_gradient(Q[i, 1], g[i, 1], p) @ v)
+                          + _quadratic_form(Q[i, 2], p, p) + g[i, 2, :3] @ p + c[i, 2])
+            c_acc[i] = -(grads[i] @ d + convective)
+        else:
+            full = _form_gradient(Q[i, 0], g[i, 0], z)
+            grads[i] = full[3:]
+            residual[i] = _quadratic_form(Q[i, 0], z, z) + g[i, 0] @ z + c[i, 0]
+            rate[i] = residual[i]
+            psi_t = _quadratic_form(Q[i, 1], z, z) + g[i, 1] @ z + c[i, 1]
+            c_acc[i] = -(grads[i] @ d + full[:3] @ v + psi_t)
+    distance = np.empty(m)
+    for i in range(m):
+        distance[i] = abs(residual[i]) / np.sqrt(grads[i] @ grads[i])
+    return residual, grads, grads @ C, c_acc, distance, rate
+
+
+@njit(cache=True, nogil=True)
+def solve_small(A, B):
+    """X = A^-1 B for a small square A (Gaussian elimination with partial pivoting; K_dc is 2 x 2 or
+    3 x 3 here, where a LAPACK call costs more than the arithmetic), B of shape (m, k)."""
+    m = A.shape[0]
+    a = A.copy()
+    x = B.copy()
+    for col in range(m):
+        pivot = col
+        for row in range(col + 1, m):
+            if abs(a[row, col]) > abs(a[pivot, col]):
+                pivot = row
+        if a[pivot, col] == 0.0:
+            raise np.linalg.LinAlgError("singular matrix")
+        if pivot != col:
+            for k in range(m):
+                a[col, k], a[pivot, k] = a[pivot, k], a[col, k]
+            for k in range(x.shape[1]):
+                x[col, k], x[pivot, k] = x[pivot, k], x[col, k]
+        for row in range(col + 1, m):
+            factor = a[row, col] / a[col, col]
+            for k in range(col, m):
+                a[row, k] -= factor * a[col, k]
+            for k in range(x.shape[1]):
+                x[row, k] -= factor * x[col, k]
+    for col in range(m - 1, -1, -1):
+        for k in range(x.shape[1]):
+            total = x[col, k]
+            for j in range(col + 1, m):
+                total -= a[col, j] * x[j, k]
+            x[col, k] = total / a[col, col]
+    return x
+
+
+@njit(cache=True, nogil=True)
+def solve_small_vector(A, b):
+    """x = A^-1 b for a small square A (see :func:`solve_small`)."""
+    return solve_small(A, b.reshape((b.size, 1)))[:, 0]
+
+
+@njit(cache=True, nogil=True)
+def project_rows(X, B, independent, dependent, servo):
+    """P^T X for X (n, k) without forming P: X[ic] + Gamma^T X[dc] for ideal constraints (P = B, whose
+    rows are the identity on ic and Gamma on dc), X[ic] for servo-constraints (P = E_ic)."""
+    out = np.empty((independent.size, X.shape[1]))
+    for j in range(independent.size):
+        out[j] = X[independent[j]]
+    if not servo:
+        for r in range(dependent.size):
+            row = X[dependent[r]]
+            for j in range(independent.size):
+                weight = B[dependent[r], j]
+                for k in range(X.shape[1]):
+                    out[j, k] += weight * row[k]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def map_columns(Y, B, independent, dependent):
+    """Y B for Y (k, n) without forming B: Y[:, ic] + Y[:, dc] Gamma."""
+    out = np.empty((Y.shape[0], independent.size))
+    for i in range(Y.shape[0]):
+        for j in range(independent.size):
+            total = Y[i, independent[j]]
+            for r in range(dependent.size):
+                total += Y[i, dependent[r]] * B[dependent[r], j]
+            out[i, j] = total
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -56,44 +184,60 @@ def velocity_map(A, independent, dependent):
     B = np.zeros((A.shape[1], n_ic))
     for col in range(n_ic):
         B[independent[col], col] = 1.0
-    gamma = -np.linalg.solve(np.ascontiguousarray(A[:, dependent]), np.ascontiguousarray(A[:, independent]))
+    gamma = -solve_small(np.ascontiguousarray(A[:, dependent]), np.ascontiguousarray(A[:, independent]))
     for row in range(dependent.size):
         B[dependent[row]] = gamma[row]
     return B
 
 
 @njit(cache=True, nogil=True)
-def project_positions(q, Q, g, c, independent, dependent, chain, tolerance, max_iterations):
-    """q with q_dc solved from Phi(q) = 0 by Newton (Jacobian K_dc); also (p, C) of the last iterate
-    and whether it converged."""
+def project_positions(q, Q, g, c, order, holonomic_dependent, chain, tolerance, max_iterations):
+    """q with the holonomically dependent coordinates solved from Phi(q) = 0 by Newton (Jacobian
+    Phi_p C[:, hd]); also (p, C) of the last iterate and whether it converged."""
     kinds, axes, origins, _, _, _, ee_joint, ee_point, _, _, _ = chain
     q = q.copy()
     for _ in range(max_iterations):
         p, C = point_position_jacobian(q, kinds, axes, origins, ee_joint, ee_point)
-        residual, grads = quadric_values(p, Q, g, c)
-        step = np.linalg.solve(grads @ np.ascontiguousarray(C[:, dependent]), residual)
-        for i in range(dependent.size):
-            q[dependent[i]] -= step[i]
+        if holonomic_dependent.size == 0:
+            return q, p, C, True
+        residual, grads = holonomic_values(p, Q, g, c, order)
+        step = solve_small_vector(grads @ np.ascontiguousarray(C[:, holonomic_dependent]), residual)
+        for i in range(holonomic_dependent.size):
+            q[holonomic_dependent[i]] -= step[i]
         if np.max(np.abs(step)) <= tolerance:
             return q, p, C, True
     return q, p, C, False
 
 
 @njit(cache=True, nogil=True)
-def dependent_velocities(qd, p, C, Q, g, c, independent, dependent):
-    """qd with qd_dc = K_dc^-1 (b - K_ic qd_ic), eq. (7)."""
-    _, grads = quadric_values(p, Q, g, c)
-    A = grads @ C
-    m = Q.shape[0]
-    b = np.empty(m)
-    for i in range(m):
-        b[i] = -(p @ Q[i, 1] @ p + g[i, 1] @ p + c[i, 1])
+def dependent_velocities(qd, p, C, Q, g, c, order, dependent):
+    """qd with qd_dc solved from the velocity-level constraints (eq. (7): K_dc qd_dc = b - K_ic qd_ic for
+    rows linear in qd); Newton on qd_dc (Jacobian K_dc = A[:, dc]), one step when every row is linear in
+    qd, until the step is below 1e-14 otherwise.  Also whether it converged."""
+    linear = True
+    for i in range(order.size):
+        if order[i] == 1 and np.any(Q[i, 0, 3:, 3:] != 0.0):
+            linear = False
     qd = qd.copy()
-    rhs = b - np.ascontiguousarray(A[:, independent]) @ qd[independent]
-    qd_dc = np.linalg.solve(np.ascontiguousarray(A[:, dependent]), rhs)
-    for i in range(dependent.size):
-        qd[dependent[i]] = qd_dc[i]
-    return qd
+    for _ in range(1 if linear else 30):
+        residual, grads = velocity_residual(p, C @ qd, Q, g, c, order)
+        step = solve_small_vector(grads @ np.ascontiguousarray(C[:, dependent]), residual)
+        for i in range(dependent.size):
+            qd[dependent[i]] -= step[i]
+        if linear or np.max(np.abs(step)) <= 1e-14:
+            return qd, True
+    return qd, False
+
+
+@njit(cache=True, nogil=True)
+def smallest_singular_value(K):
+    """Smallest singular value of a square matrix (closed form for 2 x 2, the paper's K_dc)."""
+    if K.shape[0] == 2:
+        a, b, c, d = K[0, 0], K[0, 1], K[1, 0], K[1, 1]
+        half_trace = 0.5 * (a * a + b * b + c * c + d * d)
+        det = a * d - b * c
+        return np.sqrt(max(half_trace - np.sqrt(max(half_trace * half_trace - det * det, 0.0)), 0.0))
+    return np.linalg.svd(K)[1][-1]
 
 
 @njit(cache=True, nogil=True)
@@ -109,40 +253,59 @@ def projection_matrix(B, independent, servo):
 
 
 @njit(cache=True, nogil=True)
-def evaluate(q, qd, Q, g, c, drive, independent, dependent, chain, servo):
+def evaluate(q, qd, Q, g, c, order, drive, independent, dependent, chain, servo):
     """Everything (8) needs and gives at (q, qd): dynamics terms, constraint terms, B, qdd, the
-    reactions (lambda for ideal constraints, the dependent joints' torques tau for servo-constraints)
-    and the generalized force they exert, M qdd + h - Q (= A^T lambda, or E_dc tau)."""
+    reactions (lambda for ideal constraints, the dependent joints' torques tau for servo-constraints),
+    the generalized force they exert, M qdd + h - Q (= A^T lambda, or E_dc tau), and the accounts
+    (E_k, E_p, t_dr, P_dr, P_constraints, P_D, sigma_min(K_dc)) (powers: what each source feeds in)."""
     kinds, axes, origins, body_joint, body_H, gravity, ee_joint, ee_point, K, D, drive_joint = chain
     M, h, Qg, Vg, p, R, C, d = chain_terms(q, qd, kinds, axes, origins, body_joint, body_H, gravity, ee_joint,
                                            ee_point)
     forces = Qg - K @ q - D @ qd
     forces[drive_joint] += drive[0] + drive[1] * (drive[2] - q[drive_joint])
-    residual, grads, A, b, c_acc = constraint_terms(p, C @ qd, C, d, Q, g, c)
+    residual, grads, A, c_acc, distance, rate = constraint_terms(p, C @ qd, C, d, Q, g, c, order)
     B = velocity_map(A, independent, dependent)
-    P = projection_matrix(B, independent, servo)
-    lhs = np.vstack((P.T @ M, A))
-    rhs = np.concatenate((P.T @ (forces - h), c_acc))
+    n_ic = independent.size
+    lhs = np.empty((q.size, q.size))
+    lhs[:n_ic] = project_rows(M, B, independent, dependent, servo)
+    lhs[n_ic:] = A
+    rhs = np.empty(q.size)
+    rhs[:n_ic] = project_rows((forces - h).reshape((q.size, 1)), B, independent, dependent, servo)[:, 0]
+    rhs[n_ic:] = c_acc
     qdd = np.linalg.solve(lhs, rhs)
     reaction_force = M @ qdd + h - forces
-    reactions = reaction_force[dependent] if servo else np.linalg.solve(A @ A.T, A @ reaction_force)
-    return M, h, forces, Vg, p, R, C, d, residual, grads, A, b, c_acc, B, qdd, reactions, reaction_force
+    reactions = reaction_force[dependent] if servo else solve_small_vector(A @ A.T, A @ reaction_force)
+    energy = energy_accounts(q, qd, M, Vg, K, D, drive, drive_joint)
+    accounts = np.array([energy[0], energy[1], energy[2], energy[3], reaction_force @ qd, energy[4],
+                         smallest_singular_value(np.ascontiguousarray(A[:, dependent]))])
+    return (M, h, forces, Vg, p, R, C, d, residual, grads, A, c_acc, distance, rate, B, qdd, reactions,
+            reaction_force, accounts)
 
 
 @njit(cache=True, nogil=True)
-def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamma, beta, Q, g, c, drive,
-                           independent, dependent, chain, servo, tolerance, max_iterations, projection_tolerance):
-    """One generalized-alpha step on the independent coordinates (see :mod:`crane_reference.integration`).
+def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamma, beta, Q, g, c, order, drive,
+                           independent, dependent, integrated, holonomic_dependent, chain, servo, tolerance,
+                           max_iterations, projection_tolerance):
+    """One generalized-alpha step (see :mod:`crane_reference.integration`) of the integrated coordinates
+    x = q[integrated] = (q_ic, q_vd): the independent ones and those made dependent by first-order
+    constraints.  Newton (iteration matrix from M, K, D reduced with B) on the independent accelerations,
+    fixed point on the q_vd ones; q_hd from the position constraints and qd_dc from the velocity-level
+    constraints at every iterate.
 
-    Returns q1, qd1, a~1, the evaluation at (q1, qd1), a status (0 converged, 1 Newton did not converge,
-    2 the position constraints could not be solved) and the number of Newton iterations."""
+    Returns q1, qd1, a~1 (of x), the evaluation at (q1, qd1), a status (0 converged, 1 Newton did not
+    converge, 2 the position or velocity constraints could not be solved) and the number of iterations."""
     K, D = chain[8], chain[9]
-    x0, v0, a0 = q0[independent], qd0[independent], qdd0[independent]
+    n_ic = independent.size
+    x0, v0, a0 = q0[integrated], qd0[integrated], qdd0[integrated]
     ratio = (1.0 - alpha_f) / (1.0 - alpha_m)
     beta_p, gamma_p = h * h * beta * ratio, h * gamma * ratio
-    P0 = projection_matrix(B0, independent, servo)
-    M_r = P0.T @ M0 @ B0
-    iteration_inverse = np.linalg.inv(M_r + beta_p * (P0.T @ K @ B0) + gamma_p * (P0.T @ D @ B0))
+    M_r = map_columns(project_rows(M0, B0, independent, dependent, servo), B0, independent, dependent)
+    iteration_matrix = M_r + beta_p * map_columns(project_rows(K, B0, independent, dependent, servo), B0,
+                                                    independent, dependent)
+    if np.any(D != 0.0):
+        iteration_matrix += gamma_p * map_columns(project_rows(D, B0, independent, dependent, servo), B0,
+                                                  independent, dependent)
+    iteration_inverse = np.linalg.inv(iteration_matrix)
     q_guess = q0 + h * qd0 + 0.5 * h * h * qdd0
     a1 = a0.copy()
     status = 1
@@ -151,18 +314,21 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
         x1 = x0 + h * v0 + h * h * ((0.5 - beta) * at0 + beta * at1)
         v1 = v0 + h * ((1.0 - gamma) * at0 + gamma * at1)
         q1 = q_guess.copy()
-        q1[independent] = x1
-        q1, p, C, projected = project_positions(q1, Q, g, c, independent, dependent, chain,
+        q1[integrated] = x1
+        q1, p, C, projected = project_positions(q1, Q, g, c, order, holonomic_dependent, chain,
                                                 projection_tolerance, 25)
-        if not projected:
-            held = evaluate(q0, qd0, Q, g, c, drive, independent, dependent, chain, servo)
-            return q0, qd0, at0, held, 2, iteration + 1
         qd1 = np.zeros_like(q1)
-        qd1[independent] = v1
-        qd1 = dependent_velocities(qd1, p, C, Q, g, c, independent, dependent)
-        result = evaluate(q1, qd1, Q, g, c, drive, independent, dependent, chain, servo)
+        qd1[integrated] = v1
+        if projected:
+            qd1, projected = dependent_velocities(qd1, p, C, Q, g, c, order, dependent)
+        if not projected:
+            held = evaluate(q0, qd0, Q, g, c, order, drive, independent, dependent, chain, servo)
+            return q0, qd0, at0, held, 2, iteration + 1
+        result = evaluate(q1, qd1, Q, g, c, order, drive, independent, dependent, chain, servo)
         q_guess = q1
-        correction = -(iteration_inverse @ (M_r @ (a1 - result[14][independent])))
+        qdd1 = result[15][integrated]
+        correction = qdd1 - a1
+        correction[:n_ic] = -(iteration_inverse @ (M_r @ (a1[:n_ic] - qdd1[:n_ic])))
         a1 = a1 + correction
         # Accept only an iterate that already includes a Newton correction: stopping at the predictor
         # (possible near rest, where every correction is tiny) would make the step explicit.

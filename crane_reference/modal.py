@@ -89,7 +89,7 @@ def constraint_hessian(dynamics: CraneDynamics, motion_constraints: ConstraintSe
     p = p_bar[:3]
     C = np.einsum("iab,b->ai", S[:, :3, :], p_bar)
     C[:, e + 1:] = 0.0
-    quadric = motion_constraints.coefficients(t).Q[:, 0]  # (m, 3, 3)
+    quadric = motion_constraints.coefficients(t).Q[:, 0, :3, :3]  # (m, 3, 3) (holonomic rows: the p block)
     w = weights @ motion_constraints.position_jacobian(t, p)  # sum_i w_i Phi_i,p
     v = S @ p_bar  # S_b [p; 1]
     v[e + 1:] = 0.0

@@ -18,6 +18,12 @@ M qdd + h = Q + A^T lambda, A qdd = c; lambda follows from the solution and A^T 
 generalized constraint force.  Positions of the dependent coordinates are not integrated: they are
 found from the position constraints Phi(q_ic, q_dc, t) = 0 by Newton's method with Jacobian K_dc
 (coordinate partitioning), so the motion never drifts off the constraints.
+
+First-order (velocity) task constraints Psi(p, p', t) = 0 fit the same equations: their rows of A
+are Psi_v C and their rows of c come from dPsi/dt = 0.  The coordinate each one makes dependent
+(q_vd) is not fixed by positions, so it is integrated like the independent ones, while its velocity
+comes from the constraints; the velocity-level constraints hold exactly at every evaluation.
+``dependent[i]`` is the coordinate solved from constraint i.
 """
 
 from __future__ import annotations
@@ -48,7 +54,9 @@ class MotionSolution:
 
     ``reactions`` are the Lagrange multipliers lambda of Phi (ideal constraints) or the dependent
     joints' torques tau [N m] (servo-constraints); ``constraint_forces`` the generalized force they
-    exert, M qdd + h - Q (= A^T lambda, or tau on the dependent coordinates).
+    exert, M qdd + h - Q (= A^T lambda, or tau on the dependent coordinates).  ``powers`` are what the
+    drive, the constraint forces and the dampers feed into the crane [W] (their time integrals are the
+    work terms of the energy balance).
     """
 
     qdd: np.ndarray
@@ -58,16 +66,10 @@ class MotionSolution:
     constraints: ConstraintTerms
     velocity_map: np.ndarray
     kdc_min_singular_value: float
-
-
-def smallest_singular_value(K: np.ndarray) -> float:
-    """Smallest singular value of a square matrix (closed form for 2 x 2, the paper's K_dc)."""
-    if K.shape == (2, 2):
-        gram = K.T @ K
-        half_trace = 0.5 * (gram[0, 0] + gram[1, 1])
-        det = gram[0, 0] * gram[1, 1] - gram[0, 1] ** 2
-        return float(np.sqrt(max(half_trace - np.sqrt(max(half_trace**2 - det, 0.0)), 0.0)))
-    return float(np.linalg.svd(K, compute_uv=False)[-1])
+    kinetic_energy: float
+    potential_energy: float
+    drive_torque: float
+    powers: np.ndarray
 
 
 class ProgrammedMotion:
@@ -96,28 +98,33 @@ class ProgrammedMotion:
         if len(self.dependent) != constraints.size:
             raise ValueError(f"{constraints.size} constraints need as many dependent coordinates, "
                              f"got {len(self.dependent)}")
+        orders = constraints.orders
+        self.holonomic_dependent = self.dependent[orders == 0]
+        """Coordinates solved from the position constraints (the paper's psi(3,0), psi4)."""
+        self.velocity_dependent = self.dependent[orders == 1]
+        """Coordinates whose velocities first-order constraints fix; their positions are integrated."""
+        self.integrated = np.concatenate((self.independent, self.velocity_dependent))
+        """Coordinates the integrator advances: independent first, then velocity-dependent."""
         self.min_singular_value = min_singular_value
 
     @property
     def dof(self) -> int:
         return self.dynamics.model.dof
 
-    def check_singularity(self, A: np.ndarray) -> float:
-        """Smallest singular value of K_dc = A[:, dc]; raises if below the minimum."""
-        sigma = smallest_singular_value(A[:, self.dependent])
+    def check_singularity(self, sigma: float) -> None:
+        """Raises if the smallest singular value of K_dc = A[:, dc] is below the minimum."""
         if not sigma >= self.min_singular_value:
             raise ConstraintSingularityError(
                 f"smallest singular value of K_dc = {sigma:.3g} is below {self.min_singular_value:g}: "
                 "the end-effector task is at or near a stretch/fold singularity")
-        return sigma
 
     def project_positions(self, t: float, q: np.ndarray, tolerance: float = 1e-13,
                           max_iterations: int = 25) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
-        """q with q_dc solved from Phi(q, t) = 0 (Newton, Jacobian K_dc = Phi_p C[:, dc]), and (p_E, C)
-        from the last Newton iterate (within ``tolerance`` of the returned q)."""
+        """q with q_hd solved from Phi(q, t) = 0 (Newton, Jacobian Phi_p C[:, hd]; the paper's K_dc), and
+        (p_E, C) from the last Newton iterate (within ``tolerance`` of the returned q)."""
         k = self.constraints.coefficients(t)
-        q, p, C, converged = kernels.project_positions(np.ascontiguousarray(q, dtype=float), k.Q, k.g, k.c,
-                                                       self.independent, self.dependent, self.dynamics.chain,
+        q, p, C, converged = kernels.project_positions(np.ascontiguousarray(q, dtype=float), k.Q, k.g, k.c, k.order,
+                                                       self.holonomic_dependent, self.dynamics.chain,
                                                        tolerance, max_iterations)
         if not converged:
             raise ProjectionError(f"position constraints not met after {max_iterations} Newton iterations at "
@@ -126,18 +133,25 @@ class ProgrammedMotion:
 
     def dependent_velocities(self, t: float, q: np.ndarray, qd: np.ndarray,
                              kinematics: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
-        """qd with its dependent part replaced by eq. (7); ``kinematics`` = (p_E, C) at q if known."""
+        """qd with its dependent part solved from the velocity-level constraints (eq. (7) for the paper's);
+        ``kinematics`` = (p_E, C) at q if known."""
         p, C = self.dynamics.end_effector(q) if kinematics is None else kinematics
         k = self.constraints.coefficients(t)
-        return kernels.dependent_velocities(np.ascontiguousarray(qd, dtype=float), p, C, k.Q, k.g, k.c,
-                                            self.independent, self.dependent)
+        qd, converged = kernels.dependent_velocities(np.ascontiguousarray(qd, dtype=float), p, C, k.Q, k.g, k.c,
+                                                     k.order, self.dependent)
+        if not converged:
+            raise ProjectionError(f"velocity constraints not met at t = {t:.6g} s")
+        return qd
 
     def solution_from_evaluation(self, t: float, q: np.ndarray, qd: np.ndarray, result: tuple) -> MotionSolution:
         """Wrap the arrays returned by :func:`kernels.evaluate` (checks the singularity)."""
-        M, h, Q, Vg, p, R, C, d, residual, grads, A, b, c, B, qdd, reactions, reaction_force = result
-        sigma = self.check_singularity(A)
+        (M, h, Q, Vg, p, R, C, d, residual, grads, A, c, distance, rate, B, qdd, reactions, reaction_force,
+         accounts) = result
+        kinetic, potential, torque, drive_power, constraint_power, damping_power, sigma = accounts
+        self.check_singularity(sigma)
         return MotionSolution(qdd, reactions, reaction_force, DynamicsTerms(M, h, Q, p, R, C, d, Vg),
-                              ConstraintTerms(residual, grads, A, b, c), B, sigma)
+                              ConstraintTerms(residual, grads, A, c, distance, rate), B, sigma, kinetic, potential,
+                              torque, np.array([drive_power, constraint_power, damping_power]))
 
     def projection(self, solution: MotionSolution) -> np.ndarray:
         """P of (8) at a solution: B (ideal constraints) or E_ic (servo-constraints)."""
@@ -153,6 +167,6 @@ class ProgrammedMotion:
         k, drive = self.kernel_inputs(t, left_limit)
         q = np.ascontiguousarray(q, dtype=float)
         qd = np.ascontiguousarray(qd, dtype=float)
-        result = kernels.evaluate(q, qd, k.Q, k.g, k.c, drive, self.independent, self.dependent, self.dynamics.chain,
-                                  self.servo)
+        result = kernels.evaluate(q, qd, k.Q, k.g, k.c, k.order, drive, self.independent, self.dependent,
+                                  self.dynamics.chain, self.servo)
         return self.solution_from_evaluation(t, q, qd, result)

@@ -25,7 +25,7 @@ from .integration import GeneralizedAlpha, StepState
 from .model import ChainModel, build_model
 from .parameters import CraneParameters, Task
 from .profiles import Constant, QuinticRise
-from .programmed_motion import MotionSolution, ProgrammedMotion
+from .programmed_motion import ProgrammedMotion
 from .trajectory import Sample, Trajectory, make_sample
 
 Progress = Callable[[float], None]
@@ -60,11 +60,6 @@ class Scenario:
         return self._equilibrium
 
 
-def _constraint_power(solution: MotionSolution, qd: np.ndarray) -> float:
-    """Power of the constraint (or servo) generalized forces, (M qdd + h - Q) . qd."""
-    return float(solution.constraint_forces @ qd)
-
-
 class MotionStepper:
     """Online generalized-alpha integration of a :class:`ProgrammedMotion` with work bookkeeping."""
 
@@ -78,43 +73,27 @@ class MotionStepper:
         self._k = 0
         self.state: StepState = self.integrator.start(t0, q0, qd0)
         self._work = np.zeros(3)
-        self.sample: Sample = self._sample(self.state, left_limit=False)
+        self._breakpoints = sorted(motion.dynamics.drive.breakpoints)
+        self.sample: Sample = make_sample(self.state.t, self.state.q, self.state.qd, self.state.solution, self._work)
 
     @property
     def motion(self) -> ProgrammedMotion:
         return self.integrator.motion
 
-    def _powers(self, state: StepState, left_limit: bool) -> np.ndarray:
-        dyn = self.motion.dynamics
-        j = dyn.model.drive_joint
-        return np.array([dyn.drive.power(state.t, state.q[j], state.qd[j], left_limit),
-                         _constraint_power(state.solution, state.qd), -dyn.dissipated_power(state.qd)])
-
-    def _sample(self, state: StepState, left_limit: bool) -> Sample:
-        dyn = self.motion.dynamics
-        j = dyn.model.drive_joint
-        terms = state.solution.dynamics
-        return make_sample(state.t, state.q, state.qd, state.solution, j,
-                           dyn.drive.torque(state.t, state.q[j], left_limit),
-                           dyn.kinetic_energy(terms, state.qd), dyn.potential_energy(state.t, state.q, terms),
-                           tuple(self._work))
-
     def advance(self) -> Sample:
         """One step to the next grid time, or to a drive jump before it (then restart there)."""
-        t = self.state.t
-        t_next = self._t0 + (self._k + 1) * self.step_size
-        jumps = [b for b in self.motion.dynamics.drive.breakpoints if t < b <= t_next + 1e-9 * self.step_size]
-        on_jump = bool(jumps)
-        if on_jump:
-            t_next = min(jumps)
-        if t_next >= self._t0 + (self._k + 1) * self.step_size - 1e-9 * self.step_size:
+        state = self.state
+        t = state.t
+        t_grid = self._t0 + (self._k + 1) * self.step_size
+        slack = 1e-9 * self.step_size
+        t_next = next((b for b in self._breakpoints if t < b <= t_grid + slack), t_grid)
+        on_jump = t_next != t_grid
+        if t_next >= t_grid - slack:
             self._k += 1
-        previous = self._powers(self.state, left_limit=False)
-        new = self.integrator.step(self.state, t_next - t, ends_on_jump=on_jump)
-        new = StepState(t_next, new.q, new.qd, new.solution, new.pseudo_acceleration)
-        self._work += 0.5 * (t_next - t) * (previous + self._powers(new, left_limit=on_jump))
+        new = self.integrator.step(state, t_next, ends_on_jump=on_jump)
+        self._work += 0.5 * (t_next - t) * (state.solution.powers + new.solution.powers)
         self.state = self.integrator.restart(new) if on_jump else new
-        self.sample = self._sample(self.state, left_limit=False)
+        self.sample = make_sample(t_next, self.state.q, self.state.qd, self.state.solution, self._work)
         return self.sample
 
     def snapshot(self) -> tuple[StepState, int, np.ndarray, Sample, ProgrammedMotion]:
@@ -155,7 +134,7 @@ def simulate_reference(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, s
     dyn = motion.dynamics
     model = dyn.model
     ic = motion.independent
-    n_ic, j = len(ic), model.drive_joint
+    n_ic = len(ic)
     start = GeneralizedAlpha(motion).start(t0, q0, np.zeros_like(q0))
     guess = [start.q]
 
@@ -175,9 +154,7 @@ def simulate_reference(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, s
         def rhs(t: float, y: np.ndarray, b: float = b) -> np.ndarray:
             q, qd = full_state(t, y)
             solution = motion.solve(t, q, qd, left_limit=t >= b)
-            power = [dyn.drive.power(t, q[j], qd[j], t >= b), _constraint_power(solution, qd),
-                     -dyn.dissipated_power(qd)]
-            return np.concatenate([qd[ic], solution.qdd[ic], power])
+            return np.concatenate([qd[ic], solution.qdd[ic], solution.powers])
 
         inside = sample_times[(sample_times >= a) & ((sample_times < b) | (b == edges[-1]) & (sample_times <= b))]
         result = solve_ivp(rhs, (a, b), y, method="DOP853", rtol=rtol, atol=atol, dense_output=True)
@@ -186,10 +163,7 @@ def simulate_reference(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, s
         for t in inside:
             ys = result.sol(t)
             q, qd = full_state(t, ys)
-            solution = motion.solve(t, q, qd)
-            samples.append(make_sample(t, q, qd, solution, j, dyn.drive.torque(t, q[j]),
-                                       dyn.kinetic_energy(solution.dynamics, qd),
-                                       dyn.potential_energy(t, q, solution.dynamics), tuple(ys[2 * n_ic:])))
+            samples.append(make_sample(t, q, qd, motion.solve(t, q, qd), ys[2 * n_ic:]))
         y = result.y[:, -1]
     return Trajectory.from_samples(model.variant, model.joint_names, model.drive_joint, samples)
 

@@ -43,18 +43,14 @@ class Sample:
     work_damping: float
 
 
-def make_sample(t: float, q: np.ndarray, qd: np.ndarray, solution: MotionSolution, drive_joint: int,
-                drive_torque: float, kinetic: float, potential: float, work: tuple[float, float, float]) -> Sample:
-    """Assemble a :class:`Sample` from the solution of (8) at (t, q, qd) and the accumulated work."""
+def make_sample(t: float, q: np.ndarray, qd: np.ndarray, solution: MotionSolution, work: np.ndarray) -> Sample:
+    """Assemble a :class:`Sample` from the solution of (8) at (t, q, qd) and the work done so far by the
+    drive, the constraint forces and the dampers."""
     dyn, con = solution.dynamics, solution.constraints
-    return Sample(
-        t=t, q=q, qd=qd, qdd=solution.qdd, reactions=solution.reactions,
-        constraint_forces=solution.constraint_forces, drive_torque=drive_torque,
-        ee_position=dyn.ee_position, ee_rotation=dyn.ee_rotation,
-        ee_velocity=dyn.ee_jacobian @ qd, residual=con.residual, residual_distance=con.distance,
-        kdc_min_singular_value=solution.kdc_min_singular_value, kinetic_energy=kinetic,
-        potential_energy=potential, work_drive=work[0], work_constraints=work[1], work_damping=work[2],
-    )
+    return Sample(t, q, qd, solution.qdd, solution.reactions, solution.constraint_forces, solution.drive_torque,
+                  dyn.ee_position, dyn.ee_rotation, dyn.ee_jacobian @ qd, con.residual, con.distance,
+                  solution.kdc_min_singular_value, solution.kinetic_energy, solution.potential_energy,
+                  float(work[0]), float(work[1]), float(work[2]))
 
 
 @dataclass(frozen=True)

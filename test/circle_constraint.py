@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from crane_reference.constraints import EndEffectorConstraint, Quadric
+from crane_reference.constraints import EndEffectorConstraint
 
 
 @dataclass(frozen=True)
@@ -15,7 +15,6 @@ class CircleXZ(EndEffectorConstraint):
 
     radius: float
 
-    def quadric(self, t: float) -> Quadric:
-        Q = np.zeros((3, 3, 3))
+    def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
         Q[0] = np.diag([1.0, 0.0, 1.0])
-        return Quadric(Q, np.zeros((3, 3)), np.array([-self.radius**2, 0.0, 0.0]))
+        c[0] = -self.radius**2

@@ -2,7 +2,7 @@
 
 * M(q) is symmetric positive definite (eigenvalues, Cholesky).
 * The conservative forces (gravity + springs) are minus the gradient of the potential energy: Q at
-  qd = 0 with the drive off against central finite differences of ``potential_energy``.
+  qd = 0 with the drive off against central finite differences of the potential energy.
 * Energy conservation of the free, undamped crane: M qdd = Q - h integrated with scipy's DOP853
   conserves E_k + E_p.
 * Energy balance of the damped crane: E(t) - E(0) + W_diss(t) = 0, with the dissipated work
@@ -95,7 +95,7 @@ def test_conservative_forces_are_minus_potential_gradient(models, variant):
 
     def potential(q: np.ndarray) -> tuple[float, float]:
         terms = dynamics.terms(DRIVE_OFF, q, zero)
-        return dynamics.potential_energy(DRIVE_OFF, q, terms), terms.gravity_potential
+        return dynamics.accounts(DRIVE_OFF, q, zero, terms)[1], terms.gravity_potential
 
     for _ in range(SAMPLES):
         q = random_configuration(model, rng)
@@ -145,9 +145,9 @@ def energy_history(model: ChainModel, duration: float, damping: Damping | None, 
     kinetic, total = [], []
     for t, y in zip(solution.t, np.ascontiguousarray(solution.y.T), strict=True):
         q, qd = y[:n], y[n:2 * n]
-        terms = dynamics.terms(t, q, qd)
-        kinetic.append(dynamics.kinetic_energy(terms, qd))
-        total.append(kinetic[-1] + dynamics.potential_energy(t, q, terms))
+        kinetic_energy, potential_energy = dynamics.accounts(t, q, qd, dynamics.terms(t, q, qd))[:2]
+        kinetic.append(kinetic_energy)
+        total.append(kinetic_energy + potential_energy)
     return EnergyHistory(solution.t, np.array(kinetic), np.array(total), solution.y[-1], solution.nfev)
 
 

@@ -74,7 +74,7 @@ def hold(request, params) -> Hold:
     state = integrator.start(DRIVE_OFF_START, equilibrium.q, np.zeros(motion.dof))
     velocities = []
     for _ in range(round(HOLD_DURATION / HOLD_STEP)):
-        state = integrator.step(state, HOLD_STEP)
+        state = integrator.step(state, state.t + HOLD_STEP)
         velocities.append(np.max(np.abs(state.qd)))
     return Hold(motion, equilibrium.q, equilibrium.holding_torque, np.array(velocities),
                 time.perf_counter() - start)
@@ -190,7 +190,7 @@ def angle_history(params: CraneParameters, model: ChainModel) -> np.ndarray:
     columns = [model.index(name) for name in ANGLES]
     history = [state.q[columns]]
     for _ in range(round(RIGID_LIMIT_DURATION / RIGID_LIMIT_STEP)):
-        state = integrator.step(state, RIGID_LIMIT_STEP)
+        state = integrator.step(state, state.t + RIGID_LIMIT_STEP)
         history.append(state.q[columns])
     return np.array(history)
 
