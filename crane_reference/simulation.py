@@ -86,8 +86,9 @@ class MotionStepper:
         t = state.t
         t_grid = self._t0 + (self._k + 1) * self.step_size
         slack = 1e-9 * self.step_size
-        t_next = next((b for b in self._breakpoints if t < b <= t_grid + slack), t_grid)
-        on_jump = t_next != t_grid
+        jump = next((b for b in self._breakpoints if t < b <= t_grid + slack), None)
+        on_jump = jump is not None
+        t_next = jump if on_jump else t_grid
         if t_next >= t_grid - slack:
             self._k += 1
         new = self.integrator.step(state, t_next, ends_on_jump=on_jump)
