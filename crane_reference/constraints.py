@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -124,8 +125,8 @@ class EllipseXY(EndEffectorConstraint):
         return a**-2, -2.0 * da / a**3, -2.0 * dda / a**3 + 6.0 * da**2 / a**4
 
     def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
-        Q[:, 0, 0] = self._inverse_square(self.a, t)
-        Q[:, 1, 1] = self._inverse_square(self.b, t)
+        Q[0, 0, 0], Q[1, 0, 0], Q[2, 0, 0] = self._inverse_square(self.a, t)
+        Q[0, 1, 1], Q[1, 1, 1], Q[2, 1, 1] = self._inverse_square(self.b, t)
         c[0] = -1.0
 
 
@@ -137,8 +138,8 @@ class HeightZ(EndEffectorConstraint):
 
     def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
         g[0, 2] = 1.0
-        c[:] = self.z(t)
-        c *= -1.0
+        z, dz, ddz = self.z(t)
+        c[0], c[1], c[2] = -z, -dz, -ddz
 
 
 @dataclass(frozen=True)
@@ -197,7 +198,7 @@ class ConstraintSet:
     def size(self) -> int:
         return len(self.constraints)
 
-    @property
+    @cached_property
     def orders(self) -> np.ndarray:
         """0 for a holonomic, 1 for a first-order constraint, per row."""
         return np.array([c.order for c in self.constraints], dtype=np.int64)

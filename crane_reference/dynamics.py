@@ -18,25 +18,47 @@ import numpy as np
 from numba import njit
 
 from .drive import Drive
-from .inertia import composite_inertias, gravity_forces, mass_matrix, velocity_forces
-from .kinematics import forward_kinematics, point_kinematics, point_position_jacobian, velocity_terms
+from .inertia import (
+    composite_inertias,
+    composite_velocity_products,
+    gravity_forces,
+    mass_matrix,
+    velocity_forces,
+    world_pseudo_inertias,
+)
+from .kinematics import forward_kinematics, point_bias, point_jacobian, point_position_jacobian, velocity_terms
 from .model import ChainModel
 from .parameters import Damping
 
 
 @njit(cache=True)
+def position_terms(q, kinds, axes, origins, body_joint, body_H, gravity, ee_joint, ee_point):
+    """What depends on q alone: frames T, twists S, world pseudo-inertias Hw, M, gravity forces, the
+    total gravity potential, E's position p, the rotation R of its frame and its Jacobian C."""
+    T, S = forward_kinematics(q, kinds, axes, origins)
+    Hw = world_pseudo_inertias(T, body_joint, body_H)
+    Hc = composite_inertias(Hw, body_joint, q.size)
+    M = mass_matrix(S, Hc)
+    Qg = gravity_forces(S, Hc, gravity)
+    p, C = point_jacobian(T, S, ee_joint, ee_point)
+    return T, S, Hw, M, Qg, gravity * Hc[0, 2, 3], p, T[ee_joint, :3, :3].copy(), C
+
+
+@njit(cache=True)
+def velocity_products(qd, T, S, Hw, body_joint, ee_joint, p):
+    """What is quadratic in qd: the velocity terms h of (8) and E's d (C qdd + d is E's acceleration)."""
+    _, B = velocity_terms(qd, S)
+    h = velocity_forces(S, composite_velocity_products(Hw, B, body_joint, qd.size))
+    return h, point_bias(B, ee_joint, p)
+
+
+@njit(cache=True)
 def chain_terms(q, qd, kinds, axes, origins, body_joint, body_H, gravity, ee_joint, ee_point):
     """M, h, gravity forces, total gravity potential, E's position, rotation, Jacobian C and d."""
-    n = q.size
-    T, S = forward_kinematics(q, kinds, axes, origins)
-    _, B = velocity_terms(qd, S)
-    Hc, G = composite_inertias(T, B, body_joint, body_H, n)
-    M = mass_matrix(S, Hc)
-    h = velocity_forces(S, G)
-    Qg = gravity_forces(S, Hc, gravity)
-    potential_g = gravity * Hc[0, 2, 3]
-    p, C, d = point_kinematics(T, S, B, ee_joint, ee_point)
-    return M, h, Qg, potential_g, p, T[ee_joint, :3, :3].copy(), C, d
+    T, S, Hw, M, Qg, Vg, p, R, C = position_terms(q, kinds, axes, origins, body_joint, body_H, gravity, ee_joint,
+                                                  ee_point)
+    h, d = velocity_products(qd, T, S, Hw, body_joint, ee_joint, p)
+    return M, h, Qg, Vg, p, R, C, d
 
 
 @njit(cache=True)

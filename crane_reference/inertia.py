@@ -24,32 +24,46 @@ from numba import njit
 
 
 @njit(cache=True)
-def composite_inertias(T, B, body_joint, body_H, n):
-    """Suffix sums Hc_k of world pseudo-inertias and G_k of Hc B^T over the bodies beyond joint k."""
-    Hc = np.zeros((n, 4, 4))
-    G = np.zeros((n, 4, 4))
+def world_pseudo_inertias(T, body_joint, body_H):
+    """Each body's pseudo-inertia in world coordinates, T^(l) H^(l) T^(l)T (bodies, 4, 4)."""
+    Hw = np.empty((body_joint.size, 4, 4))
     TH = np.empty((4, 4))
-    Hw = np.empty((4, 4))
     for body in range(body_joint.size):
-        k = body_joint[body]
-        Tk, H, Bk = T[k], body_H[body], B[k]
+        Tk, H = T[body_joint[body]], body_H[body]
         for a in range(4):
             for b in range(4):
                 TH[a, b] = Tk[a, 0] * H[0, b] + Tk[a, 1] * H[1, b] + Tk[a, 2] * H[2, b] + Tk[a, 3] * H[3, b]
         for a in range(4):
             for b in range(a, 4):
-                Hw[a, b] = TH[a, 0] * Tk[b, 0] + TH[a, 1] * Tk[b, 1] + TH[a, 2] * Tk[b, 2] + TH[a, 3] * Tk[b, 3]
-                Hw[b, a] = Hw[a, b]
-        for a in range(4):
-            for b in range(4):
-                Hc[k, a, b] += Hw[a, b]
-                G[k, a, b] += Hw[a, 0] * Bk[b, 0] + Hw[a, 1] * Bk[b, 1] + Hw[a, 2] * Bk[b, 2] + Hw[a, 3] * Bk[b, 3]
+                Hw[body, a, b] = TH[a, 0] * Tk[b, 0] + TH[a, 1] * Tk[b, 1] + TH[a, 2] * Tk[b, 2] + TH[a, 3] * Tk[b, 3]
+                Hw[body, b, a] = Hw[body, a, b]
+    return Hw
+
+
+@njit(cache=True)
+def composite_inertias(Hw, body_joint, n):
+    """Suffix sums Hc_k of the world pseudo-inertias over the bodies beyond joint k."""
+    Hc = np.zeros((n, 4, 4))
+    for body in range(body_joint.size):
+        Hc[body_joint[body]] += Hw[body]
     for k in range(n - 2, -1, -1):
+        Hc[k] += Hc[k + 1]
+    return Hc
+
+
+@njit(cache=True)
+def composite_velocity_products(Hw, B, body_joint, n):
+    """Suffix sums G_k of T H T^T B^T over the bodies beyond joint k (B of each body's frame)."""
+    G = np.zeros((n, 4, 4))
+    for body in range(body_joint.size):
+        k = body_joint[body]
+        H, Bk = Hw[body], B[k]
         for a in range(4):
             for b in range(4):
-                Hc[k, a, b] += Hc[k + 1, a, b]
-                G[k, a, b] += G[k + 1, a, b]
-    return Hc, G
+                G[k, a, b] += H[a, 0] * Bk[b, 0] + H[a, 1] * Bk[b, 1] + H[a, 2] * Bk[b, 2] + H[a, 3] * Bk[b, 3]
+    for k in range(n - 2, -1, -1):
+        G[k] += G[k + 1]
+    return G
 
 
 @njit(cache=True)

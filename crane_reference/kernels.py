@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .dynamics import chain_terms, energy_accounts
+from .dynamics import energy_accounts, position_terms, velocity_products
 from .kinematics import point_position_jacobian
 
 
@@ -253,33 +253,87 @@ def projection_matrix(B, independent, servo):
 
 
 @njit(cache=True, nogil=True)
-def evaluate(q, qd, Q, g, c, order, drive, independent, dependent, chain, servo):
-    """Everything (8) needs and gives at (q, qd): dynamics terms, constraint terms, B, qdd, the
-    reactions (lambda for ideal constraints, the dependent joints' torques tau for servo-constraints),
-    the generalized force they exert, M qdd + h - Q (= A^T lambda, or E_dc tau), and the accounts
-    (E_k, E_p, t_dr, P_dr, P_constraints, P_D, sigma_min(K_dc)) (powers: what each source feeds in)."""
+def _cholesky_solve(L, b):
+    """x with L L^T x = b (L lower triangular)."""
+    n = b.size
+    y = np.empty(n)
+    for i in range(n):
+        total = b[i]
+        for k in range(i):
+            total -= L[i, k] * y[k]
+        y[i] = total / L[i, i]
+    x = np.empty(n)
+    for i in range(n - 1, -1, -1):
+        total = y[i]
+        for k in range(i + 1, n):
+            total -= L[k, i] * x[k]
+        x[i] = total / L[i, i]
+    return x
+
+
+@njit(cache=True, nogil=True)
+def _accelerations(M, f, A, c_acc, B, independent, dependent, servo):
+    """qdd from (8), [P^T M; A] qdd = [P^T f; c] with f = Q - h.  Ideal constraints (P = B): qdd = B a + e
+    with e the particular solution (e_ic = 0, K_dc e_dc = c) and the reduced, symmetric positive definite
+    system B^T M B a = B^T (f - M e) (Cholesky).  Servo-constraints: the square system by LU."""
+    n = f.size
+    if servo:
+        lhs = np.empty((n, n))
+        lhs[:independent.size] = project_rows(M, B, independent, dependent, True)
+        lhs[independent.size:] = A
+        rhs = np.empty(n)
+        rhs[:independent.size] = f[independent]
+        rhs[independent.size:] = c_acc
+        return np.linalg.solve(lhs, rhs)
+    e_dc = solve_small_vector(np.ascontiguousarray(A[:, dependent]), c_acc)
+    load = f.copy()
+    for r in range(dependent.size):
+        load -= M[:, dependent[r]] * e_dc[r]
+    reduced = map_columns(project_rows(M, B, independent, dependent, False), B, independent, dependent)
+    a = _cholesky_solve(np.linalg.cholesky(reduced), project_rows(load.reshape((n, 1)), B, independent, dependent,
+                                                                  False)[:, 0])
+    qdd = B @ a
+    for r in range(dependent.size):
+        qdd[dependent[r]] += e_dc[r]
+    return qdd
+
+
+@njit(cache=True, nogil=True)
+def _evaluate(q, qd, Q, g, c, order, drive, independent, dependent, chain, servo, project_velocities):
+    """:func:`evaluate`, optionally solving qd_dc from the velocity-level constraints first (with E's
+    Jacobian at q itself, between the position and the velocity parts of the dynamics).  Returns qd,
+    the evaluation and whether the velocity constraints were solved."""
     kinds, axes, origins, body_joint, body_H, gravity, ee_joint, ee_point, K, D, drive_joint = chain
-    M, h, Qg, Vg, p, R, C, d = chain_terms(q, qd, kinds, axes, origins, body_joint, body_H, gravity, ee_joint,
-                                           ee_point)
-    forces = Qg - K @ q - D @ qd
+    T, S, Hw, M, Qg, Vg, p, R, C = position_terms(q, kinds, axes, origins, body_joint, body_H, gravity, ee_joint,
+                                                  ee_point)
+    damped = np.any(D != 0.0)
+    solved = True
+    if project_velocities:
+        qd, solved = dependent_velocities(qd, p, C, Q, g, c, order, dependent)
+    h, d = velocity_products(qd, T, S, Hw, body_joint, ee_joint, p)
+    forces = Qg - K @ q
+    if damped:
+        forces -= D @ qd
     forces[drive_joint] += drive[0] + drive[1] * (drive[2] - q[drive_joint])
     residual, grads, A, c_acc, distance, rate = constraint_terms(p, C @ qd, C, d, Q, g, c, order)
     B = velocity_map(A, independent, dependent)
-    n_ic = independent.size
-    lhs = np.empty((q.size, q.size))
-    lhs[:n_ic] = project_rows(M, B, independent, dependent, servo)
-    lhs[n_ic:] = A
-    rhs = np.empty(q.size)
-    rhs[:n_ic] = project_rows((forces - h).reshape((q.size, 1)), B, independent, dependent, servo)[:, 0]
-    rhs[n_ic:] = c_acc
-    qdd = np.linalg.solve(lhs, rhs)
+    qdd = _accelerations(M, forces - h, A, c_acc, B, independent, dependent, servo)
     reaction_force = M @ qdd + h - forces
     reactions = reaction_force[dependent] if servo else solve_small_vector(A @ A.T, A @ reaction_force)
     energy = energy_accounts(q, qd, M, Vg, K, D, drive, drive_joint)
     accounts = np.array([energy[0], energy[1], energy[2], energy[3], reaction_force @ qd, energy[4],
                          smallest_singular_value(np.ascontiguousarray(A[:, dependent]))])
-    return (M, h, forces, Vg, p, R, C, d, residual, grads, A, c_acc, distance, rate, B, qdd, reactions,
-            reaction_force, accounts)
+    return qd, (M, h, forces, Vg, p, R, C, d, residual, grads, A, c_acc, distance, rate, B, qdd, reactions,
+                reaction_force, accounts), solved
+
+
+@njit(cache=True, nogil=True)
+def evaluate(q, qd, Q, g, c, order, drive, independent, dependent, chain, servo):
+    """Everything (8) needs and gives at (q, qd): dynamics terms, constraint terms, B, qdd, the
+    reactions (lambda for ideal constraints, the dependent joints' torques tau for servo-constraints),
+    the generalized force they exert, M qdd + h - Q (= A^T lambda, or E_dc tau), and the accounts
+    (E_k, E_p, t_dr, P_dr, P_constraints, P_D, sigma_min(K_dc)) (powers: what each source feeds in)."""
+    return _evaluate(q, qd, Q, g, c, order, drive, independent, dependent, chain, servo, False)[1]
 
 
 @njit(cache=True, nogil=True)
@@ -305,7 +359,9 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
     if np.any(D != 0.0):
         iteration_matrix += gamma_p * map_columns(project_rows(D, B0, independent, dependent, servo), B0,
                                                   independent, dependent)
-    iteration_inverse = np.linalg.inv(iteration_matrix)
+    # symmetric positive definite for ideal constraints (P = B): Cholesky; servo rows: a general inverse
+    factor = np.ascontiguousarray(np.linalg.cholesky(iteration_matrix) if not servo
+                                  else np.linalg.inv(iteration_matrix))
     q_guess = q0 + h * qd0 + 0.5 * h * h * qdd0
     a1 = a0.copy()
     status = 1
@@ -315,24 +371,66 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
         v1 = v0 + h * ((1.0 - gamma) * at0 + gamma * at1)
         q1 = q_guess.copy()
         q1[integrated] = x1
-        q1, p, C, projected = project_positions(q1, Q, g, c, order, holonomic_dependent, chain,
-                                                projection_tolerance, 25)
+        q1, _, _, solved = project_positions(q1, Q, g, c, order, holonomic_dependent, chain, projection_tolerance, 25)
         qd1 = np.zeros_like(q1)
         qd1[integrated] = v1
-        if projected:
-            qd1, projected = dependent_velocities(qd1, p, C, Q, g, c, order, dependent)
-        if not projected:
+        if solved:
+            qd1, result, solved = _evaluate(q1, qd1, Q, g, c, order, drive, independent, dependent, chain, servo,
+                                            True)
+        if not solved:
             held = evaluate(q0, qd0, Q, g, c, order, drive, independent, dependent, chain, servo)
             return q0, qd0, at0, held, 2, iteration + 1
-        result = evaluate(q1, qd1, Q, g, c, order, drive, independent, dependent, chain, servo)
         q_guess = q1
         qdd1 = result[15][integrated]
         correction = qdd1 - a1
-        correction[:n_ic] = -(iteration_inverse @ (M_r @ (a1[:n_ic] - qdd1[:n_ic])))
+        residual = M_r @ (a1[:n_ic] - qdd1[:n_ic])
+        correction[:n_ic] = -(_cholesky_solve(factor, residual) if not servo else factor @ residual)
         a1 = a1 + correction
-        # Accept only an iterate that already includes a Newton correction: stopping at the predictor
-        # (possible near rest, where every correction is tiny) would make the step explicit.
-        if iteration > 0 and beta_p * np.max(np.abs(correction)) <= tolerance:
+        # The accepted iterate is off by the correction not applied: bound it in velocities (see the module
+        # docstring of crane_reference.integration).  Accept only an iterate that already includes a Newton
+        # correction: stopping at the predictor (possible near rest, where every correction is tiny) would
+        # make the step explicit.
+        if iteration > 0 and gamma_p * np.max(np.abs(correction)) <= tolerance:
             status = 0
             break
     return q1, qd1, at1, result, status, iteration + 1
+
+
+@njit(cache=True, nogil=True)
+def generalized_alpha_run(q, qd, qdd, at, M, B, t0, times, Qs, gs, cs, order, drives, alpha_m, alpha_f, gamma,
+                          beta, independent, dependent, integrated, holonomic_dependent, chain, servo, tolerance,
+                          max_iterations, projection_tolerance):
+    """:func:`generalized_alpha_step` from t0 through ``times`` (N,) in one call, with the constraint
+    coefficients (Qs, gs, cs) and drive parameters (drives) of each step's end.  Returns the number of
+    steps completed, the status of the last one (0 when all converged), per-step rows (q, qd, qdd,
+    reactions, constraint forces, E's position, rotation and velocity, residuals, distances, accounts,
+    Newton iterations) and the last step's a~ and evaluation."""
+    N, n, m = times.size, q.size, order.size
+    rows_q, rows_qd, rows_qdd = np.empty((N, n)), np.empty((N, n)), np.empty((N, n))
+    rows_reactions, rows_forces = np.empty((N, m)), np.empty((N, n))
+    rows_p, rows_R, rows_v = np.empty((N, 3)), np.empty((N, 3, 3)), np.empty((N, 3))
+    rows_residual, rows_distance = np.empty((N, m)), np.empty((N, m))
+    rows_accounts, rows_iterations = np.empty((N, 7)), np.empty(N, dtype=np.int64)
+    t = t0
+    q1, qd1, at1, result, status, iterations = generalized_alpha_step(
+        q, qd, qdd, at, M, B, times[0] - t, alpha_m, alpha_f, gamma, beta, Qs[0], gs[0], cs[0], order, drives[0],
+        independent, dependent, integrated, holonomic_dependent, chain, servo, tolerance, max_iterations,
+        projection_tolerance)
+    completed = 0
+    while status == 0:
+        rows_q[completed], rows_qd[completed], rows_qdd[completed] = q1, qd1, result[15]
+        rows_reactions[completed], rows_forces[completed] = result[16], result[17]
+        rows_p[completed], rows_R[completed], rows_v[completed] = result[4], result[5], result[6] @ qd1
+        rows_residual[completed], rows_distance[completed] = result[8], result[12]
+        rows_accounts[completed], rows_iterations[completed] = result[18], iterations
+        completed += 1
+        if completed == N:
+            break
+        t = times[completed - 1]
+        q1, qd1, at1, result, status, iterations = generalized_alpha_step(
+            q1, qd1, result[15], at1, result[0], result[14], times[completed] - t, alpha_m, alpha_f, gamma, beta,
+            Qs[completed], gs[completed], cs[completed], order, drives[completed], independent, dependent,
+            integrated, holonomic_dependent, chain, servo, tolerance, max_iterations, projection_tolerance)
+    rows = (rows_q, rows_qd, rows_qdd, rows_reactions, rows_forces, rows_p, rows_R, rows_v, rows_residual,
+            rows_distance, rows_accounts, rows_iterations)
+    return completed, status, rows, at1, result

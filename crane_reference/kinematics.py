@@ -146,8 +146,9 @@ def velocity_terms(qd: np.ndarray, S: np.ndarray):
 
 
 @njit(cache=True)
-def _point_jacobian(T: np.ndarray, S: np.ndarray, joint: int, point: np.ndarray):
-    """World position p of a point fixed after ``joint`` and its Jacobian C = J [S_1 p ... S_n p] (3, n)."""
+def point_jacobian(T: np.ndarray, S: np.ndarray, joint: int, point: np.ndarray):
+    """World position p of a point fixed after ``joint`` and its Jacobian C = J [S_1 p ... S_n p] (3, n)
+    (the paper's C = J [T_1 r ... T_n r])."""
     n = S.shape[0]
     F = T[joint]
     p = np.empty(3)
@@ -161,19 +162,18 @@ def _point_jacobian(T: np.ndarray, S: np.ndarray, joint: int, point: np.ndarray)
 
 
 @njit(cache=True)
-def point_kinematics(T: np.ndarray, S: np.ndarray, B: np.ndarray, joint: int, point: np.ndarray):
-    """Position p, Jacobian C (3,n) and velocity-product acceleration d (3) of a point fixed in the
-    frame after ``joint`` (the paper's C = J[T_1 r ... T_n r], d = J sum_ij T_ij qd_i qd_j r)."""
-    p, C = _point_jacobian(T, S, joint, point)
+def point_bias(B: np.ndarray, joint: int, p: np.ndarray):
+    """Velocity-product acceleration d = B_joint [p; 1] of a point at p fixed after ``joint`` (the
+    paper's d = J sum_ij T_ij qd_i qd_j r)."""
     Bj = B[joint]
     d = np.empty(3)
     for r in range(3):
         d[r] = Bj[r, 0] * p[0] + Bj[r, 1] * p[1] + Bj[r, 2] * p[2] + Bj[r, 3]
-    return p, C, d
+    return d
 
 
 @njit(cache=True)
 def point_position_jacobian(q, kinds, axes, origins, joint, point):
     """Position and Jacobian of a point fixed after ``joint``, without velocity terms (for projection)."""
     T, S = forward_kinematics(q, kinds, axes, origins)
-    return _point_jacobian(T, S, joint, point)
+    return point_jacobian(T, S, joint, point)

@@ -50,7 +50,7 @@ import scipy.linalg
 from .constraints import ConstraintSet
 from .dynamics import CraneDynamics
 from .equilibrium import static_equilibrium
-from .inertia import composite_inertias, mass_matrix
+from .inertia import composite_inertias, mass_matrix, world_pseudo_inertias
 from .kinematics import forward_kinematics
 from .model import AXES, REVOLUTE, Body, ChainModel, Joint, homogeneous
 from .parameters import BeamSection, CraneParameters
@@ -72,7 +72,7 @@ def gravity_stiffness(dynamics: CraneDynamics, q: np.ndarray) -> np.ndarray:
     kinds, axes, origins, body_joint, body_H = dynamics.chain[:5]
     n = q.size
     T, S = forward_kinematics(np.ascontiguousarray(q, dtype=float), kinds, axes, origins)
-    Hc, _ = composite_inertias(T, np.zeros_like(T), body_joint, body_H, n)
+    Hc = composite_inertias(world_pseudo_inertias(T, body_joint, body_H), body_joint, n)
     u = np.einsum("jab,jb->ja", S, Hc[:, :, 3])  # S_j Hc_j e_4
     X = S[:, 2, :] @ u.T  # X_ij = J_3 S_i S_j Hc_j e_4
     return dynamics.model.gravity * (np.triu(X) + np.triu(X, 1).T)
@@ -112,7 +112,7 @@ def body_mass_matrices(dynamics: CraneDynamics, q: np.ndarray) -> dict[str, np.n
     T, S = forward_kinematics(np.ascontiguousarray(q, dtype=float), kinds, axes, origins)
     parts: dict[str, np.ndarray] = {}
     for b, body in enumerate(dynamics.model.bodies):
-        Hc, _ = composite_inertias(T, np.zeros_like(T), body_joint[b:b + 1], body_H[b:b + 1], n)
+        Hc = composite_inertias(world_pseudo_inertias(T, body_joint[b:b + 1], body_H[b:b + 1]), body_joint[b:b + 1], n)
         group = body_group(body.name)
         parts[group] = parts.get(group, 0.0) + mass_matrix(S, Hc)
     return parts

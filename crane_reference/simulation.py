@@ -26,7 +26,7 @@ from .model import ChainModel, build_model
 from .parameters import CraneParameters, Task
 from .profiles import Constant, QuinticRise
 from .programmed_motion import ProgrammedMotion
-from .trajectory import Sample, Trajectory, make_sample
+from .trajectory import Sample, Trajectory, make_sample, stack_samples
 
 Progress = Callable[[float], None]
 
@@ -80,22 +80,62 @@ class MotionStepper:
     def motion(self) -> ProgrammedMotion:
         return self.integrator.motion
 
+    def _next_times(self, t_end: float) -> tuple[np.ndarray, bool, int]:
+        """Step ends from the current state through the first grid time >= t_end, cut at the first drive
+        jump on the way (then the last end is the jump); also whether it is cut and how many grid times
+        it covers."""
+        h, t = self.step_size, self.state.t
+        slack = 1e-9 * h
+        last = max(self._k + 1, int(np.ceil((t_end - self._t0) / h - 1e-9)))
+        grid = self._t0 + np.arange(self._k + 1, last + 1) * h
+        jump = next((b for b in self._breakpoints if t < b <= grid[-1] + slack), None)
+        if jump is None:
+            return grid, False, grid.size
+        before = grid[grid < jump - slack]
+        covered = before.size + int(before.size < grid.size and grid[before.size] <= jump + slack)
+        return np.append(before, jump), True, covered
+
     def advance(self) -> Sample:
         """One step to the next grid time, or to a drive jump before it (then restart there)."""
         state = self.state
         t = state.t
-        t_grid = self._t0 + (self._k + 1) * self.step_size
-        slack = 1e-9 * self.step_size
-        jump = next((b for b in self._breakpoints if t < b <= t_grid + slack), None)
-        on_jump = jump is not None
-        t_next = jump if on_jump else t_grid
-        if t_next >= t_grid - slack:
-            self._k += 1
+        times, on_jump, covered = self._next_times(self._t0 + (self._k + 1) * self.step_size)
+        t_next = float(times[0])
+        self._k += covered
         new = self.integrator.step(state, t_next, ends_on_jump=on_jump)
         self._work += 0.5 * (t_next - t) * (state.solution.powers + new.solution.powers)
         self.state = self.integrator.restart(new) if on_jump else new
         self.sample = make_sample(t_next, self.state.q, self.state.qd, self.state.solution, self._work)
         return self.sample
+
+    def advance_until(self, t_end: float) -> dict[str, np.ndarray]:
+        """Steps through the first grid time >= t_end in compiled runs (cut at drive jumps, restarting
+        there): the samples' fields (:class:`Sample`) stacked per step."""
+        blocks = []
+        while self.state.t < t_end - 1e-9 * self.step_size:
+            start = self.state
+            times, on_jump, covered = self._next_times(t_end)
+            new, rows = self.integrator.run(start, times, ends_on_jump=on_jump)
+            self._k += covered
+            powers = np.vstack((start.solution.powers, rows.accounts[:, 3:6]))
+            steps = np.diff(np.concatenate(([start.t], times)))
+            work = self._work + np.cumsum(0.5 * steps[:, None] * (powers[:-1] + powers[1:]), axis=0)
+            self._work = work[-1].copy()
+            self.state = self.integrator.restart(new) if on_jump else new
+            accounts = rows.accounts.copy()
+            qdd, reactions, forces = rows.qdd.copy(), rows.reactions.copy(), rows.constraint_forces.copy()
+            if on_jump:  # the sample at a jump shows the motion from the jump on, as advance() does
+                solution = self.state.solution
+                qdd[-1], reactions[-1], forces[-1] = solution.qdd, solution.reactions, solution.constraint_forces
+                accounts[-1, 2] = solution.drive_torque
+            blocks.append(dict(t=times, q=rows.q, qd=rows.qd, qdd=qdd, reactions=reactions, constraint_forces=forces,
+                               drive_torque=accounts[:, 2], ee_position=rows.ee_position,
+                               ee_rotation=rows.ee_rotation, ee_velocity=rows.ee_velocity, residual=rows.residual,
+                               residual_distance=rows.residual_distance, kdc_min_singular_value=accounts[:, 6],
+                               kinetic_energy=accounts[:, 0], potential_energy=accounts[:, 1],
+                               work_drive=work[:, 0], work_constraints=work[:, 1], work_damping=work[:, 2]))
+        self.sample = make_sample(self.state.t, self.state.q, self.state.qd, self.state.solution, self._work)
+        return {name: np.concatenate([b[name] for b in blocks]) for name in blocks[0]} if blocks else {}
 
     def snapshot(self) -> tuple[StepState, int, np.ndarray, Sample, ProgrammedMotion]:
         """Everything needed to continue from the current step later (see :meth:`rewind`)."""
@@ -115,17 +155,20 @@ class MotionStepper:
 
 
 def simulate(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, step: float = 1e-3, rho_inf: float = 0.8,
-             t0: float = 0.0, qd0: np.ndarray | None = None, progress: Progress | None = None) -> Trajectory:
-    """Programmed motion from (t0, q0, qd0) to t_end with generalized-alpha; one sample per step."""
+             t0: float = 0.0, qd0: np.ndarray | None = None, progress: Progress | None = None,
+             chunk: float = 0.25) -> Trajectory:
+    """Programmed motion from (t0, q0, qd0) to t_end with generalized-alpha; one sample per step,
+    computed in compiled runs of ``chunk`` seconds (``progress`` is called after each)."""
     qd0 = np.zeros_like(q0) if qd0 is None else qd0
     stepper = MotionStepper(motion, t0, q0, qd0, step, rho_inf)
-    samples = [stepper.sample]
+    parts = [stack_samples([stepper.sample])]
     while stepper.state.t < t_end - 1e-9 * step:
-        samples.append(stepper.advance())
+        parts.append(stepper.advance_until(min(stepper.state.t + chunk, t_end)))
         if progress is not None:
             progress(stepper.state.t)
     model = motion.dynamics.model
-    return Trajectory.from_samples(model.variant, model.joint_names, model.drive_joint, samples)
+    arrays = {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
+    return Trajectory.from_arrays(model.variant, model.joint_names, model.drive_joint, arrays)
 
 
 def simulate_reference(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, sample_times: np.ndarray,

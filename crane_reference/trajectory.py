@@ -53,6 +53,11 @@ def make_sample(t: float, q: np.ndarray, qd: np.ndarray, solution: MotionSolutio
                   float(work[0]), float(work[1]), float(work[2]))
 
 
+def stack_samples(samples: list[Sample]) -> dict[str, np.ndarray]:
+    """The fields of ``samples`` stacked into arrays (first axis: sample)."""
+    return {f.name: np.array([getattr(s, f.name) for s in samples]) for f in fields(Sample)}
+
+
 @dataclass(frozen=True)
 class Trajectory:
     """Samples of one run stacked into arrays (first axis: time)."""
@@ -81,7 +86,13 @@ class Trajectory:
 
     @classmethod
     def from_samples(cls, variant: str, joint_names: list[str], drive_joint: int, samples: list[Sample]) -> Trajectory:
-        arrays = {f.name: np.array([getattr(s, f.name) for s in samples]) for f in fields(Sample)}
+        return cls.from_arrays(variant, joint_names, drive_joint, stack_samples(samples))
+
+    @classmethod
+    def from_arrays(cls, variant: str, joint_names: list[str], drive_joint: int,
+                    arrays: dict[str, np.ndarray]) -> Trajectory:
+        """From the fields of :class:`Sample` stacked per sample (:func:`stack_samples`)."""
+        arrays = dict(arrays)
         arrays["ee_quaternion"] = Rotation.from_matrix(arrays.pop("ee_rotation")).as_quat()
         return cls(variant=variant, joint_names=tuple(joint_names), drive_joint=drive_joint, **arrays)
 
