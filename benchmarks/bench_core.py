@@ -1,14 +1,23 @@
 """Speed and accuracy of the simulation core; prints the figures quoted in the closing notes.
 
-    python benchmarks/bench_core.py [--duration 10] [--reference-duration 10] [--skip-reference]
+    python benchmarks/bench_core.py [--duration 10] [--repeats 3] [--cache results/bench_core]
+                                    [--skip-accuracy]
 
-1. Time of one M(q) (chain terms) and of one full qdd evaluation (eq. (8), compiled) at 24 DOF.
-2. Wall time and real-time factor of the default motion (rigid; flexible with n_rfe = 6, 12, 24) with
-   generalized-alpha at h = 1 ms and 2 ms, and the largest constraint residual.
-3. Accuracy of psi2, psi(3,0), psi4 and E against a converged DOP853 run (rtol 1e-10) of the same
-   equations: raw, and after a 0.1 s moving mean (the undamped boom rings at 80-200 Hz and 1.7 kHz for
-   ever; no step that runs faster than real time resolves those phases).  Repeated with 1 % structural
-   damping at the first boom bending mode, where the ringing decays and the raw error becomes meaningful.
+1. [eval] Time of M(q) with h, gravity and E's kinematics, and of one full qdd from (8), at 24 DOF.
+2. [speed] Wall time per step and real-time factor (best of ``--repeats``) of the default motion
+   (rigid; flexible with n_rfe = 6, 12, 24) with generalized-alpha at h = 1 and 2 ms, the mean number
+   of Newton iterations and the largest constraint residual.
+3. [accuracy] psi2, psi(3,0), psi4 and E against a converged DOP853 run (rtol 1e-10) of the same
+   equations over ``--duration`` seconds, at h = 2, 1, 0.5, 0.25 ms: the largest raw error and the
+   largest error of the 0.1 s moving mean.  Twice: the paper's undamped crane, and the same crane with
+   1 % structural damping at 87 Hz in the boom (stiffness-proportional).  The DOP853 runs take minutes
+   and are cached as NPZ in ``--cache``.
+4. [vibration] The part of the converged psi2, psi(3,0), psi4 above 40 Hz (4th-order Butterworth
+   high-pass, forward-backward) after 5 s: largest value, RMS and the strongest spectral peak.  An
+   integrator that does not follow the phase of this vibration is off by about its amplitude.
+5. [newton] Largest difference of psi2, psi(3,0), psi4 over the run between Newton tolerances (on the
+   accepted velocity correction, m/s or rad/s) of 1e-8, 1e-9 (the default) and 1e-10 and a run at
+   1e-12, at h = 1 ms: the Newton error must stay far below the discretisation error.
 """
 
 from __future__ import annotations
@@ -16,16 +25,21 @@ from __future__ import annotations
 import argparse
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
+from scipy.signal import butter, sosfiltfilt, welch
 
 from crane_reference.config import load_config
 from crane_reference.dynamics import chain_terms
-from crane_reference.parameters import Damping
-from crane_reference.simulation import Scenario, simulate, simulate_reference
+from crane_reference.parameters import CraneParameters, Damping
+from crane_reference.simulation import MotionStepper, Scenario, simulate, simulate_reference
+from crane_reference.trajectory import Trajectory
 
 COORDINATES = ("column_slew", "boom_luff", "knuckle")
+REFERENCE_SAMPLE = 1e-4  # [s]
+DAMPED_BETA = 2 * 0.01 / (2 * np.pi * 87.0)  # [s]: 1 % of critical damping at 87 Hz, beta = 2 zeta / omega
 
 
 def per_call(function, repeat: int = 2000) -> float:
@@ -36,7 +50,7 @@ def per_call(function, repeat: int = 2000) -> float:
     return (time.perf_counter() - start) / repeat
 
 
-def evaluation_times(params) -> None:
+def evaluation_times(params: CraneParameters) -> None:
     scenario = Scenario(params, "flexible")
     q = scenario.equilibrium.q
     qd = np.full_like(q, 0.01)
@@ -48,7 +62,18 @@ def evaluation_times(params) -> None:
           f"full qdd from (8) incl. constraints and Python wrapper {t_qdd * 1e6:.1f} us")
 
 
-def speed(params, duration: float) -> None:
+def newton_iterations(scenario: Scenario, step: float, duration: float = 1.0) -> float:
+    """Mean Newton iterations per step over the first ``duration`` seconds (one step at a time)."""
+    q0 = scenario.equilibrium.q
+    stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), step)
+    counts = []
+    while stepper.state.t < duration:
+        stepper.advance()
+        counts.append(stepper.integrator.last_iterations)
+    return float(np.mean(counts))
+
+
+def speed(params: CraneParameters, duration: float, repeats: int) -> None:
     cases = [("rigid", params), *(("flexible", replace(params, boom=replace(params.boom, rfe_count=n)))
                                   for n in (6, 12, 24))]
     for variant, p in cases:
@@ -56,53 +81,102 @@ def speed(params, duration: float) -> None:
         q0 = scenario.equilibrium.q
         simulate(scenario.motion, q0, 0.01, step=1e-3)  # compile / load the kernels
         for step in (1e-3, 2e-3):
-            start = time.perf_counter()
-            tr = simulate(scenario.motion, q0, duration, step=step)
-            wall = time.perf_counter() - start
+            walls = []
+            for _ in range(repeats):
+                start = time.perf_counter()
+                tr = simulate(scenario.motion, q0, duration, step=step)
+                walls.append(time.perf_counter() - start)
+            wall = min(walls)
             print(f"[speed] {variant:8s} n_rfe={p.boom.rfe_count if variant == 'flexible' else 1:2d} "
-                  f"dof={scenario.model.dof:2d} h={step * 1e3:.0f} ms: {duration:.0f} s in {wall:6.2f} s wall, "
-                  f"real-time factor {duration / wall:6.1f}, max residual {tr.residual_distance.max():.1e} m, "
-                  f"energy-balance error {np.max(np.abs(tr.energy_balance_error)):.2e} J "
-                  f"(work {np.max(np.abs(tr.work_drive)):.0f} J)")
+                  f"dof={scenario.model.dof:2d} h={step * 1e3:.0f} ms: {duration:.0f} s in {wall:6.2f} s wall "
+                  f"(best of {repeats}; median {np.median(walls):.2f} s), {wall / tr.t.size * 1e6:6.1f} us/step, "
+                  f"real-time factor {duration / wall:5.1f}, Newton iterations {newton_iterations(scenario, step):.2f}"
+                  f"/step, max residual {tr.residual_distance.max():.1e} m")
 
 
-def accuracy(params, duration: float, label: str) -> None:
+def reference_run(params: CraneParameters, duration: float, cache: Path, label: str) -> Trajectory:
+    path = cache / f"dop853_{label}_{duration:g}s.npz"
+    if path.exists():
+        return Trajectory.from_npz(path)
+    scenario = Scenario(params, "flexible")
+    times = np.round(np.arange(0.0, duration + 0.5 * REFERENCE_SAMPLE, REFERENCE_SAMPLE), 9)
+    start = time.perf_counter()
+    reference = simulate_reference(scenario.motion, scenario.equilibrium.q, duration, times, rtol=1e-10, atol=1e-12)
+    print(f"[accuracy:{label}] DOP853 reference over {duration:g} s: {time.perf_counter() - start:.0f} s wall")
+    cache.mkdir(parents=True, exist_ok=True)
+    reference.to_npz(path)
+    return reference
+
+
+def errors(reference: Trajectory, tr: Trajectory) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Raw and 0.1 s-mean largest errors of psi2, psi(3,0), psi4 [rad] and of E [m] on the reference's times."""
+    index = [reference.joint_names.index(n) for n in COORDINATES]
+    window = round(0.1 / REFERENCE_SAMPLE)
+    q = np.array([np.interp(reference.t, tr.t, tr.q[:, k]) for k in index]).T - reference.q[:, index]
+    e = np.array([np.interp(reference.t, tr.t, tr.ee_position[:, k]) for k in range(3)]).T - reference.ee_position
+    return (np.abs(q).max(axis=0), np.abs(uniform_filter1d(q, window, axis=0)).max(axis=0),
+            float(np.linalg.norm(e, axis=1).max()), float(np.linalg.norm(uniform_filter1d(e, window, axis=0),
+                                                                          axis=1).max()))
+
+
+def accuracy(params: CraneParameters, duration: float, cache: Path, label: str) -> Trajectory:
+    reference = reference_run(params, duration, cache, label)
     scenario = Scenario(params, "flexible")
     q0 = scenario.equilibrium.q
-    start = time.perf_counter()
-    reference = simulate_reference(scenario.motion, q0, duration, np.round(np.arange(0.0, duration + 5e-4, 1e-3), 9),
-                                   rtol=1e-10, atol=1e-12)
-    print(f"[accuracy:{label}] DOP853 reference: {time.perf_counter() - start:.0f} s wall")
-    index = [reference.joint_names.index(n) for n in COORDINATES]
-    window = 100  # samples = 0.1 s
-    for step, rho in ((1e-3, 0.8), (2e-3, 0.8), (1e-3, 0.5)):
-        tr = simulate(scenario.motion, q0, duration, step=step, rho_inf=rho)
-        q = np.array([np.interp(reference.t, tr.t, tr.q[:, k]) for k in index]).T
-        e = np.array([np.interp(reference.t, tr.t, tr.ee_position[:, k]) for k in range(3)]).T
-        raw = np.abs(q - reference.q[:, index]).max(axis=0)
-        mean = np.abs(uniform_filter1d(q - reference.q[:, index], window, axis=0)).max(axis=0)
-        ee = np.linalg.norm(e - reference.ee_position, axis=1)
-        ee_mean = np.linalg.norm(uniform_filter1d(e - reference.ee_position, window, axis=0), axis=1)
-        print(f"[accuracy:{label}] h={step * 1e3:.0f} ms rho_inf={rho}: max |error| psi2/psi30/psi4 = "
-              f"{raw[0]:.1e}/{raw[1]:.1e}/{raw[2]:.1e} rad, E {ee.max():.1e} m; 0.1 s mean error "
-              f"{mean[0]:.1e}/{mean[1]:.1e}/{mean[2]:.1e} rad, E {ee_mean.max():.1e} m")
+    for step in (2e-3, 1e-3, 5e-4, 2.5e-4):
+        start = time.perf_counter()
+        tr = simulate(scenario.motion, q0, duration, step=step)
+        wall = time.perf_counter() - start
+        raw, mean, ee, ee_mean = errors(reference, tr)
+        print(f"[accuracy:{label}] h={step * 1e3:.2f} ms ({duration / wall:4.1f}x real time): max |error| "
+              f"psi2/psi30/psi4 = {raw[0]:.1e}/{raw[1]:.1e}/{raw[2]:.1e} rad, E {ee:.1e} m; 0.1 s mean error "
+              f"{mean[0]:.1e}/{mean[1]:.1e}/{mean[2]:.1e} rad, E {ee_mean:.1e} m")
+    return reference
+
+
+def vibration_content(reference: Trajectory, label: str) -> None:
+    high_pass = butter(4, 40.0, btype="highpass", fs=1.0 / REFERENCE_SAMPLE, output="sos")
+    late = (reference.t > 5.0) & (reference.t < reference.t[-1] - 0.2)
+    for name in COORDINATES:
+        fast = sosfiltfilt(high_pass, reference.coordinate(name))[late]
+        frequency, power = welch(fast, fs=1.0 / REFERENCE_SAMPLE, nperseg=8192)
+        print(f"[vibration:{label}] {name}: above 40 Hz after 5 s max {np.abs(fast).max():.1e} rad, "
+              f"rms {fast.std():.1e} rad, strongest at {frequency[np.argmax(power)]:.0f} Hz")
+
+
+def newton_tolerance(params: CraneParameters, duration: float, step: float = 1e-3) -> None:
+    scenario = Scenario(params, "flexible")
+    q0 = scenario.equilibrium.q
+    index = [scenario.model.joint_names.index(n) for n in COORDINATES]
+    runs = {}
+    for tolerance in (1e-8, 1e-9, 1e-10, 1e-12):
+        stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), step)
+        stepper.integrator.tolerance = tolerance
+        start = time.perf_counter()
+        runs[tolerance] = stepper.advance_until(duration)["q"][:, index], duration / (time.perf_counter() - start)
+    for tolerance in (1e-8, 1e-9, 1e-10):
+        difference = np.abs(runs[tolerance][0] - runs[1e-12][0]).max(axis=0)
+        print(f"[newton] h={step * 1e3:.0f} ms, tolerance {tolerance:g} ({runs[tolerance][1]:.1f}x real time) "
+              f"vs 1e-12: largest difference over {duration:g} s psi2/psi30/psi4 = "
+              + "/".join(f"{x:.1e}" for x in difference) + " rad")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--duration", type=float, default=10.0)
-    parser.add_argument("--reference-duration", type=float, default=10.0)
-    parser.add_argument("--skip-reference", action="store_true")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--cache", type=Path, default=Path("results/bench_core"))
+    parser.add_argument("--skip-accuracy", action="store_true")
     args = parser.parse_args()
     params = load_config()
     evaluation_times(params)
-    speed(params, args.duration)
-    if not args.skip_reference:
-        accuracy(params, args.reference_duration, "undamped")
-        # 1 % of critical damping at the first boom bending mode (~87 Hz): beta = 2 zeta / omega
-        beta = 2 * 0.01 / (2 * np.pi * 87.0)
-        accuracy(replace(params, damping=Damping(support=0.0, boom=beta)), args.reference_duration,
-                 f"boom beta={beta:.2e} s")
+    speed(params, args.duration, args.repeats)
+    if args.skip_accuracy:
+        return
+    newton_tolerance(params, args.duration)
+    damped = replace(params, damping=Damping(support=0.0, boom=DAMPED_BETA))
+    for label, p in (("undamped", params), (f"boom-beta-{DAMPED_BETA:.2e}s", damped)):
+        vibration_content(accuracy(p, args.duration, args.cache, label), label)
 
 
 if __name__ == "__main__":

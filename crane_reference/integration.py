@@ -29,8 +29,9 @@ exact for the stiff linear springs, approximate for gravity, velocity and constr
 iterated as a fixed point.  The iterate is accepted once the last correction, in velocities
 (gamma' |da|), is below ``tolerance`` [rad/s or m/s]: that correction is the error of the accepted
 iterate.  The bound is on velocities, not positions (beta' |da|, smaller by h beta / gamma): a
-velocity error persists and makes the positions drift.  With the default 1e-8, 10 s of the default
-motion at h = 0.5 or 1 ms differ from runs at 1e-10 by less than 1e-6 rad (benchmarks/bench_core.py).
+velocity error persists and makes the positions drift, for ever on the undamped crane.  With the
+default 1e-9, 10 s of the default motion at h = 1 ms differ from a run at 1e-12 by at most 5e-8 rad
+(1e-8: 3e-5 rad; benchmarks/bench_core.py, [newton]).
 """
 
 from __future__ import annotations
@@ -111,7 +112,7 @@ class StepState:
 class GeneralizedAlpha:
     """Generalized-alpha stepper for a :class:`ProgrammedMotion` (one compiled call per step)."""
 
-    def __init__(self, motion: ProgrammedMotion, rho_inf: float = 0.8, tolerance: float = 1e-8,
+    def __init__(self, motion: ProgrammedMotion, rho_inf: float = 0.8, tolerance: float = 1e-9,
                  max_iterations: int = 30):
         self.motion = motion
         self.coefficients = GeneralizedAlphaParameters.from_spectral_radius(rho_inf)
