@@ -76,35 +76,42 @@ def velocity_residual(p, v, Q, g, c, order):
 
 
 @njit(cache=True, nogil=True)
-def constraint_terms(p, v, C, d, Q, g, c, order):
-    """Residuals (Phi or Psi), gradients (Phi_p or Psi_v), A = gradients C, c of A qdd = c, the
-    distances |residual| / |gradient| and the velocity-level residuals (dPhi/dt or Psi) (see
-    :mod:`crane_reference.constraints`)."""
+def acceleration_terms(p, v, C, d, Q, g, c, order):
+    """A = gradients C (gradients Phi_p or Psi_v) and c of the acceleration-level constraints A qdd = c
+    (see :mod:`crane_reference.constraints`)."""
     m = Q.shape[0]
-    residual = np.empty(m)
-    rate = np.empty(m)
     grads = np.empty((m, 3))
     c_acc = np.empty(m)
     z = np.concatenate((p, v))
     for i in range(m):
         if order[i] == 0:
             grads[i] = _form_gradient(Q[i, 0], g[i, 0], p)
-            residual[i] = _quadratic_form(Q[i, 0], p, p) + g[i, 0, :3] @ p + c[i, 0]
-            rate[i] = grads[i] @ v + _quadratic_form(Q[i, 1], p, p) + g[i, 1, :3] @ p + c[i, 1]
             convective = (2.0 * _quadratic_form(Q[i, 0], v, v) + 2.0 * (_form_gradient(Q[i, 1], g[i, 1], p) @ v)
                           + _quadratic_form(Q[i, 2], p, p) + g[i, 2, :3] @ p + c[i, 2])
             c_acc[i] = -(grads[i] @ d + convective)
         else:
             full = _form_gradient(Q[i, 0], g[i, 0], z)
             grads[i] = full[3:]
-            residual[i] = _quadratic_form(Q[i, 0], z, z) + g[i, 0] @ z + c[i, 0]
-            rate[i] = residual[i]
             psi_t = _quadratic_form(Q[i, 1], z, z) + g[i, 1] @ z + c[i, 1]
             c_acc[i] = -(grads[i] @ d + full[:3] @ v + psi_t)
+    return grads @ C, c_acc
+
+
+@njit(cache=True, nogil=True)
+def constraint_values(p, v, Q, g, c, order):
+    """Residuals (Phi or Psi), gradients (Phi_p or Psi_v), distances |residual| / |gradient| and the
+    velocity-level residuals (dPhi/dt or Psi)."""
+    m = Q.shape[0]
+    residual = np.empty(m)
+    rate, grads = velocity_residual(p, v, Q, g, c, order)
+    z = np.concatenate((p, v))
+    for i in range(m):
+        residual[i] = (_quadratic_form(Q[i, 0], p, p) + g[i, 0, :3] @ p + c[i, 0] if order[i] == 0
+                       else _quadratic_form(Q[i, 0], z, z) + g[i, 0] @ z + c[i, 0])
     distance = np.empty(m)
     for i in range(m):
         distance[i] = abs(residual[i]) / np.sqrt(grads[i] @ grads[i])
-    return residual, grads, grads @ C, c_acc, distance, rate
+    return residual, grads, distance, rate
 
 
 @njit(cache=True, nogil=True)
@@ -299,32 +306,42 @@ def _accelerations(M, f, A, c_acc, B, independent, dependent, servo):
 
 
 @njit(cache=True, nogil=True)
-def _evaluate(q, qd, Q, g, c, order, drive, independent, dependent, chain, servo, project_velocities):
-    """:func:`evaluate`, optionally solving qd_dc from the velocity-level constraints first (with E's
-    Jacobian at q itself, between the position and the velocity parts of the dynamics).  Returns qd,
-    the evaluation and whether the velocity constraints were solved."""
+def _accelerations_at(q, qd, Q, g, c, order, drive, independent, dependent, chain, servo, project_velocities):
+    """What a Newton iteration needs at (q, qd): qdd from (8), optionally after solving qd_dc from the
+    velocity-level constraints (with E's Jacobian at q itself, between the position and the velocity
+    parts of the dynamics).  Returns qd, the terms (M, h, forces, Vg, p, R, C, d, A, c, B, qdd) and
+    whether the velocity constraints were solved."""
     kinds, axes, origins, body_joint, body_H, gravity, ee_joint, ee_point, K, D, drive_joint = chain
     T, S, Hw, M, Qg, Vg, p, R, C = position_terms(q, kinds, axes, origins, body_joint, body_H, gravity, ee_joint,
                                                   ee_point)
-    damped = np.any(D != 0.0)
     solved = True
     if project_velocities:
         qd, solved = dependent_velocities(qd, p, C, Q, g, c, order, dependent)
     h, d = velocity_products(qd, T, S, Hw, body_joint, ee_joint, p)
     forces = Qg - K @ q
-    if damped:
+    if np.any(D != 0.0):
         forces -= D @ qd
     forces[drive_joint] += drive[0] + drive[1] * (drive[2] - q[drive_joint])
-    residual, grads, A, c_acc, distance, rate = constraint_terms(p, C @ qd, C, d, Q, g, c, order)
+    A, c_acc = acceleration_terms(p, C @ qd, C, d, Q, g, c, order)
     B = velocity_map(A, independent, dependent)
     qdd = _accelerations(M, forces - h, A, c_acc, B, independent, dependent, servo)
+    return qd, (M, h, forces, Vg, p, R, C, d, A, c_acc, B, qdd), solved
+
+
+@njit(cache=True, nogil=True)
+def _complete(q, qd, terms, Q, g, c, order, drive, dependent, chain, servo):
+    """The full evaluation from the terms of :func:`_accelerations_at`: adds the constraint residuals,
+    gradients, distances and velocity residuals, the reactions, their generalized force and the accounts."""
+    K, D, drive_joint = chain[8], chain[9], chain[10]
+    M, h, forces, Vg, p, R, C, d, A, c_acc, B, qdd = terms
+    residual, grads, distance, rate = constraint_values(p, C @ qd, Q, g, c, order)
     reaction_force = M @ qdd + h - forces
     reactions = reaction_force[dependent] if servo else solve_small_vector(A @ A.T, A @ reaction_force)
     energy = energy_accounts(q, qd, M, Vg, K, D, drive, drive_joint)
     accounts = np.array([energy[0], energy[1], energy[2], energy[3], reaction_force @ qd, energy[4],
                          smallest_singular_value(np.ascontiguousarray(A[:, dependent]))])
-    return qd, (M, h, forces, Vg, p, R, C, d, residual, grads, A, c_acc, distance, rate, B, qdd, reactions,
-                reaction_force, accounts), solved
+    return (M, h, forces, Vg, p, R, C, d, residual, grads, A, c_acc, distance, rate, B, qdd, reactions,
+            reaction_force, accounts)
 
 
 @njit(cache=True, nogil=True)
@@ -333,7 +350,8 @@ def evaluate(q, qd, Q, g, c, order, drive, independent, dependent, chain, servo)
     reactions (lambda for ideal constraints, the dependent joints' torques tau for servo-constraints),
     the generalized force they exert, M qdd + h - Q (= A^T lambda, or E_dc tau), and the accounts
     (E_k, E_p, t_dr, P_dr, P_constraints, P_D, sigma_min(K_dc)) (powers: what each source feeds in)."""
-    return _evaluate(q, qd, Q, g, c, order, drive, independent, dependent, chain, servo, False)[1]
+    qd, terms, _ = _accelerations_at(q, qd, Q, g, c, order, drive, independent, dependent, chain, servo, False)
+    return _complete(q, qd, terms, Q, g, c, order, drive, dependent, chain, servo)
 
 
 @njit(cache=True, nogil=True)
@@ -375,13 +393,13 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
         qd1 = np.zeros_like(q1)
         qd1[integrated] = v1
         if solved:
-            qd1, result, solved = _evaluate(q1, qd1, Q, g, c, order, drive, independent, dependent, chain, servo,
-                                            True)
+            qd1, terms, solved = _accelerations_at(q1, qd1, Q, g, c, order, drive, independent, dependent, chain,
+                                                   servo, True)
         if not solved:
             held = evaluate(q0, qd0, Q, g, c, order, drive, independent, dependent, chain, servo)
             return q0, qd0, at0, held, 2, iteration + 1
         q_guess = q1
-        qdd1 = result[15][integrated]
+        qdd1 = terms[11][integrated]
         correction = qdd1 - a1
         residual = M_r @ (a1[:n_ic] - qdd1[:n_ic])
         correction[:n_ic] = -(_cholesky_solve(factor, residual) if not servo else factor @ residual)
@@ -393,7 +411,8 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, alpha_m, alpha_f, gamm
         if iteration > 0 and gamma_p * np.max(np.abs(correction)) <= tolerance:
             status = 0
             break
-    return q1, qd1, at1, result, status, iteration + 1
+    return q1, qd1, at1, _complete(q1, qd1, terms, Q, g, c, order, drive, dependent, chain, servo), status, \
+        iteration + 1
 
 
 @njit(cache=True, nogil=True)
