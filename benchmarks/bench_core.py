@@ -1,7 +1,7 @@
 """Speed and accuracy of the simulation core; prints the figures quoted in the closing notes.
 
     python benchmarks/bench_core.py [--duration 10] [--repeats 3] [--cache results/bench_core]
-                                    [--skip-accuracy]
+                                    [--only eval speed first-order newton accuracy] [--check-reference]
 
 1. [eval] Time of M(q) with h, gravity and E's kinematics, and of one full qdd from (8), at 24 DOF.
 2. [speed] Wall time per step and real-time factor (best of ``--repeats``) of the default motion
@@ -18,7 +18,12 @@
    integrator that does not follow the phase of this vibration is off by about its amplitude.
    With ``--check-reference`` the undamped reference is repeated at rtol 1e-9 ([reference]): their
    difference bounds the reference's own error.
-5. [newton] Largest difference of psi2, psi(3,0), psi4 over the run between Newton tolerances (on the
+5. [first-order] The paper's ellipse and height plus the first-order constraint x y' - y x' = a b omega(t)
+   (E runs along the ellipse with the parametric-angle rate omega, a quintic rise to 0.8 rad/s over
+   1 s; the column slew becomes dependent), rigid crane, 2 s: the largest error of E's parametric angle
+   against the integral of omega at h = 2, 1, 0.5 ms, the largest velocity-constraint residual and the
+   energy-balance error relative to the work of the constraint forces.
+6. [newton] Largest difference of psi2, psi(3,0), psi4 over the run between Newton tolerances (on the
    accepted velocity correction, m/s or rad/s) of 1e-8, 1e-9 (the default) and 1e-10 and a run at
    1e-12, at h = 1 ms: the Newton error must stay far below the discretisation error.
 """
@@ -31,11 +36,15 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from scipy.integrate import quad
 from scipy.signal import butter, sosfiltfilt, welch
 
 from crane_reference.config import load_config
+from crane_reference.constraints import ArealRate, ConstraintSet, EllipseXY, HeightZ
 from crane_reference.dynamics import chain_terms
 from crane_reference.parameters import CraneParameters, Damping
+from crane_reference.profiles import Constant, QuinticRise
+from crane_reference.programmed_motion import ProgrammedMotion
 from crane_reference.simulation import MotionStepper, Scenario, simulate, simulate_reference
 from crane_reference.trajectory import Trajectory
 
@@ -177,25 +186,55 @@ def newton_tolerance(params: CraneParameters, duration: float, step: float = 1e-
               + "/".join(f"{x:.1e}" for x in difference) + " rad")
 
 
+def first_order(params: CraneParameters, duration: float = 2.0) -> None:
+    omega = QuinticRise(0.0, 0.8, 0.0, 1.0)
+    a, b = params.task.ellipse_a, params.task.ellipse_b
+    scenario = Scenario(params, "rigid")
+    model = scenario.model
+    task = ConstraintSet((EllipseXY(Constant(a), Constant(b)), HeightZ(QuinticRise(scenario.z_static, 0.2, 0.0, 5.0)),
+                          ArealRate(lambda t: tuple(a * b * x for x in omega(t)))))
+    dependent = tuple(model.joint_names.index(n) for n in ("boom_luff", "knuckle", "column_slew"))
+    motion = ProgrammedMotion(scenario.dynamics, task, dependent=dependent)
+    for step in (2e-3, 1e-3, 5e-4):
+        start = time.perf_counter()
+        tr = simulate(motion, scenario.equilibrium.q, duration, step=step)
+        wall = time.perf_counter() - start
+        x, y = tr.ee_position[:, 0], tr.ee_position[:, 1]
+        theta = np.unwrap(np.arctan2(y / b, x / a))
+        expected = [quad(lambda s: omega(s)[0], 0.0, t, points=[1.0], epsabs=1e-13, epsrel=1e-13)[0] for t in tr.t]
+        work = np.max(np.abs(tr.work_constraints))
+        print(f"[first-order] h={step * 1e3:.1f} ms ({duration / wall:.1f}x real time): parametric angle error "
+              f"{np.max(np.abs(theta - theta[0] - expected)):.1e} rad after {expected[-1]:.2f} rad; velocity "
+              f"residual {np.max(np.abs(tr.residual[:, 2])):.1e} m^2/s; energy balance "
+              f"{np.max(np.abs(tr.energy_balance_error)) / work:.1e} of the constraint work {work:.0f} J")
+
+
+SECTIONS = ("eval", "speed", "first-order", "newton", "accuracy")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--duration", type=float, default=10.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--cache", type=Path, default=Path("results/bench_core"))
-    parser.add_argument("--skip-accuracy", action="store_true")
+    parser.add_argument("--only", nargs="+", choices=SECTIONS, default=SECTIONS, help="sections to run")
     parser.add_argument("--check-reference", action="store_true")
     args = parser.parse_args()
     params = load_config()
-    evaluation_times(params)
-    speed(params, args.duration, args.repeats)
-    if args.skip_accuracy:
-        return
-    newton_tolerance(params, args.duration)
+    if "eval" in args.only:
+        evaluation_times(params)
+    if "speed" in args.only:
+        speed(params, args.duration, args.repeats)
+    if "first-order" in args.only:
+        first_order(params)
+    if "newton" in args.only:
+        newton_tolerance(params, args.duration)
     if args.check_reference:
         reference_check(params, args.duration, args.cache)
-    damped = replace(params, damping=Damping(support=0.0, boom=DAMPED_BETA))
-    for label, p in (("undamped", params), (f"boom-beta-{DAMPED_BETA:.2e}s", damped)):
-        vibration_content(accuracy(p, args.duration, args.cache, label), label)
+    if "accuracy" in args.only:
+        damped = replace(params, damping=Damping(support=0.0, boom=DAMPED_BETA))
+        for label, p in (("undamped", params), (f"boom-beta-{DAMPED_BETA:.2e}s", damped)):
+            vibration_content(accuracy(p, args.duration, args.cache, label), label)
 
 
 if __name__ == "__main__":
