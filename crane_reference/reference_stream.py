@@ -32,8 +32,11 @@ from .parameters import CraneParameters, FlexibleDrive, Task, TorqueDrive
 from .profiles import Blend, Constant, Profile, QuinticRise
 from .programmed_motion import ConstraintSingularityError, ProgrammedMotion, ProjectionError
 from .simulation import MotionStepper, Scenario
+from .trajectory import unstack_samples
 
 RUNNING, PAUSED, ERROR = "RUNNING", "PAUSED", "ERROR"
+CHUNK_STEPS = 20
+"""Steps computed per compiled run; the wall budget of :meth:`ReferenceStream.compute` is checked between runs."""
 SOLVER_FAILURES = (ConstraintSingularityError, ProjectionError, IntegrationError, np.linalg.LinAlgError,
                    FloatingPointError)
 
@@ -164,14 +167,30 @@ class ReferenceStream:
             if deadline is not None and time.perf_counter() > deadline:
                 return
             try:
-                sample = self._stepper.advance()
-                if not (np.all(np.isfinite(sample.q)) and np.all(np.isfinite(sample.qd))):
-                    raise FloatingPointError(f"non-finite state at t = {sample.t:.6g} s")
+                chunk_end = min(target, self._times[-1] + CHUNK_STEPS * self.step)
+                rows = self._stepper.advance_until(max(chunk_end, self._times[-1] + 0.5 * self.step))
+                if not (np.all(np.isfinite(rows["q"])) and np.all(np.isfinite(rows["qd"]))):
+                    raise FloatingPointError(f"non-finite state before t = {rows['t'][-1]:.6g} s")
             except SOLVER_FAILURES as failure:
                 self._fail(failure)
                 return
+            samples = unstack_samples(rows)
+            motion = self._stepper.motion
+            self._history += [(None, None, None, sample, motion) for sample in samples[:-1]]
             self._history.append(self._stepper.snapshot())
-            self._times.append(sample.t)
+            self._times += [sample.t for sample in samples]
+
+    def _rewind(self, k: int) -> None:
+        """Forget the motion after the k-th computed instant and put the solver back there.  Instants
+        inside a compiled run keep their samples only: the solver restarts from the last kept state
+        before k and steps to k again, one step at a time (the same steps, bit for bit)."""
+        start = max(i for i in range(k + 1) if self._history[i][0] is not None)
+        self._stepper.rewind(self._history[start])
+        for i in range(start + 1, k + 1):
+            self._stepper.advance()
+            self._history[i] = self._stepper.snapshot()
+        del self._history[k + 1:]
+        del self._times[k + 1:]
 
     def _fail(self, failure: Exception) -> None:
         last = self._history[-1][3]
@@ -221,6 +240,8 @@ class ReferenceStream:
         """Forget computed states older than ``keep`` seconds before publish time tau."""
         t = self.motion_time(tau) - keep
         k = bisect.bisect_left(self._times, t) - 1
+        while k > 0 and self._history[k][0] is None:  # keep a state to restart from (see _rewind)
+            k -= 1
         if k > 0:
             del self._history[:k]
             del self._times[:k]
@@ -272,9 +293,7 @@ class ReferenceStream:
         t = self.motion_time(tau)
         self.compute(tau)
         k = min(bisect.bisect_left(self._times, t - 1e-12), len(self._times) - 1)
-        del self._history[k + 1:]
-        del self._times[k + 1:]
-        self._stepper.rewind(self._history[k])
+        self._rewind(k)
         t_b = self._times[k]
         old = self._stepper.motion.constraints.constraints
         ellipse, height = old[0], old[1]

@@ -58,6 +58,13 @@ def stack_samples(samples: list[Sample]) -> dict[str, np.ndarray]:
     return {f.name: np.array([getattr(s, f.name) for s in samples]) for f in fields(Sample)}
 
 
+def unstack_samples(arrays: dict[str, np.ndarray]) -> list[Sample]:
+    """The samples whose fields :func:`stack_samples` stacked."""
+    names = [f.name for f in fields(Sample)]
+    columns = [arrays[name] for name in names]
+    return [Sample(*(float(c[i]) if c.ndim == 1 else c[i] for c in columns)) for i in range(len(arrays["t"]))]
+
+
 @dataclass(frozen=True)
 class Trajectory:
     """Samples of one run stacked into arrays (first axis: time)."""

@@ -479,11 +479,11 @@ def test_solver_failure_holds_and_reports_error(ros: Harness) -> None:
     node = ros.start(publish_rate=100)
     time.sleep(0.3)
 
-    def fail() -> None:
+    def fail(t_end: float) -> None:
         raise ConstraintSingularityError("injected by the test")
 
     with node._stream_lock:
-        node._stream._stepper.advance = fail
+        node._stream._stepper.advance_until = fail
     ros.wait_for(lambda: node._stream.state == "ERROR", "the stream's ERROR state")
     ros.wait_for(lambda: any(m.status[0].level == messages.rclpy_types().byte(messages.ERROR)
                              for _, m in list(ros.received["diagnostics"])), "an ERROR diagnostic")
