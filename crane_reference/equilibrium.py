@@ -41,6 +41,7 @@ def reduced_static_forces(motion: ProgrammedMotion, t: float, q: np.ndarray) -> 
 def static_equilibrium(motion: ProgrammedMotion, q_start: np.ndarray, t0: float = 0.0,
                        force_tolerance: float = 1e-7) -> Equilibrium:
     """Equilibrium near ``q_start`` with the drive coordinate held at its value in ``q_start``."""
+    motion.require_holonomic("a static equilibrium")
     drive = motion.dynamics.model.drive_joint
     rows = np.flatnonzero(motion.independent != drive)
     free = motion.independent[rows]

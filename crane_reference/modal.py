@@ -193,6 +193,7 @@ def linearise_chain(dynamics: CraneDynamics, t: float, q: np.ndarray) -> Lineari
 def linearise(motion: ProgrammedMotion, t: float, q: np.ndarray, qd: np.ndarray | None = None) -> Linearisation:
     """The programmed motion linearised about (t, q, qd) (q_dc re-projected on the constraints first;
     qd = 0 by default).  The reactions are those of :meth:`ProgrammedMotion.solve` at the state."""
+    motion.require_holonomic("the linearisation")
     dynamics = motion.dynamics
     q, _ = motion.project_positions(t, np.asarray(q, dtype=float))
     qd = np.zeros_like(q) if qd is None else motion.dependent_velocities(t, q, np.asarray(qd, dtype=float))

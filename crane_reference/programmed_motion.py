@@ -107,6 +107,12 @@ class ProgrammedMotion:
         """Coordinates the integrator advances: independent first, then velocity-dependent."""
         self.min_singular_value = min_singular_value
 
+    def require_holonomic(self, purpose: str) -> None:
+        """Raise unless every task constraint is holonomic (``purpose`` names what needs that)."""
+        if self.velocity_dependent.size:
+            raise ValueError(f"{purpose} is defined for holonomic task constraints only; this set has "
+                             f"{self.velocity_dependent.size} first-order constraint(s)")
+
     @property
     def dof(self) -> int:
         return self.dynamics.model.dof

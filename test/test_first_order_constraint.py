@@ -24,6 +24,7 @@ from crane_reference.constraints import ArealRate, ConstraintSet, EllipseXY, Hei
 from crane_reference.drive import make_drive
 from crane_reference.dynamics import CraneDynamics
 from crane_reference.equilibrium import static_equilibrium
+from crane_reference.modal import linearise
 from crane_reference.model import build_model
 from crane_reference.profiles import Constant, QuinticRise
 from crane_reference.programmed_motion import ProgrammedMotion
@@ -127,3 +128,11 @@ def test_parametric_angle_follows_the_prescribed_rate(rigid):
     work = np.max(np.abs(trajectory.work_constraints))
     assert work > 100.0, "the areal constraint should do noticeable work"
     assert np.max(np.abs(trajectory.energy_balance_error)) <= 1e-4 * work
+
+
+def test_equilibrium_and_linearisation_name_their_limit(rigid):
+    motion, start = rigid
+    with pytest.raises(ValueError, match="holonomic task constraints only"):
+        static_equilibrium(motion, start)
+    with pytest.raises(ValueError, match="holonomic task constraints only"):
+        linearise(motion, 0.0, start)
