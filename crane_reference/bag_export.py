@@ -48,23 +48,23 @@ from .reference_stream import ERROR, ReferenceSample, ReferenceStream
 
 STORAGES = ("mcap", "sqlite3")
 VERSIONS = (9, 8)
-NODE_NAME = "crane_reference"  # the node's default name (crane_reference.node.NODE_NAME)
-JOINT_STATES = "/joint_states"
-END_EFFECTOR_POSE = f"/{NODE_NAME}/end_effector_pose"
-DIAGNOSTICS = "/diagnostics"
+NODE_NAME = messages.NODE_NAME
+JOINT_STATES = f"/{messages.JOINT_STATES_TOPIC}"
+END_EFFECTOR_POSE = messages.END_EFFECTOR_POSE_TOPIC.replace("~", f"/{NODE_NAME}", 1)
+DIAGNOSTICS = messages.DIAGNOSTICS_TOPIC
 TOPIC_TYPES = {
     JOINT_STATES: "sensor_msgs/msg/JointState",
     END_EFFECTOR_POSE: "geometry_msgs/msg/PoseStamped",
     DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray",
 }
 DEFAULT_TOPICS = tuple(TOPIC_TYPES)
-MAX_RATE = 1000  # [Hz], upper bound of the node's publish_rate parameter
-DIAGNOSTICS_PERIOD_NS = 10**9  # the node publishes /diagnostics at 1 Hz
+MAX_RATE = messages.MAX_PUBLISH_RATE
+DIAGNOSTICS_PERIOD_NS = round(messages.DIAGNOSTICS_PERIOD * messages.NANOSECONDS)
 QUEUE_SIZE = 100_000  # messages waiting for the writer thread before write() blocks
 RELEASE_KEEP = 1.0  # [s] of computed motion kept behind the sample being exported
 INFINITE = QosTime(sec=9223372036, nsec=854775807)  # RMW_DURATION_INFINITE as rosbag2 writes it
-NODE_QOS = Qos(  # what the node's publishers offer: depth 10, reliable, volatile, no deadline or lifespan
-    history=QosHistory.KEEP_LAST, depth=10, reliability=QosReliability.RELIABLE,
+NODE_QOS = Qos(  # what the node's publishers offer: keep last, reliable, volatile, no deadline or lifespan
+    history=QosHistory.KEEP_LAST, depth=messages.PUBLISHER_DEPTH, reliability=QosReliability.RELIABLE,
     durability=QosDurability.VOLATILE, deadline=INFINITE, lifespan=INFINITE,
     liveliness=QosLiveliness.AUTOMATIC, liveliness_lease_duration=INFINITE,
     avoid_ros_namespace_conventions=False)

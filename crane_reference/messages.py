@@ -28,6 +28,14 @@ import numpy as np
 from .reference_stream import ReferenceSample
 
 NANOSECONDS = 10**9
+# The node's interface, shared by the node and the offline bag export (which must not import rclpy)
+NODE_NAME = "crane_reference"
+JOINT_STATES_TOPIC = "joint_states"
+END_EFFECTOR_POSE_TOPIC = "~/end_effector_pose"
+DIAGNOSTICS_TOPIC = "/diagnostics"
+PUBLISHER_DEPTH = 10  # keep-last depth of every publisher (reliable, volatile)
+DIAGNOSTICS_PERIOD = 1.0  # [s]
+MAX_PUBLISH_RATE = 1000  # [Hz], upper bound of the publish_rate parameter
 ELLIPSE_SEGMENTS = 128
 ELLIPSE_NAMESPACE = "target_ellipse"
 TRAIL_NAMESPACE = "end_effector_trail"

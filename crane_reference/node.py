@@ -86,7 +86,7 @@ from .reference_stream import (
 )
 from .urdf import model_to_urdf
 
-NODE_NAME = "crane_reference"
+NODE_NAME = messages.NODE_NAME
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
 COMMAND_LEAD = 0.25  # [s] from the next sample to publish to the one a command takes effect at
 COMPUTE_SLICE = 0.005  # [s] of wall time the worker holds the stream per compute call
@@ -97,7 +97,6 @@ MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, older s
 MARKER_RATE = 10.0  # [Hz]
 TRAIL_RATE = 50.0  # [Hz] of points added to E's trail
 TRAIL_POINTS = 500
-DIAGNOSTICS_PERIOD = 1.0  # [s]
 TIME_TOLERANCE = 1e-9  # [s], rounding slack when comparing stream times
 NANOSECONDS = messages.NANOSECONDS
 RCLError = rclpy_implementation.RCLError
@@ -181,11 +180,12 @@ class CraneReferenceNode(Node):
         self._diagnostics_reference = (0, 0.0, 0.0, self.get_clock().now().nanoseconds)
 
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self._joint_pub = self.create_publisher(JointState, "joint_states", 10)
-        self._pose_pub = self.create_publisher(PoseStamped, "~/end_effector_pose", 10)
-        self._preview_pub = self.create_publisher(JointTrajectory, "~/reference_preview", 10)
-        self._marker_pub = self.create_publisher(MarkerArray, "~/markers", 10)
-        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        depth = messages.PUBLISHER_DEPTH
+        self._joint_pub = self.create_publisher(JointState, messages.JOINT_STATES_TOPIC, depth)
+        self._pose_pub = self.create_publisher(PoseStamped, messages.END_EFFECTOR_POSE_TOPIC, depth)
+        self._preview_pub = self.create_publisher(JointTrajectory, "~/reference_preview", depth)
+        self._marker_pub = self.create_publisher(MarkerArray, "~/markers", depth)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, messages.DIAGNOSTICS_TOPIC, depth)
         self._description_pub = self.create_publisher(String, "robot_description", latched)
         self._description_pub.publish(messages.robot_description(self._types, model_to_urdf(self._stream.model)))
 
@@ -200,7 +200,7 @@ class CraneReferenceNode(Node):
                          threading.Thread(target=self._publish_loop, name="crane_reference_publisher", daemon=True)]
         for thread in self._threads:
             thread.start()
-        self.create_timer(DIAGNOSTICS_PERIOD, self._publish_diagnostics)
+        self.create_timer(messages.DIAGNOSTICS_PERIOD, self._publish_diagnostics)
         self.create_timer(1.0 / MARKER_RATE, self._publish_markers)
         self._status_timer = self.create_timer(self._values["status_period"], self._log_status)
         self.get_logger().info(

@@ -31,6 +31,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from .messages import MAX_PUBLISH_RATE
 from .model import VARIANTS
 from .parameters import CraneParameters, TorqueDrive
 
@@ -125,7 +126,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("integrator.step", DOUBLE, 1e-3, "Step of the generalized-alpha integrator", "s",
                   (1e-5, 1e-2), read_only=True),
     ParameterSpec("publish_rate", INTEGER, 100, "Rate of joint_states and ~/end_effector_pose; sample k is "
-                  "stamped start + k / publish_rate", "Hz", (1, 1000), read_only=True),
+                  "stamped start + k / publish_rate", "Hz", (1, MAX_PUBLISH_RATE), read_only=True),
     ParameterSpec("frame_id", STRING, "world", "Frame of ~/end_effector_pose, ~/reference_preview and ~/markers "
                   "(the world frame {0} of the crane)"),
     ParameterSpec("ellipse.a", DOUBLE, 3.0, "Semi-axis of E's ellipse along world x (constraint (5.1)); "
