@@ -1,10 +1,11 @@
-"""Compiled (numba) evaluation of the programmed motion and of one generalized-alpha step.
+"""Compiled (numba) evaluation of the programmed motion and of generalized-alpha steps.
 
 The mathematics is documented where it is defined: chain terms in :mod:`crane_reference.dynamics`,
-quadric constraints in :mod:`crane_reference.constraints`, equations (7)-(8) and the coordinate
-partitioning in :mod:`crane_reference.programmed_motion`, the generalized-alpha method in
-:mod:`crane_reference.integration`.  Here they are fused so that one integration step is one call:
-the time-dependent data (constraint coefficients, drive) enter as numbers evaluated at the step's end.
+quadric constraints (holonomic and first-order) in :mod:`crane_reference.constraints`, equations
+(7)-(8) and the coordinate partitioning in :mod:`crane_reference.programmed_motion`, the
+generalized-alpha method in :mod:`crane_reference.integration`.  Here they are fused so that one
+integration step, or a run of steps, is one call: the time-dependent data (constraint coefficients,
+drive) enter as numbers evaluated at each step's end.
 The kernels release the GIL (``nogil``), so a ROS node's publishing thread runs while the solver steps.
 
 ``chain`` is the tuple (kinds, axes, origins, body_joint, body_H, gravity, ee_joint, ee_point, K, D,
