@@ -36,6 +36,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
+from report import print_table
 from sensor_msgs.msg import JointState
 
 NS = 10**9
@@ -167,10 +168,7 @@ def main() -> int:
     parser.add_argument("--domain-id", type=int, default=os.getpid() % 100 + 1)
     args = parser.parse_args()
     rows = [run(rate, args.duration, args.model, args.changes, args.domain_id) for rate in args.rates]
-    print(f"crane_reference node, {args.model} model, {args.duration:g} s per rate, {os.cpu_count()} CPUs")
-    for key in rows[0]:
-        cells = "".join(f"{row[key]:>12.3f}" if isinstance(row[key], float) else f"{row[key]!s:>12}" for row in rows)
-        print(f"{key:<22}{cells}")
+    print_table(f"crane_reference node, {args.model} model, {args.duration:g} s per rate, {os.cpu_count()} CPUs", rows)
     return 0
 
 

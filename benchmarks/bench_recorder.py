@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from report import print_table
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.typesys import Stores, get_typestore
 
@@ -108,10 +109,8 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="bench_recorder_") as workdir:
         rows = [run(storage, rate, args.duration, args.domain_id, Path(workdir))
                 for storage in args.storages for rate in args.rates]
-    print(f"crane-reference record of the flexible node, {args.duration:g} s per case, {os.cpu_count()} CPUs")
-    for key in rows[0]:
-        cells = "".join(f"{row[key]:>12.3f}" if isinstance(row[key], float) else f"{row[key]!s:>12}" for row in rows)
-        print(f"{key:<22}{cells}")
+    print_table(f"crane-reference record of the flexible node, {args.duration:g} s per case, "
+                f"{os.cpu_count()} CPUs", rows)
     return 0
 
 

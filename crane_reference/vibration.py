@@ -493,6 +493,15 @@ def _plot_spectra(spectra: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def _label_time_axes(ax, title: str, ylabel: str, **title_style: str) -> None:
+    """Title, time axis, y label, grid and legend of one time-course panel."""
+    ax.set_title(title, **title_style)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel(ylabel)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize="small")
+
+
 def _plot_differences(diffs: dict, path: Path) -> None:
     """Differences of psi2, psi(3,0), psi4 over time (raw grey, 0.1 s moving mean black), one row per pair
     (flexible - rigid per realisation, servo - ideal per model)."""
@@ -505,11 +514,7 @@ def _plot_differences(diffs: dict, path: Path) -> None:
         for ax, name, label in zip(axes[r], DIFFERENCE_COORDINATES, labels, strict=True):
             ax.plot(d["t"], d[name], color="0.7", lw=0.5, label="raw")
             ax.plot(d["t"], moving_mean(d["t"], d[name]), color="k", lw=1.2, label=f"{MEAN_WINDOW:g} s mean")
-            ax.set_title(f"{label}: {pair}", fontsize="medium")
-            ax.set_xlabel("t [s]")
-            ax.set_ylabel("[rad]")
-            ax.grid(True, alpha=0.3)
-            ax.legend(fontsize="small")
+            _label_time_axes(ax, f"{label}: {pair}", "[rad]", fontsize="medium")
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -528,10 +533,6 @@ def _plot_efforts(runs: dict, path: Path) -> None:
             ax.plot(tr.t, tr.constraint_forces[:, k], lw=0.6 if not rigid else 1.2, ls="--" if rigid else "-",
                     label=f"{realisation}, {variant}")
     for ax, name in zip(axes, ("luff joint psi(3,0)", "knuckle psi4"), strict=True):
-        ax.set_title(f"constraint realisation's generalized force on the {name}")
-        ax.set_xlabel("t [s]")
-        ax.set_ylabel("[N m]")
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize="small")
+        _label_time_axes(ax, f"constraint realisation's generalized force on the {name}", "[N m]")
     fig.savefig(path, dpi=110)
     plt.close(fig)
