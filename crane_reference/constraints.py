@@ -203,15 +203,21 @@ class ConstraintSet:
         """0 for a holonomic, 1 for a first-order constraint, per row."""
         return np.array([c.order for c in self.constraints], dtype=np.int64)
 
-    def coefficients(self, t: float) -> ConstraintCoefficients:
-        m = self.size
-        Q, g, c = np.zeros((m, 3, 6, 6)), np.zeros((m, 3, 6)), np.zeros((m, 3))
-        for i, constraint in enumerate(self.constraints):
-            if constraint.order == 0:
-                constraint.write(t, Q[i, :, :3, :3], g[i, :, :3], c[i])
-            else:
-                constraint.write(t, Q[i, :2], g[i, :2], c[i, :2])
+    def coefficients_at(self, times: np.ndarray) -> ConstraintCoefficients:
+        """The coefficients at each of ``times``, stacked on a leading axis: Q (N, m, 3, 6, 6) etc."""
+        n, m = len(times), self.size
+        Q, g, c = np.zeros((n, m, 3, 6, 6)), np.zeros((n, m, 3, 6)), np.zeros((n, m, 3))
+        for k, t in enumerate(times):
+            for i, constraint in enumerate(self.constraints):
+                if constraint.order == 0:
+                    constraint.write(t, Q[k, i, :, :3, :3], g[k, i, :, :3], c[k, i])
+                else:
+                    constraint.write(t, Q[k, i, :2], g[k, i, :2], c[k, i, :2])
         return ConstraintCoefficients(Q, g, c, self.orders)
+
+    def coefficients(self, t: float) -> ConstraintCoefficients:
+        stacked = self.coefficients_at([t])
+        return ConstraintCoefficients(stacked.Q[0], stacked.g[0], stacked.c[0], stacked.order)
 
     def _holonomic(self) -> tuple[EndEffectorConstraint, ...]:
         if any(c.order != 0 for c in self.constraints):

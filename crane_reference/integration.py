@@ -135,21 +135,9 @@ class GeneralizedAlpha:
         return StepState(state.t, state.q, state.qd, solution, solution.qdd[self.motion.integrated].copy())
 
     def step(self, state: StepState, t1: float, ends_on_jump: bool = False) -> StepState:
-        """Advance ``state`` to time t1 > state.t [s].  A step ending on a drive jump (``ends_on_jump``)
-        uses the drive's left limit there; continue with :meth:`restart` at the jump."""
-        c = self.coefficients
-        motion = self.motion
-        h = t1 - state.t
-        k, drive = motion.kernel_inputs(t1, ends_on_jump)
-        previous = state.solution
-        q1, qd1, at1, result, status, iterations = kernels.generalized_alpha_step(
-            state.q, state.qd, previous.qdd, state.pseudo_acceleration, previous.dynamics.M, previous.velocity_map,
-            h, c.alpha_m, c.alpha_f, c.gamma, c.beta, k.Q, k.g, k.c, k.order, drive, motion.independent,
-            motion.dependent, motion.integrated, motion.holonomic_dependent, motion.dynamics.chain, motion.servo,
-            self.tolerance, self.max_iterations, PROJECTION_TOLERANCE)
-        self._check(status, state.t, t1)
-        self.last_iterations = iterations
-        return StepState(t1, q1, qd1, motion.solution_from_evaluation(t1, q1, qd1, result), at1)
+        """Advance ``state`` to time t1 > state.t [s] (one step of :meth:`run`).  A step ending on a drive
+        jump (``ends_on_jump``) uses the drive's left limit there; continue with :meth:`restart` at the jump."""
+        return self.run(state, np.array([t1], dtype=float), ends_on_jump)[0]
 
     def run(self, state: StepState, times: np.ndarray, ends_on_jump: bool = False) -> tuple[StepState, StepRows]:
         """Advance ``state`` through the increasing ``times`` [s] in one compiled call (the steps of
@@ -158,16 +146,15 @@ class GeneralizedAlpha:
         c = self.coefficients
         motion = self.motion
         drive = motion.dynamics.drive
-        inputs = [motion.constraints.coefficients(t) for t in times]
+        k = motion.constraints.coefficients_at(times)
         drives = np.array([drive.kernel_parameters(t, ends_on_jump and i == len(times) - 1)
                            for i, t in enumerate(times)])
         previous = state.solution
         completed, status, rows, at1, result = kernels.generalized_alpha_run(
             state.q, state.qd, previous.qdd, state.pseudo_acceleration, previous.dynamics.M, previous.velocity_map,
-            state.t, np.asarray(times, dtype=float), np.array([k.Q for k in inputs]), np.array([k.g for k in inputs]),
-            np.array([k.c for k in inputs]), motion.constraints.orders, drives, c.alpha_m, c.alpha_f, c.gamma, c.beta,
-            motion.independent, motion.dependent, motion.integrated, motion.holonomic_dependent, motion.dynamics.chain,
-            motion.servo, self.tolerance, self.max_iterations, PROJECTION_TOLERANCE)
+            state.t, np.asarray(times, dtype=float), k.Q, k.g, k.c, k.order, drives, c.alpha_m, c.alpha_f, c.gamma,
+            c.beta, motion.independent, motion.dependent, motion.integrated, motion.holonomic_dependent,
+            motion.dynamics.chain, motion.servo, self.tolerance, self.max_iterations, PROJECTION_TOLERANCE)
         self._check(status, times[completed - 1] if completed else state.t, times[min(completed, len(times) - 1)])
         rows = StepRows(*rows)
         motion.check_singularity(float(np.min(rows.accounts[:, 6])))

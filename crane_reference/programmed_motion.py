@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import kernels
-from .constraints import ConstraintCoefficients, ConstraintSet, ConstraintTerms
+from .constraints import ConstraintSet, ConstraintTerms
 from .dynamics import CraneDynamics, DynamicsTerms
 
 
@@ -163,14 +163,10 @@ class ProgrammedMotion:
         """P of (8) at a solution: B (ideal constraints) or E_ic (servo-constraints)."""
         return kernels.projection_matrix(solution.velocity_map, self.independent, self.servo)
 
-    def kernel_inputs(self, t: float, left_limit: bool = False) -> tuple[ConstraintCoefficients, np.ndarray]:
-        """Constraint coefficients and drive parameters at t for the compiled solver."""
-        return self.constraints.coefficients(t), self.dynamics.drive.kernel_parameters(t, left_limit)
-
     def solve(self, t: float, q: np.ndarray, qd: np.ndarray, left_limit: bool = False) -> MotionSolution:
         """qdd from the programmed motion equations (8) and the multipliers lambda (drive taken just
         before t with ``left_limit``)."""
-        k, drive = self.kernel_inputs(t, left_limit)
+        k, drive = self.constraints.coefficients(t), self.dynamics.drive.kernel_parameters(t, left_limit)
         q = np.ascontiguousarray(q, dtype=float)
         qd = np.ascontiguousarray(qd, dtype=float)
         result = kernels.evaluate(q, qd, k.Q, k.g, k.c, k.order, drive, self.independent, self.dependent,

@@ -32,7 +32,7 @@ from .parameters import CraneParameters, FlexibleDrive, Task, TorqueDrive
 from .profiles import Blend, Constant, Profile, QuinticRise
 from .programmed_motion import ConstraintSingularityError, ProgrammedMotion, ProjectionError
 from .simulation import MotionStepper, Scenario
-from .trajectory import unstack_samples
+from .trajectory import generalized_effort, unstack_samples
 
 RUNNING, PAUSED, ERROR = "RUNNING", "PAUSED", "ERROR"
 CHUNK_STEPS = 20
@@ -204,8 +204,7 @@ class ReferenceStream:
         return replace(sample, qd=zero, qdd=zero.copy(), held=True)
 
     def _from_sample(self, s) -> ReferenceSample:
-        effort = s.constraint_forces.copy()
-        effort[self.model.drive_joint] += s.drive_torque
+        effort = generalized_effort(s.constraint_forces, s.drive_torque, self.model.drive_joint)
         quaternion = Rotation.from_matrix(s.ee_rotation).as_quat()
         return ReferenceSample(s.t, s.q, s.qd, s.qdd, effort, s.ee_position, quaternion,
                                float(np.max(s.residual_distance)), False)

@@ -97,15 +97,7 @@ class MotionStepper:
 
     def advance(self) -> Sample:
         """One step to the next grid time, or to a drive jump before it (then restart there)."""
-        state = self.state
-        t = state.t
-        times, on_jump, covered = self._next_times(self._t0 + (self._k + 1) * self.step_size)
-        t_next = float(times[0])
-        self._k += covered
-        new = self.integrator.step(state, t_next, ends_on_jump=on_jump)
-        self._work += 0.5 * (t_next - t) * (state.solution.powers + new.solution.powers)
-        self.state = self.integrator.restart(new) if on_jump else new
-        self.sample = make_sample(t_next, self.state.q, self.state.qd, self.state.solution, self._work)
+        self._run_block(self._t0 + (self._k + 1) * self.step_size)
         return self.sample
 
     def advance_until(self, t_end: float) -> dict[str, np.ndarray]:
@@ -113,29 +105,34 @@ class MotionStepper:
         there): the samples' fields (:class:`Sample`) stacked per step."""
         blocks = []
         while self.state.t < t_end - 1e-9 * self.step_size:
-            start = self.state
-            times, on_jump, covered = self._next_times(t_end)
-            new, rows = self.integrator.run(start, times, ends_on_jump=on_jump)
-            self._k += covered
-            powers = np.vstack((start.solution.powers, rows.accounts[:, 3:6]))
-            steps = np.diff(np.concatenate(([start.t], times)))
-            work = self._work + np.cumsum(0.5 * steps[:, None] * (powers[:-1] + powers[1:]), axis=0)
-            self._work = work[-1].copy()
-            self.state = self.integrator.restart(new) if on_jump else new
-            accounts = rows.accounts.copy()
-            qdd, reactions, forces = rows.qdd.copy(), rows.reactions.copy(), rows.constraint_forces.copy()
-            if on_jump:  # the sample at a jump shows the motion from the jump on, as advance() does
-                solution = self.state.solution
-                qdd[-1], reactions[-1], forces[-1] = solution.qdd, solution.reactions, solution.constraint_forces
-                accounts[-1, 2] = solution.drive_torque
-            blocks.append(dict(t=times, q=rows.q, qd=rows.qd, qdd=qdd, reactions=reactions, constraint_forces=forces,
-                               drive_torque=accounts[:, 2], ee_position=rows.ee_position,
-                               ee_rotation=rows.ee_rotation, ee_velocity=rows.ee_velocity, residual=rows.residual,
-                               residual_distance=rows.residual_distance, kdc_min_singular_value=accounts[:, 6],
-                               kinetic_energy=accounts[:, 0], potential_energy=accounts[:, 1],
-                               work_drive=work[:, 0], work_constraints=work[:, 1], work_damping=work[:, 2]))
-        self.sample = make_sample(self.state.t, self.state.q, self.state.qd, self.state.solution, self._work)
+            blocks.append(self._run_block(t_end))
         return {name: np.concatenate([b[name] for b in blocks]) for name in blocks[0]} if blocks else {}
+
+    def _run_block(self, t_end: float) -> dict[str, np.ndarray]:
+        """One compiled run towards t_end, up to the first drive jump (restarting there); the trapezoidal
+        work accounts; the samples' fields stacked per step."""
+        start = self.state
+        times, on_jump, covered = self._next_times(t_end)
+        new, rows = self.integrator.run(start, times, ends_on_jump=on_jump)
+        self._k += covered
+        powers = np.vstack((start.solution.powers, rows.accounts[:, 3:6]))
+        steps = np.diff(np.concatenate(([start.t], times)))
+        work = self._work + np.cumsum(0.5 * steps[:, None] * (powers[:-1] + powers[1:]), axis=0)
+        self._work = work[-1].copy()
+        self.state = self.integrator.restart(new) if on_jump else new
+        self.sample = make_sample(self.state.t, self.state.q, self.state.qd, self.state.solution, self._work)
+        accounts = rows.accounts.copy()
+        qdd, reactions, forces = rows.qdd.copy(), rows.reactions.copy(), rows.constraint_forces.copy()
+        if on_jump:  # the sample at a jump shows the motion from the jump on, as after a restart
+            solution = self.state.solution
+            qdd[-1], reactions[-1], forces[-1] = solution.qdd, solution.reactions, solution.constraint_forces
+            accounts[-1, 2] = solution.drive_torque
+        return dict(t=times, q=rows.q, qd=rows.qd, qdd=qdd, reactions=reactions, constraint_forces=forces,
+                    drive_torque=accounts[:, 2], ee_position=rows.ee_position, ee_rotation=rows.ee_rotation,
+                    ee_velocity=rows.ee_velocity, residual=rows.residual, residual_distance=rows.residual_distance,
+                    kdc_min_singular_value=accounts[:, 6], kinetic_energy=accounts[:, 0],
+                    potential_energy=accounts[:, 1], work_drive=work[:, 0], work_constraints=work[:, 1],
+                    work_damping=work[:, 2])
 
     def snapshot(self) -> tuple[StepState, int, np.ndarray, Sample, ProgrammedMotion]:
         """Everything needed to continue from the current step later (see :meth:`rewind`)."""

@@ -53,6 +53,15 @@ def make_sample(t: float, q: np.ndarray, qd: np.ndarray, solution: MotionSolutio
                   float(work[0]), float(work[1]), float(work[2]))
 
 
+def generalized_effort(constraint_forces: np.ndarray, drive_torque: float | np.ndarray,
+                       drive_joint: int) -> np.ndarray:
+    """The generalized force task and drive require: the constraint forces plus the drive torque on its
+    joint (last axis: coordinates; a single sample or stacked ones)."""
+    effort = np.array(constraint_forces, dtype=float)
+    effort[..., drive_joint] += drive_torque
+    return effort
+
+
 def stack_samples(samples: list[Sample]) -> dict[str, np.ndarray]:
     """The fields of ``samples`` stacked into arrays (first axis: sample)."""
     return {f.name: np.array([getattr(s, f.name) for s in samples]) for f in fields(Sample)}
@@ -116,9 +125,7 @@ class Trajectory:
     @property
     def effort(self) -> np.ndarray:
         """Generalized forces of constraints and drive (N, n)."""
-        effort = self.constraint_forces.copy()
-        effort[:, self.drive_joint] += self.drive_torque
-        return effort
+        return generalized_effort(self.constraint_forces, self.drive_torque, self.drive_joint)
 
     def coordinate(self, name: str) -> np.ndarray:
         return self.q[:, self.joint_names.index(name)]
