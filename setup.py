@@ -32,6 +32,7 @@ setup(
         "PyYAML>=6",
         "matplotlib>=3.6",
         "rosbags>=0.10",
+        "tqdm>=4.60",
     ],
     extras_require={
         "ros": [
@@ -39,7 +40,7 @@ setup(
             "ros-jazzy-common-interfaces",
             "ros-jazzy-std-srvs",
         ],
-        "test": ["pytest>=7", "pin>=3", "mcap>=1.1", "ruff>=0.5"],
+        "test": ["pytest>=7", "pin>=3", "mcap>=1.1", "ruff>=0.5", "import-linter>=2.1"],
     },
     zip_safe=True,
     maintainer="crane_reference maintainers",

@@ -39,14 +39,14 @@ import numpy as np
 from scipy.integrate import quad
 from scipy.signal import butter, sosfiltfilt, welch
 
-from crane_reference.config import load_config
-from crane_reference.constraints import ArealRate, ConstraintSet, EllipseXY, HeightZ
-from crane_reference.dynamics import chain_terms
-from crane_reference.parameters import CraneParameters, Damping
-from crane_reference.profiles import Constant, QuinticRise
-from crane_reference.programmed_motion import ProgrammedMotion
-from crane_reference.simulation import MotionStepper, Scenario, simulate, simulate_reference
-from crane_reference.trajectory import Trajectory
+from crane_reference.dynamics.terms import chain_terms
+from crane_reference.model.config import load_config
+from crane_reference.model.parameters import CraneParameters, Damping
+from crane_reference.model.profiles import Constant, QuinticRise
+from crane_reference.motion.constraints import ArealRate, ConstraintSet, EllipseXY, HeightZ
+from crane_reference.motion.programmed_motion import ProgrammedMotion
+from crane_reference.motion.simulation import MotionStepper, Scenario, simulate, simulate_reference
+from crane_reference.motion.trajectory import Trajectory
 
 COORDINATES = ("column_slew", "boom_luff", "knuckle")
 REFERENCE_SAMPLE = 1e-4  # [s]

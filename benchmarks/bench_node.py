@@ -1,6 +1,6 @@
 """Benchmark of the crane_reference node: publishing rate, timing and re-target latency.
 
-For each rate (default 100, 500 and 1000 Hz) it starts ``python -m crane_reference.node`` in its own
+For each rate (default 100, 500 and 1000 Hz) it starts ``python -m crane_reference.ros.node`` in its own
 process (an isolated ROS domain, localhost only), subscribes to ``joint_states`` from this process
 and, after a warm-up, records for ``--duration`` seconds (default 30):
 
@@ -110,7 +110,7 @@ def measure_latency(executor: SingleThreadedExecutor, client: AsyncParameterClie
 
 def run(rate: int, duration: float, model: str, changes: int, domain: int) -> dict[str, float]:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    node = subprocess.Popen([sys.executable, "-m", "crane_reference.node", "--ros-args", "-p",
+    node = subprocess.Popen([sys.executable, "-m", "crane_reference.ros.node", "--ros-args", "-p",
                              f"publish_rate:={rate}", "-p", f"model:={model}", "-p", "status_period:=3600.0"],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")

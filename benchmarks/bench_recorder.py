@@ -1,7 +1,7 @@
 """Benchmark of `crane-reference record` recording the live node: completeness, throughput and CPU.
 
 For each storage (default mcap and sqlite3) and publish rate (default 100 and 1000 Hz) it starts
-``python -m crane_reference.node`` in its own process (an isolated ROS domain, localhost only), then
+``python -m crane_reference.ros.node`` in its own process (an isolated ROS domain, localhost only), then
 ``python -m crane_reference.cli record -o DIR --storage S`` with the node's default topics, lets it
 record for ``--duration`` seconds and stops it with SIGINT (the Ctrl-C path).  From the bag, read back
 with rosbags:
@@ -32,7 +32,7 @@ from report import print_table
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.typesys import Stores, get_typestore
 
-from crane_reference.bag_export import DIAGNOSTICS, END_EFFECTOR_POSE, JOINT_STATES
+from crane_reference.interface.bag import DIAGNOSTICS, END_EFFECTOR_POSE, JOINT_STATES
 
 NS = 10**9
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
@@ -61,7 +61,7 @@ def bag_contents(path: Path) -> tuple[np.ndarray, dict[str, int]]:
 
 def run(storage: str, rate: int, duration: float, domain: int, workdir: Path) -> dict[str, object]:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    node = subprocess.Popen([sys.executable, "-m", "crane_reference.node", "--ros-args", "-p",
+    node = subprocess.Popen([sys.executable, "-m", "crane_reference.ros.node", "--ros-args", "-p",
                              f"publish_rate:={rate}", "-p", "model:=flexible"],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     bag = workdir / f"{storage}_{rate}hz"

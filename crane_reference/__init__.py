@@ -1,15 +1,20 @@
 """Programmed constrained motion of a flexible-boom crane (Jarzebowska, Urbas, Augustynek).
 
-Layout, following the computation: parameters/config -> model (+ rfe) -> kinematics -> inertia ->
-dynamics -> constraints -> programmed_motion (eqs. (7)-(8)) -> kernels (compiled) -> integration ->
-simulation / reference_stream -> node (ROS 2 adapter).
+The subpackages follow the computation, each importing only those before it (checked by
+import-linter, see ``.importlinter``):
+
+``model`` (parameters, config, RFE, chain, drive, URDF) -> ``dynamics`` (compiled kernels) ->
+``motion`` (task constraints, eqs. (7)-(8), integration, simulation) -> ``stream`` (online reference)
+-> ``interface`` (ROS messages and rosbag2 without rclpy) -> ``ros`` (the rclpy node); ``analysis``
+(modal, vibration, plots) sits beside ``stream``; ``cli`` on top.
 """
 
 import hashlib
 import os
 from pathlib import Path
 
-_COMPILED_MODULES = ("kinematics.py", "inertia.py", "dynamics.py", "kernels.py")
+COMPILED_PACKAGE = Path(__file__).parent / "dynamics"
+"""The numba-compiled modules: their sources key the compilation cache."""
 
 
 def _numba_cache_dir() -> str:
@@ -17,8 +22,9 @@ def _numba_cache_dir() -> str:
     another file changes; keying the cache directory on the sources of all compiled modules makes a
     stale cache impossible."""
     digest = hashlib.sha256()
-    for name in _COMPILED_MODULES:
-        digest.update((Path(__file__).parent / name).read_bytes())
+    for source in sorted(COMPILED_PACKAGE.glob("*.py")):
+        digest.update(source.name.encode())
+        digest.update(source.read_bytes())
     base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
     return str(base / "crane_reference" / f"numba-{digest.hexdigest()[:16]}")
 

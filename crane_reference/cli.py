@@ -8,31 +8,23 @@ import time
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
-from .config import ConfigError, load_config
-from .model import VARIANTS, build_model
-from .urdf import model_to_urdf
+from .model.chain import VARIANTS, build_model
+from .model.config import ConfigError, load_config
+from .model.urdf import model_to_urdf
 
 
-class ProgressBar:
-    """A one-line progress bar on stderr (only when stderr is a terminal)."""
+def progress_bar(label: str, total: float) -> tqdm:
+    """A tqdm bar over ``total`` seconds of simulated time (shown only when stderr is a terminal); call
+    :func:`advance_to` with the simulated time reached."""
+    return tqdm(total=total, desc=label, unit="s sim", disable=not sys.stderr.isatty(),
+                bar_format="{desc:<9} {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} s [{elapsed}<{remaining}]")
 
-    def __init__(self, label: str, total: float):
-        self.label, self.total = label, total
-        self.enabled = sys.stderr.isatty()
-        self._last = -1
 
-    def __call__(self, value: float) -> None:
-        percent = int(100 * value / self.total)
-        if self.enabled and percent != self._last:
-            self._last = percent
-            bar = "#" * (percent // 4)
-            sys.stderr.write(f"\r{self.label:<9} [{bar:<25}] {percent:3d}% ")
-            sys.stderr.flush()
-
-    def close(self) -> None:
-        if self.enabled:
-            sys.stderr.write("\n")
+def advance_to(bar: tqdm):
+    """A progress callback that moves ``bar`` to the simulated time it is given."""
+    return lambda value: bar.update(value - bar.n)
 
 
 def _variants(choice: str) -> list[str]:
@@ -41,11 +33,9 @@ def _variants(choice: str) -> list[str]:
 
 def simulate_command(args: argparse.Namespace) -> int:
     if args.bag is not None:
-        from .bag_export import export_command
-
         return export_command(args)
-    from .plotting import figure2
-    from .simulation import Scenario, simulate
+    from .analysis.plotting import figure2
+    from .motion.simulation import Scenario, simulate
 
     params = load_config(args.config)
     out = Path(args.out)
@@ -55,10 +45,9 @@ def simulate_command(args: argparse.Namespace) -> int:
         scenario = Scenario(params, variant)
         wall = time.perf_counter()
         start = scenario.equilibrium
-        bar = ProgressBar(variant, args.duration)
-        trajectory = simulate(scenario.motion, start.q, args.duration, step=args.step, rho_inf=args.rho_inf,
-                              progress=bar)
-        bar.close()
+        with progress_bar(variant, args.duration) as bar:
+            trajectory = simulate(scenario.motion, start.q, args.duration, step=args.step, rho_inf=args.rho_inf,
+                                  progress=advance_to(bar))
         wall = time.perf_counter() - wall
         trajectory.to_csv(out / f"{variant}.csv")
         trajectory.to_npz(out / f"{variant}.npz")
@@ -77,25 +66,53 @@ def simulate_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def export_command(args: argparse.Namespace) -> int:
+    """``crane-reference simulate --bag DIR [--rate HZ] [--bag-storage S] [--bag-version V]``: the bag
+    instead of CSV/NPZ/Figure 2, for one model variant (``--model both``, the default, records the
+    node's default, flexible)."""
+    from .interface import bag
+
+    if not 1 <= args.rate <= bag.MAX_RATE:
+        print(f"crane-reference: --rate {args.rate}: must be an integer in [1, {bag.MAX_RATE}] Hz", file=sys.stderr)
+        return 2
+    variant = "flexible" if args.model == "both" else args.model
+    config = load_config(args.config)
+    try:
+        writer = bag.BagWriter(args.bag, args.bag_storage, args.bag_version)
+    except bag.BagError as error:
+        print(f"crane-reference: --bag: {error}", file=sys.stderr)
+        return 2
+    wall = time.perf_counter()
+    with writer, progress_bar(variant, args.duration) as bar:
+        samples = bag.export_reference(writer, bag.node_stream(config, variant, args.step, args.rho_inf), args.rate,
+                                       args.duration, progress=advance_to(bar))
+    wall = time.perf_counter() - wall
+    counts = ", ".join(f"{topic} {count}" for topic, count in writer.counts.items())
+    print(f"{variant}: {samples} samples at {args.rate} Hz ({args.duration:g} s simulated in {wall:.2f} s wall) "
+          f"written to {writer.path} ({writer.storage}, version {writer.version}, "
+          f"{writer.size() / 1e6:.2f} MB): {counts}")
+    return 0
+
+
 def urdf_command(args: argparse.Namespace) -> int:
     print(model_to_urdf(build_model(load_config(args.config), args.model)))
     return 0
 
 
 def node_command(args: argparse.Namespace, ros_args: list[str]) -> int:
-    from .node import main as node_main
+    from .ros.node import main as node_main
 
     return node_main(ros_args)
 
 
 def record_command(args: argparse.Namespace) -> int:
-    from .recorder import record_command as record
+    from .ros.recorder import record_command as record
 
     return record(args)
 
 
 def modes_command(args: argparse.Namespace) -> int:
-    from .modal import modes_report
+    from .analysis.modal import modes_report
 
     if not (np.isfinite(args.t) and args.t >= 0.0) or args.count < 1:
         print(f"crane-reference: --t {args.t} must be >= 0 s and --count {args.count} >= 1", file=sys.stderr)
@@ -109,7 +126,7 @@ def modes_command(args: argparse.Namespace) -> int:
 
 
 def analyze_command(args: argparse.Namespace) -> int:
-    from .vibration import analyze
+    from .analysis.vibration import analyze
 
     if not (np.isfinite(args.duration) and args.duration > 0 and args.step > 0):
         print(f"crane-reference: --duration {args.duration} and --step {args.step} must be > 0 s", file=sys.stderr)

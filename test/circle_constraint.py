@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from crane_reference.constraints import EndEffectorConstraint
+from crane_reference.motion.constraints import EndEffectorConstraint
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Offline export of the reference to rosbag2 (crane_reference.bag_export), read back with rosbags and mcap."""
+"""Offline export of the reference to rosbag2 (crane_reference.interface.bag), read back with rosbags and mcap."""
 
 from __future__ import annotations
 
@@ -15,8 +15,10 @@ from rosbags.highlevel import AnyReader
 from rosbags.interfaces import QosDurability, QosReliability
 from rosbags.rosbag2 import Reader
 
-from crane_reference import bag_export, cli, messages
-from crane_reference.bag_export import (
+from crane_reference import cli
+from crane_reference.interface import bag as bag_export
+from crane_reference.interface import messages
+from crane_reference.interface.bag import (
     DEFAULT_TOPICS,
     DIAGNOSTICS,
     END_EFFECTOR_POSE,
@@ -29,7 +31,7 @@ from crane_reference.bag_export import (
     export_reference,
     node_stream,
 )
-from crane_reference.config import load_config
+from crane_reference.model.config import load_config
 
 RATE = 50
 DURATION = 2.0  # [s]: samples 0 .. 100, diagnostics at 1 s and 2 s
@@ -83,6 +85,7 @@ def offline(tmp_path_factory):
     return path, *read_bag(path), samples, list(stream.joint_names)
 
 
+@pytest.mark.slow
 def test_topics_types_hashes_qos_and_counts(offline):
     path, connections, by_topic, _, _ = offline
     assert set(connections) == set(DEFAULT_TOPICS)
@@ -126,15 +129,18 @@ def test_stamps_and_values_equal_the_stream(offline):
                                                                        rel=1e-3)
 
 
+@pytest.mark.ros
 def test_content_equals_the_node_messages(offline):
     """The bag's messages, read with rclpy, equal the rclpy messages the node builds for the same samples
     (bytes may differ in CDR padding, which rclpy leaves uninitialized)."""
-    rclpy_serialization = pytest.importorskip("rclpy.serialization")
     from geometry_msgs.msg import PoseStamped
+    from rclpy import serialization as rclpy_serialization
     from sensor_msgs.msg import JointState
 
     _, _, by_topic, samples, joint_names = offline
-    types = messages.rclpy_types()
+    from crane_reference.ros.message_types import rclpy_types
+
+    types = rclpy_types()
     for k in (0, 1, SAMPLES // 2, SAMPLES - 1):
         stamp = k * PERIOD_NS
         node_joint_state = messages.joint_state(types, stamp, joint_names, samples[k])
@@ -258,9 +264,11 @@ def test_cli_simulate_bag(tmp_path, capsys):
         cli.main(["simulate", "--bag", str(tmp_path / "s"), "--bag-storage", "rosbag"])
 
 
+@pytest.mark.ros
 def test_constants_match_the_node():
     """The export's node name and rate bound are the node's (bag_export must not import rclpy)."""
-    node = pytest.importorskip("crane_reference.node")
-    node_parameters = pytest.importorskip("crane_reference.node_parameters")
+    from crane_reference.ros import node
+    from crane_reference.ros import parameters as node_parameters
+
     assert bag_export.NODE_NAME == node.NODE_NAME
     assert node_parameters.SPECS["publish_rate"].bounds[1] == bag_export.MAX_RATE

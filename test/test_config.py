@@ -1,4 +1,4 @@
-"""Tests of crane_reference.config: the default crane.yaml and the validation of bad input."""
+"""Tests of crane_reference.model.config: the default crane.yaml and the validation of bad input."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import yaml
 
-from crane_reference.config import ConfigError, default_config_path, load_config, parse_config
-from crane_reference.parameters import CraneParameters, FlexibleDrive, RigidBody, TorqueDrive
+from crane_reference.model.config import ConfigError, default_config_path, load_config, parse_config
+from crane_reference.model.parameters import CraneParameters, FlexibleDrive, RigidBody, TorqueDrive
 
 DEFAULT_YAML = Path(__file__).resolve().parent.parent / "config" / "crane.yaml"
 
@@ -22,11 +22,6 @@ HI, WI = H - 2 * T, W - 2 * T
 
 
 _DEFAULT_DATA = yaml.safe_load(DEFAULT_YAML.read_text(encoding="utf-8"))
-
-
-@pytest.fixture(scope="module")
-def params() -> CraneParameters:
-    return load_config()
 
 
 @pytest.fixture

@@ -23,11 +23,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from crane_reference.config import load_config
-from crane_reference.drive import TorqueSource
-from crane_reference.dynamics import CraneDynamics
-from crane_reference.model import VARIANTS, ChainModel, build_model
-from crane_reference.parameters import Damping
+from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.model.chain import VARIANTS, ChainModel, build_model
+from crane_reference.model.drive import TorqueSource
+from crane_reference.model.parameters import Damping
 
 SEED = 20240611
 SAMPLES = 5
@@ -38,11 +37,6 @@ ENERGY_TOLERANCE = 1e-6  # relative to the largest kinetic energy of the run, se
 FD_STEP = 1e-6  # [m or rad], central differences of E_p
 FD_TOLERANCE = 1e-7  # relative to max |Q|
 SOFT_BOOM = 1e-2  # boom (RFE spring) stiffness factor of the softened flexible model
-
-
-@pytest.fixture(scope="module")
-def params():
-    return load_config()
 
 
 @pytest.fixture(scope="module")
@@ -173,6 +167,7 @@ ENERGY_CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", list(ENERGY_CASES))
 def test_energy_conserved_in_free_motion(models, case):
     variant, factor, duration = ENERGY_CASES[case]

@@ -18,11 +18,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from crane_reference.config import load_config
-from crane_reference.drive import make_drive
-from crane_reference.dynamics import CraneDynamics
-from crane_reference.model import VARIANTS, ChainModel, build_model, rotation
-from crane_reference.urdf import matrix_to_rpy, model_to_urdf
+from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.model.chain import VARIANTS, ChainModel, build_model, rotation
+from crane_reference.model.config import load_config
+from crane_reference.model.drive import make_drive
+from crane_reference.model.urdf import matrix_to_rpy, model_to_urdf
 
 SAMPLES = 6
 DRIVE_OFF = 5.0  # [s], the default torque drive is zero from t = 1 s on

@@ -19,17 +19,16 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from crane_reference.config import load_config
-from crane_reference.constraints import paper_constraints
-from crane_reference.drive import TorqueSource, make_drive
-from crane_reference.dynamics import CraneDynamics
-from crane_reference.equilibrium import static_equilibrium
-from crane_reference.integration import GeneralizedAlpha
-from crane_reference.model import AXES, REVOLUTE, VARIANTS, Body, ChainModel, Joint, build_model, homogeneous
-from crane_reference.parameters import Boom, CraneParameters
-from crane_reference.profiles import Constant, QuinticRise
-from crane_reference.programmed_motion import ProgrammedMotion
-from crane_reference.rfe import discretise_beam
+from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.model.chain import AXES, REVOLUTE, VARIANTS, Body, ChainModel, Joint, build_model, homogeneous
+from crane_reference.model.drive import TorqueSource, make_drive
+from crane_reference.model.parameters import Boom, CraneParameters
+from crane_reference.model.profiles import Constant, QuinticRise
+from crane_reference.model.rfe import discretise_beam
+from crane_reference.motion.constraints import paper_constraints
+from crane_reference.motion.equilibrium import static_equilibrium
+from crane_reference.motion.integration import GeneralizedAlpha
+from crane_reference.motion.programmed_motion import ProgrammedMotion
 
 DRIVE_OFF_START = 2.0  # [s], the default torque drive (on [0, 1) s) is off from here on
 HOLD_DURATION, HOLD_STEP = 5.0, 2e-3  # [s]
@@ -38,11 +37,6 @@ REST_VELOCITY = 1e-7  # [m/s or rad/s], the brief's bound on |qd| while holding 
 ROUND_OFF_VELOCITY = 1e-10  # a converged implicit step stays at ~1e-15 here, see test_rest_stays_at_round_off
 KKT_TOLERANCE = 1e-6  # [N or N m]
 EULER_BERNOULLI_ROOT = 1.875104068711961  # first root of cos(x) cosh(x) = -1
-
-
-@pytest.fixture(scope="module")
-def params() -> CraneParameters:
-    return load_config()
 
 
 def paper_motion(params: CraneParameters, model: ChainModel, z=None) -> ProgrammedMotion:

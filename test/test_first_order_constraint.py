@@ -19,16 +19,16 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from crane_reference.config import load_config
-from crane_reference.constraints import ArealRate, ConstraintSet, EllipseXY, HeightZ
-from crane_reference.drive import make_drive
-from crane_reference.dynamics import CraneDynamics
-from crane_reference.equilibrium import static_equilibrium
-from crane_reference.modal import linearise
-from crane_reference.model import build_model
-from crane_reference.profiles import Constant, QuinticRise
-from crane_reference.programmed_motion import ProgrammedMotion
-from crane_reference.simulation import paper_task_constraints, simulate
+from crane_reference.analysis.modal import linearise
+from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.model.chain import build_model
+from crane_reference.model.config import load_config
+from crane_reference.model.drive import make_drive
+from crane_reference.model.profiles import Constant, QuinticRise
+from crane_reference.motion.constraints import ArealRate, ConstraintSet, EllipseXY, HeightZ
+from crane_reference.motion.equilibrium import static_equilibrium
+from crane_reference.motion.programmed_motion import ProgrammedMotion
+from crane_reference.motion.simulation import paper_task_constraints, simulate
 
 A_AXIS, B_AXIS = 3.0, 2.0  # [m], the paper's ellipse
 OMEGA_MAX, OMEGA_RISE = 0.8, 1.0  # [rad/s], [s]

@@ -1,4 +1,4 @@
-"""Modal analysis of the constrained crane (:mod:`crane_reference.modal`), against independent truths.
+"""Modal analysis of the constrained crane (:mod:`crane_reference.analysis.modal`), against independent truths.
 
 * A clamped-free uniform beam built with the RFE code: the first three bending frequencies within 2 % of
   Euler-Bernoulli's (beta_n L)^2 / (2 pi) sqrt(E I / (rho A L^4)) at n_rfe = 20.
@@ -21,13 +21,7 @@ import numpy as np
 import pytest
 from circle_constraint import CircleXZ
 
-from crane_reference.cli import main
-from crane_reference.config import load_config
-from crane_reference.constraints import ConstraintSet
-from crane_reference.drive import TorqueSource
-from crane_reference.dynamics import CraneDynamics
-from crane_reference.equilibrium import reduced_static_forces
-from crane_reference.modal import (
+from crane_reference.analysis.modal import (
     CONSTRAINT,
     DRIVE,
     body_mass_matrices,
@@ -39,18 +33,18 @@ from crane_reference.modal import (
     modal_analysis,
     scenario_motion,
 )
-from crane_reference.model import AXES, PRISMATIC, VARIANTS, Body, ChainModel, Joint
-from crane_reference.parameters import FlexibleDrive, RigidBody
-from crane_reference.programmed_motion import REALISATIONS, ProgrammedMotion
-from crane_reference.simulation import Scenario
+from crane_reference.cli import main
+from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.model.chain import AXES, PRISMATIC, VARIANTS, Body, ChainModel, Joint
+from crane_reference.model.drive import TorqueSource
+from crane_reference.model.parameters import FlexibleDrive, RigidBody
+from crane_reference.motion.constraints import ConstraintSet
+from crane_reference.motion.equilibrium import reduced_static_forces
+from crane_reference.motion.programmed_motion import REALISATIONS, ProgrammedMotion
+from crane_reference.motion.simulation import Scenario
 
 EULER_BERNOULLI_ROOTS = (1.875104068711961, 4.694091132974175, 7.854757438237613)  # cos x cosh x = -1
 NO_DRIVE = TorqueSource(0.0, 0.0, 0.0)
-
-
-@pytest.fixture(scope="module")
-def params():
-    return load_config()
 
 
 @pytest.mark.parametrize("plane", ["vertical", "lateral"])

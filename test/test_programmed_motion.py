@@ -18,13 +18,19 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from crane_reference.config import load_config
-from crane_reference.constraints import ConstraintSet, EllipseXY, EndEffectorConstraint, HeightZ, paper_constraints
-from crane_reference.drive import make_drive
-from crane_reference.dynamics import CraneDynamics
-from crane_reference.model import VARIANTS, build_model
-from crane_reference.profiles import Blend, Constant, QuinticRise
-from crane_reference.programmed_motion import ProgrammedMotion
+from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.model.chain import VARIANTS, build_model
+from crane_reference.model.config import load_config
+from crane_reference.model.drive import make_drive
+from crane_reference.model.profiles import Blend, Constant, QuinticRise
+from crane_reference.motion.constraints import (
+    ConstraintSet,
+    EllipseXY,
+    EndEffectorConstraint,
+    HeightZ,
+    paper_constraints,
+)
+from crane_reference.motion.programmed_motion import ProgrammedMotion
 
 SEED = 7
 SAMPLES = 6

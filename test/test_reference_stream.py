@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from crane_reference.config import load_config
-from crane_reference.reference_stream import CHUNK_STEPS, ReferenceStream, TaskTargets
+from crane_reference.model.config import load_config
+from crane_reference.stream.reference_stream import CHUNK_STEPS, ReferenceStream, TaskTargets
 
 STEP = 1e-3  # [s]
 RETARGET_AT = 0.2037  # [s], inside the eleventh run of CHUNK_STEPS steps

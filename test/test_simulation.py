@@ -14,14 +14,9 @@ from dataclasses import fields
 import numpy as np
 import pytest
 
-from crane_reference.config import default_config_path, load_config
-from crane_reference.simulation import Scenario, simulate, simulate_reference
-from crane_reference.trajectory import Trajectory
-
-
-@pytest.fixture(scope="module")
-def params():
-    return load_config()
+from crane_reference.model.config import default_config_path
+from crane_reference.motion.simulation import Scenario, simulate, simulate_reference
+from crane_reference.motion.trajectory import Trajectory
 
 
 @pytest.fixture(scope="module")
@@ -54,6 +49,7 @@ def test_starts_on_the_ellipse_where_configuration_9_puts_e(params, flexible_run
     assert scenario.dynamics.end_effector(q9)[0] == pytest.approx([0.0, -2.0, scenario.z_static], abs=1e-12)
 
 
+@pytest.mark.slow
 def test_residuals_stay_below_1e_9_m_over_60_s(params):
     scenario = Scenario(params, "flexible")
     tr = simulate(scenario.motion, scenario.equilibrium.q, 60.0, step=2e-3)
@@ -61,6 +57,7 @@ def test_residuals_stay_below_1e_9_m_over_60_s(params):
     assert tr.residual_distance.max() <= 1e-9
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("variant", "duration"), [("rigid", 10.0), ("flexible", 1.2)])
 def test_energy_balance_of_the_converged_motion(params, variant, duration):
     """E(t) - E(0) = work of drive + constraint forces (no dampers by default), both integrated as
@@ -145,6 +142,7 @@ def test_cli_urdf_lists_the_joints_in_coordinate_order(flexible_run):
     assert moving == scenario.model.joint_names
 
 
+@pytest.mark.slow
 def test_cli_simulate_writes_results_and_figure(tmp_path):
     result = run_cli("simulate", "--model", "both", "--duration", "0.2", "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr

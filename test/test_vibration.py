@@ -28,20 +28,8 @@ from scipy import signal
 from scipy.integrate import solve_ivp
 from scipy.interpolate import CubicSpline
 
-from crane_reference.cli import main
-from crane_reference.config import load_config
-from crane_reference.constraints import ConstraintSet, paper_constraints
-from crane_reference.drive import TorqueSource, make_drive
-from crane_reference.dynamics import CraneDynamics
-from crane_reference.equilibrium import static_equilibrium
-from crane_reference.modal import linearise, modal_analysis, modal_assurance, scenario_motion
-from crane_reference.model import AXES, PRISMATIC, Body, ChainModel, Joint, build_model, rotation
-from crane_reference.parameters import RigidBody
-from crane_reference.profiles import Constant
-from crane_reference.programmed_motion import ProgrammedMotion
-from crane_reference.rfe import discretise_beam
-from crane_reference.simulation import Scenario, simulate, simulate_reference
-from crane_reference.vibration import (
+from crane_reference.analysis.modal import linearise, modal_analysis, modal_assurance, scenario_motion
+from crane_reference.analysis.vibration import (
     boom_tip_deflection,
     deflection_signals,
     generalized_alpha_frequency,
@@ -50,13 +38,19 @@ from crane_reference.vibration import (
     spectral_peaks,
     spectrum,
 )
+from crane_reference.cli import main
+from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.model.chain import AXES, PRISMATIC, Body, ChainModel, Joint, build_model, rotation
+from crane_reference.model.drive import TorqueSource, make_drive
+from crane_reference.model.parameters import RigidBody
+from crane_reference.model.profiles import Constant
+from crane_reference.model.rfe import discretise_beam
+from crane_reference.motion.constraints import ConstraintSet, paper_constraints
+from crane_reference.motion.equilibrium import static_equilibrium
+from crane_reference.motion.programmed_motion import ProgrammedMotion
+from crane_reference.motion.simulation import Scenario, simulate, simulate_reference
 
 DRIVE_OFF = 2.0  # [s] the default torque drive acts on [0, 1) s
-
-
-@pytest.fixture(scope="module")
-def params():
-    return load_config()
 
 
 @pytest.mark.parametrize(("suffix", "axis"), [("bend_vertical", 2), ("bend_lateral", 1), ("twist", 0)])
@@ -258,6 +252,7 @@ def test_servo_constraints_on_the_flexible_boom_are_unstable(held):
     assert slope == pytest.approx(sigma, rel=0.01)
 
 
+@pytest.mark.slow
 def test_analyze_command(tmp_path):
     """1.1 s at h = 1 ms: all files, four runs; the flexible servo run stops early and its unstable
     internal modes are reported; ideal runs keep the constraints to 1e-9 m."""

@@ -17,7 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .drive import Drive
+from ..model.chain import ChainModel
+from ..model.drive import Drive
+from ..model.parameters import Damping
 from .inertia import (
     composite_inertias,
     composite_velocity_products,
@@ -27,8 +29,6 @@ from .inertia import (
     world_pseudo_inertias,
 )
 from .kinematics import forward_kinematics, point_bias, point_jacobian, point_position_jacobian, velocity_terms
-from .model import ChainModel
-from .parameters import Damping
 
 
 @njit(cache=True)

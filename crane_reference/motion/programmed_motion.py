@@ -32,9 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import kernels
+from ..dynamics import kernels
+from ..dynamics.terms import CraneDynamics, DynamicsTerms
 from .constraints import ConstraintSet, ConstraintTerms
-from .dynamics import CraneDynamics, DynamicsTerms
 
 
 class ConstraintSingularityError(RuntimeError):

@@ -70,12 +70,12 @@ from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from . import messages
-from .config import ConfigError, load_config
-from .equilibrium import EquilibriumError
-from .node_parameters import PARAMETERS, SPECS, TARGET_PARAMETERS, ParameterError, check, coerce_parameters, declare
-from .parameters import CraneParameters, FlexibleDrive, TorqueDrive
-from .reference_stream import (
+from ..interface import messages
+from ..model.config import ConfigError, load_config
+from ..model.parameters import CraneParameters, FlexibleDrive, TorqueDrive
+from ..model.urdf import model_to_urdf
+from ..motion.equilibrium import EquilibriumError
+from ..stream.reference_stream import (
     ERROR,
     PAUSED,
     SOLVER_FAILURES,
@@ -84,7 +84,8 @@ from .reference_stream import (
     TaskTargets,
     UnreachableTargetError,
 )
-from .urdf import model_to_urdf
+from .message_types import rclpy_types
+from .parameters import PARAMETERS, SPECS, TARGET_PARAMETERS, ParameterError, check, coerce_parameters, declare
 
 NODE_NAME = messages.NODE_NAME
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
@@ -155,7 +156,7 @@ class CraneReferenceNode(Node):
         self._lookahead = max(2, math.ceil(LOOKAHEAD * self._rate))
         self._stream = self._make_stream(config)
         self._last_valid = self._stream.sample(0.0)
-        self._types = messages.rclpy_types()
+        self._types = rclpy_types()
         self._joint_names = list(self._stream.joint_names)
 
         # Buffer of frames [next to publish ... _gen_k - 1], guarded by _lock (never held while solving).

@@ -17,14 +17,14 @@ from itertools import pairwise
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from ..dynamics.terms import CraneDynamics
+from ..model.chain import ChainModel, build_model
+from ..model.drive import make_drive
+from ..model.parameters import CraneParameters, Task
+from ..model.profiles import Constant, QuinticRise
 from .constraints import ConstraintSet, paper_constraints
-from .drive import make_drive
-from .dynamics import CraneDynamics
 from .equilibrium import Equilibrium, static_equilibrium
 from .integration import GeneralizedAlpha, StepState
-from .model import ChainModel, build_model
-from .parameters import CraneParameters, Task
-from .profiles import Constant, QuinticRise
 from .programmed_motion import ProgrammedMotion
 from .trajectory import Sample, Trajectory, make_sample, stack_samples
 

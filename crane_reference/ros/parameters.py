@@ -31,9 +31,9 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from .messages import MAX_PUBLISH_RATE
-from .model import VARIANTS
-from .parameters import CraneParameters, TorqueDrive
+from ..interface.messages import MAX_PUBLISH_RATE
+from ..model.chain import VARIANTS
+from ..model.parameters import CraneParameters, TorqueDrive
 
 Value = bool | int | float | str
 BOOL, INTEGER, DOUBLE, STRING = (Parameter.Type.BOOL, Parameter.Type.INTEGER, Parameter.Type.DOUBLE,

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -37,18 +36,18 @@ from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from crane_reference import messages
-from crane_reference.config import load_config
-from crane_reference.drive import make_drive
-from crane_reference.dynamics import CraneDynamics
-from crane_reference.node import LOOKAHEAD, CraneReferenceNode, Frame
-from crane_reference.node_parameters import PARAMETERS, SPECS
-from crane_reference.programmed_motion import ConstraintSingularityError
-from crane_reference.reference_stream import ReferenceStream, TaskTargets
+from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.interface import messages
+from crane_reference.model.config import load_config
+from crane_reference.model.drive import make_drive
+from crane_reference.motion.programmed_motion import ConstraintSingularityError
+from crane_reference.ros.message_types import rclpy_types
+from crane_reference.ros.node import LOOKAHEAD, CraneReferenceNode, Frame
+from crane_reference.ros.parameters import PARAMETERS, SPECS
+from crane_reference.stream.reference_stream import ReferenceStream, TaskTargets
 
 NS = 10**9
 NODE = "crane_reference"
-ROS_ENV = {"ROS_DOMAIN_ID": str(os.getpid() % 100 + 1), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
 TOPICS = {
     "joint_states": (JointState, "/joint_states"),
     "pose": (PoseStamped, f"/{NODE}/end_effector_pose"),
@@ -66,7 +65,6 @@ class Harness:
     """The node under test and a probe node, each spun by its own executor thread."""
 
     def __init__(self) -> None:
-        os.environ.update(ROS_ENV)
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self.node: CraneReferenceNode | None = None
@@ -200,6 +198,7 @@ def assert_continuous(q: np.ndarray, qd: np.ndarray, dt: float, steps: np.ndarra
 # --- publishing -----------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_rate_sizes_and_stamps(ros: Harness) -> None:
     node = ros.start(publish_rate=200)
     time.sleep(0.2)
@@ -274,7 +273,7 @@ def test_preview_markers_diagnostics_and_robot_description(ros: Harness) -> None
     _, diagnostics = ros.received["diagnostics"][-1]
     status = diagnostics.status[0]
     values = {kv.key: kv.value for kv in status.values}
-    assert status.level == messages.rclpy_types().byte(messages.OK), status.message
+    assert status.level == rclpy_types().byte(messages.OK), status.message
     assert values["state"] == "RUNNING" and float(values["constraint_residual_m"]) < 1e-9
     assert float(values["real_time_factor"]) > 0 and float(values["achieved_rate_hz"]) > 0
 
@@ -299,7 +298,7 @@ def test_use_sim_time_waits_for_clock_and_follows_it(ros: Harness) -> None:
 
     def tick() -> None:
         now = sim_start + time.monotonic_ns() - wall_start
-        clock.publish(Clock(clock=messages.time_msg(messages.rclpy_types(), now)))
+        clock.publish(Clock(clock=messages.time_msg(rclpy_types(), now)))
 
     ros.probe.create_timer(0.005, tick)
     ros.wait_for(lambda: len(ros.received["joint_states"]) >= 20, "joint_states on simulated time")
@@ -389,6 +388,7 @@ def test_integer_values_for_double_parameters(ros: Harness, tmp_path: Path) -> N
     assert node.get_parameter("blend_time").value == 3.0 and node._stream.blend_time == 3.0
 
 
+@pytest.mark.slow
 def test_atomic_ellipse_change_is_smooth_and_converges(ros: Harness) -> None:
     rate, blend = 100, 1.0
     node = ros.start(publish_rate=rate, blend_time=blend)
@@ -438,6 +438,7 @@ def test_atomic_ellipse_change_is_smooth_and_converges(ros: Harness) -> None:
 # --- services and failures ------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_pause_resume_and_restart(ros: Harness) -> None:
     rate = 100
     node = ros.start(publish_rate=rate)
@@ -485,7 +486,7 @@ def test_solver_failure_holds_and_reports_error(ros: Harness) -> None:
     with node._stream_lock:
         node._stream._stepper.advance_until = fail
     ros.wait_for(lambda: node._stream.state == "ERROR", "the stream's ERROR state")
-    ros.wait_for(lambda: any(m.status[0].level == messages.rclpy_types().byte(messages.ERROR)
+    ros.wait_for(lambda: any(m.status[0].level == rclpy_types().byte(messages.ERROR)
                              for _, m in list(ros.received["diagnostics"])), "an ERROR diagnostic")
     failed = ros.samples()["stamp"][-1]  # the frames made before the failure (LOOKAHEAD) are published first
     ros.wait_until_stamp(failed + round((LOOKAHEAD + 0.5) * NS))
@@ -548,7 +549,7 @@ def test_rclpy_and_rosbags_messages_agree() -> None:
         "robot_description": lambda t: messages.robot_description(t, "<robot/>"),
     }
     for name, build in builders.items():
-        ours, theirs = build(messages.rclpy_types()), build(messages.rosbags_types(typestore))
+        ours, theirs = build(rclpy_types()), build(messages.rosbags_types(typestore))
         assert plain(ours) == plain(theirs), name
         # On the wire too (float32 fields such as colours are rounded by both serializations alike):
         ours_read = typestore.deserialize_cdr(serialize_message(ours), theirs.__msgtype__)

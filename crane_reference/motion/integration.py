@@ -41,7 +41,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import kernels
+from ..dynamics import kernels
 from .programmed_motion import MotionSolution, ProgrammedMotion, ProjectionError
 
 PROJECTION_TOLERANCE = 1e-9

@@ -1,8 +1,7 @@
-"""Live recording (crane_reference.recorder): in-process, stopped by SIGINT/SIGTERM, and of the running node."""
+"""Live recording (crane_reference.ros.recorder): in-process, stopped by SIGINT/SIGTERM, and of the running node."""
 
 from __future__ import annotations
 
-import os
 import re
 import signal
 import subprocess
@@ -24,7 +23,7 @@ from std_msgs.msg import String
 from test_bag_export import installed_type_hash, metadata, read_bag, stamp_ns
 
 from crane_reference import cli
-from crane_reference.bag_export import (
+from crane_reference.interface.bag import (
     DEFAULT_TOPICS,
     DIAGNOSTICS,
     END_EFFECTOR_POSE,
@@ -34,8 +33,8 @@ from crane_reference.bag_export import (
     export_reference,
     node_stream,
 )
-from crane_reference.config import load_config
-from crane_reference.recorder import (
+from crane_reference.model.config import load_config
+from crane_reference.ros.recorder import (
     message_class,
     record,
     rosbags_qos,
@@ -43,8 +42,6 @@ from crane_reference.recorder import (
 )
 
 # An isolated ROS graph for this test process (and the subprocesses it starts).
-os.environ["ROS_DOMAIN_ID"] = str(20 + os.getpid() % 180)
-os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 ROOT = Path(__file__).resolve().parents[1]
 INFINITE = QosTime(sec=9223372036, nsec=854775807)
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -191,6 +188,7 @@ def test_record_arguments(tmp_path, capsys):
 
 @pytest.mark.parametrize(("signum", "storage"), [(signal.SIGINT, "mcap"), (signal.SIGTERM, "sqlite3")],
                          ids=["SIGINT-mcap", "SIGTERM-sqlite3"])
+@pytest.mark.slow
 def test_signal_leaves_a_complete_bag(context, tmp_path, signum, storage):
     """A recorder stopped by a signal while messages stream in writes every message it received: its
     count at exit equals the bag's, and the bag holds messages 0 .. n-1 of those published, none missing."""
@@ -225,13 +223,14 @@ def test_signal_leaves_a_complete_bag(context, tmp_path, signum, storage):
     node.destroy_node()
 
 
+@pytest.mark.slow
 def test_live_node_matches_offline_export(context, tmp_path):
     """`crane-reference record` (default topics) of the running node agrees with `simulate --bag` for the
     same parameters: joint states and poses at the same stamps equal to 1e-9; same topics and types."""
     rate, model = 50, "rigid"
     log = tmp_path / "node.log"
     with log.open("w") as log_file:
-        node = subprocess.Popen(python_command("crane_reference.node", "--ros-args", "-p", f"publish_rate:={rate}",
+        node = subprocess.Popen(python_command("crane_reference.ros.node", "--ros-args", "-p", f"publish_rate:={rate}",
                                                "-p", f"model:={model}"), cwd=ROOT, stdout=log_file, stderr=log_file)
     probe = rclpy.create_node("live_test_probe", context=context)
     live = tmp_path / "live"

@@ -25,14 +25,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .constraints import ConstraintSet, EllipseXY, HeightZ, paper_constraints
-from .equilibrium import static_equilibrium
-from .integration import IntegrationError
-from .parameters import CraneParameters, FlexibleDrive, Task, TorqueDrive
-from .profiles import Blend, Constant, Profile, QuinticRise
-from .programmed_motion import ConstraintSingularityError, ProgrammedMotion, ProjectionError
-from .simulation import MotionStepper, Scenario
-from .trajectory import generalized_effort, unstack_samples
+from ..model.parameters import CraneParameters, FlexibleDrive, Task, TorqueDrive
+from ..model.profiles import Blend, Constant, Profile, QuinticRise
+from ..motion.constraints import ConstraintSet, EllipseXY, HeightZ, paper_constraints
+from ..motion.equilibrium import static_equilibrium
+from ..motion.integration import IntegrationError
+from ..motion.programmed_motion import ConstraintSingularityError, ProgrammedMotion, ProjectionError
+from ..motion.simulation import MotionStepper, Scenario
+from ..motion.trajectory import generalized_effort, unstack_samples
 
 RUNNING, PAUSED, ERROR = "RUNNING", "PAUSED", "ERROR"
 CHUNK_STEPS = 20

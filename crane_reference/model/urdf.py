@@ -14,7 +14,7 @@ Mapping, chain model -> URDF:
   ``<inertial>``).  Every further body on the same frame (the payload) is a link of its own, attached
   through an identity ``fixed`` joint named ``<body>_fixed``.
 * ``<inertial>``: the body's mass, origin at its centre of mass (rpy 0) and its inertia tensor about the
-  centre of mass, all in frame k, exactly as in :class:`~crane_reference.parameters.RigidBody`.
+  centre of mass, all in frame k, exactly as in :class:`~crane_reference.model.parameters.RigidBody`.
 * ``<visual>`` geometry only for display (it never affects the inertia): a sphere for a point mass, a
   cylinder for the column (from its frame origin up to the next joint, the boom pivot), and for every
   other body the uniform box with the body's mass and inertia, centred at its centre of mass and
@@ -30,7 +30,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from .model import PRISMATIC, Body, ChainModel, Joint
+from .chain import PRISMATIC, Body, ChainModel, Joint
 from .parameters import RigidBody
 
 PRISMATIC_LIMIT = 100.0  # [m], symmetric position limit of the base translations

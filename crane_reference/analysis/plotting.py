@@ -11,7 +11,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy.ndimage import maximum_filter1d, uniform_filter1d
 
-from .trajectory import Trajectory
+from ..motion.trajectory import Trajectory
 
 MEAN_WINDOW = 0.1  # s: smooths the undamped RFE ringing out of the difference curves
 COORDINATES = (("column_slew", r"$\psi^{(2)}$ [rad]"), ("boom_luff", r"$\psi^{(3,0)}$ [rad]"),

@@ -1,7 +1,7 @@
 """Loading and validation of the crane description ``config/crane.yaml``.
 
 :func:`load_config` reads a YAML file (by default the packaged ``config/crane.yaml``) and
-:func:`parse_config` turns the parsed mapping into :class:`~crane_reference.parameters.CraneParameters`.
+:func:`parse_config` turns the parsed mapping into :class:`~crane_reference.model.parameters.CraneParameters`.
 Every problem raises :class:`ConfigError` whose message names the source, the dotted path of the
 field, the offending value and what is allowed, e.g.::
 
@@ -21,7 +21,7 @@ from typing import Any, TypeVar
 import numpy as np
 import yaml
 
-from crane_reference.parameters import (
+from crane_reference.model.parameters import (
     BeamSection,
     Boom,
     CraneParameters,
@@ -82,7 +82,7 @@ class _FieldError(Exception):
 def default_config_path() -> Path:
     """The packaged ``config/crane.yaml``: next to the package source (a source checkout or an
     editable install), else in the package's ament share directory (an installed ROS package)."""
-    source_tree = Path(__file__).resolve().parent.parent / DEFAULT_FILE
+    source_tree = Path(__file__).resolve().parents[2] / DEFAULT_FILE
     if source_tree.is_file():
         return source_tree
     try:
@@ -131,7 +131,7 @@ def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> CraneParame
 
     ``source`` names the origin of ``data`` in error messages.  Vectors become float arrays of shape
     (3,), inertia tensors float arrays of shape (3, 3).  The sections ``damping``, ``initial`` and
-    ``task`` and each of their keys are optional (defaults from :mod:`crane_reference.parameters`).
+    ``task`` and each of their keys are optional (defaults from :mod:`crane_reference.model.parameters`).
     """
     try:
         return _crane(data)

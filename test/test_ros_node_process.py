@@ -1,4 +1,4 @@
-"""The node as a process (``python -m crane_reference.node``): it publishes, SIGINT ends it with exit
+"""The node as a process (``python -m crane_reference.ros.node``): it publishes, SIGINT ends it with exit
 code 0 and no traceback, and a start-up error exits 1 with the reason and no traceback."""
 
 from __future__ import annotations
@@ -10,23 +10,23 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-ENV = {**os.environ, "ROS_DOMAIN_ID": str((os.getpid() + 50) % 100 + 1), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
 NODE_YAML = Path(__file__).resolve().parent.parent / "config" / "node.yaml"
 
 
 def start(*ros_args: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "crane_reference.node", "--ros-args", *ros_args], env=ENV,
+    return subprocess.Popen([sys.executable, "-m", "crane_reference.ros.node", "--ros-args", *ros_args], env=os.environ,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
+@pytest.mark.slow
 def test_publishes_and_exits_cleanly_on_sigint() -> None:
     process = start("--params-file", str(NODE_YAML), "-p", "publish_rate:=50", "-p", "ellipse.a:=3")
-    os.environ.update({k: ENV[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
     context = rclpy.Context()
     rclpy.init(context=context)
     received: list[JointState] = []

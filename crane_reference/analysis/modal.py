@@ -47,16 +47,16 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg
 
-from .constraints import ConstraintSet
-from .dynamics import CraneDynamics
-from .equilibrium import static_equilibrium
-from .inertia import composite_inertias, mass_matrix, world_pseudo_inertias
-from .kinematics import forward_kinematics
-from .model import AXES, REVOLUTE, Body, ChainModel, Joint, homogeneous
-from .parameters import BeamSection, CraneParameters
-from .programmed_motion import ProgrammedMotion
-from .rfe import discretise_beam
-from .simulation import Scenario, simulate
+from ..dynamics.inertia import composite_inertias, mass_matrix, world_pseudo_inertias
+from ..dynamics.kinematics import forward_kinematics
+from ..dynamics.terms import CraneDynamics
+from ..model.chain import AXES, REVOLUTE, Body, ChainModel, Joint, homogeneous
+from ..model.parameters import BeamSection, CraneParameters
+from ..model.rfe import discretise_beam
+from ..motion.constraints import ConstraintSet
+from ..motion.equilibrium import static_equilibrium
+from ..motion.programmed_motion import ProgrammedMotion
+from ..motion.simulation import Scenario, simulate
 
 BOOM_SPRING_PARTS = {"_bend_vertical": "boom bending, luffing plane", "_bend_lateral": "boom bending, horizontal",
                      "_twist": "boom torsion"}

@@ -38,7 +38,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .profiles import Profile
+from ..model.profiles import Profile
 
 
 @dataclass(frozen=True)

@@ -59,15 +59,15 @@ import numpy as np
 from scipy import signal
 from scipy.ndimage import uniform_filter1d
 
-from .equilibrium import EquilibriumError
-from .integration import GeneralizedAlphaParameters, IntegrationError
-from .kinematics import forward_kinematics
+from ..dynamics.kinematics import forward_kinematics
+from ..model.chain import VARIANTS, ChainModel
+from ..model.parameters import CraneParameters
+from ..motion.equilibrium import EquilibriumError
+from ..motion.integration import GeneralizedAlphaParameters, IntegrationError
+from ..motion.programmed_motion import REALISATIONS, ConstraintSingularityError, ProgrammedMotion, ProjectionError
+from ..motion.simulation import MotionStepper, Scenario
+from ..motion.trajectory import Trajectory
 from .modal import Modes, linearise, modal_analysis, scenario_motion
-from .model import VARIANTS, ChainModel
-from .parameters import CraneParameters
-from .programmed_motion import REALISATIONS, ConstraintSingularityError, ProgrammedMotion, ProjectionError
-from .simulation import MotionStepper, Scenario
-from .trajectory import Trajectory
 
 MIN_FREQUENCY = 2.0  # [Hz] peaks below are the quasi-static response to the slewing
 RELATIVE_TOLERANCE = 0.01  # of the peak frequency, besides one spectral bin

@@ -18,8 +18,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .dynamics import energy_accounts, position_terms, velocity_products
 from .kinematics import point_position_jacobian
+from .terms import energy_accounts, position_terms, velocity_products
 
 
 @njit(cache=True, nogil=True)

@@ -23,10 +23,8 @@ it (:func:`export_command`).
 
 from __future__ import annotations
 
-import argparse
 import math
 import queue
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -40,11 +38,9 @@ from rosbags.interfaces import Connection, Qos, QosDurability, QosHistory, QosLi
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 
+from ..model.parameters import CraneParameters, TorqueDrive
+from ..stream.reference_stream import ERROR, ReferenceSample, ReferenceStream
 from . import messages
-from .cli import ProgressBar
-from .config import load_config
-from .parameters import CraneParameters, TorqueDrive
-from .reference_stream import ERROR, ReferenceSample, ReferenceStream
 
 STORAGES = ("mcap", "sqlite3")
 VERSIONS = (9, 8)
@@ -308,30 +304,3 @@ def export_reference(bag: BagWriter, stream: ReferenceStream, rate: int, duratio
         if progress is not None:
             progress(tau)
     return count
-
-
-def export_command(args: argparse.Namespace) -> int:
-    """``crane-reference simulate --bag DIR [--rate HZ] [--bag-storage S] [--bag-version V]``: the bag
-    instead of CSV/NPZ/Figure 2, for one model variant (``--model both``, the default, records the
-    node's default, flexible)."""
-    if not 1 <= args.rate <= MAX_RATE:
-        print(f"crane-reference: --rate {args.rate}: must be an integer in [1, {MAX_RATE}] Hz", file=sys.stderr)
-        return 2
-    variant = "flexible" if args.model == "both" else args.model
-    config = load_config(args.config)
-    try:
-        bag = BagWriter(args.bag, args.bag_storage, args.bag_version)
-    except BagError as error:
-        print(f"crane-reference: --bag: {error}", file=sys.stderr)
-        return 2
-    wall = time.perf_counter()
-    bar = ProgressBar(variant, args.duration)
-    with bag:
-        samples = export_reference(bag, node_stream(config, variant, args.step, args.rho_inf), args.rate,
-                                   args.duration, progress=bar)
-    bar.close()
-    wall = time.perf_counter() - wall
-    counts = ", ".join(f"{topic} {count}" for topic, count in bag.counts.items())
-    print(f"{variant}: {samples} samples at {args.rate} Hz ({args.duration:g} s simulated in {wall:.2f} s wall) "
-          f"written to {bag.path} ({bag.storage}, version {bag.version}, {bag.size() / 1e6:.2f} MB): {counts}")
-    return 0

@@ -42,7 +42,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.topic_endpoint_info import TopicEndpointInfo
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 
-from .bag_export import DEFAULT_TOPICS, BagError, BagWriter
+from ..interface.bag import DEFAULT_TOPICS, BagError, BagWriter
 
 NANOSECONDS = 10**9
 RECORD_DEPTH = 1000  # history depth of the recording subscriptions

@@ -3,7 +3,7 @@
 The builders never import a message package themselves: they take a :class:`MessageTypes`, a small
 namespace of message constructors and array converters, so that the same code makes
 
-* rclpy messages for the live node (:func:`rclpy_types`), and
+* rclpy messages for the live node (:func:`crane_reference.ros.message_types.rclpy_types`), and
 * rosbags messages for writing rosbag2 files offline without ROS (:func:`rosbags_types`, from rosbags'
   Jazzy typestore).
 
@@ -17,15 +17,15 @@ Stamps are integer nanoseconds (``stamp_ns``); sample k of a stream published at
 
 from __future__ import annotations
 
-import array
 import itertools
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .reference_stream import ReferenceSample
+if TYPE_CHECKING:
+    from ..stream.reference_stream import ReferenceSample
 
 NANOSECONDS = 10**9
 # The node's interface, shared by the node and the offline bag export (which must not import rclpy)
@@ -74,28 +74,6 @@ class MessageTypes:
     float64_array: Callable[[np.ndarray], Any]
     uint8_array: Callable[[bytes], Any]
     byte: Callable[[int], Any]
-
-
-def rclpy_types() -> MessageTypes:
-    """Constructors of the rclpy message classes (ROS 2 Python message packages)."""
-    from builtin_interfaces.msg import Duration, Time
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-    from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3
-    from sensor_msgs.msg import CompressedImage, JointState
-    from std_msgs.msg import ColorRGBA, Header, String
-    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
-    from visualization_msgs.msg import Marker, MarkerArray, MeshFile
-
-    return MessageTypes(
-        Time=Time, Duration=Duration, Header=Header, String=String, ColorRGBA=ColorRGBA, Point=Point,
-        Quaternion=Quaternion, Vector3=Vector3, Pose=Pose, PoseStamped=PoseStamped, JointState=JointState,
-        JointTrajectory=JointTrajectory, JointTrajectoryPoint=JointTrajectoryPoint, KeyValue=KeyValue,
-        DiagnosticStatus=DiagnosticStatus, DiagnosticArray=DiagnosticArray, CompressedImage=CompressedImage,
-        MeshFile=MeshFile, Marker=Marker, MarkerArray=MarkerArray,
-        float64_array=lambda values: array.array("d", np.ascontiguousarray(values, dtype=np.float64).tobytes()),
-        uint8_array=lambda data: array.array("B", data),
-        byte=lambda value: bytes((value,)),
-    )
 
 
 def rosbags_types(typestore: Any = None) -> MessageTypes:

@@ -1,0 +1,60 @@
+"""Shared fixtures and markers of the test suite.
+
+Markers (``setup.cfg``): ``ros`` for tests that need rclpy and the ROS message packages (every test in a
+``test_ros_*.py`` module gets it), ``slow`` for tests that integrate seconds of motion or start
+processes.  ``pytest -m "not ros"`` runs the rest on a machine without ROS: the ``test_ros_*`` modules
+are then not even imported.  CI runs everything.
+
+Every ROS test of one pytest process uses its own ROS domain (from the process id), discovery on
+localhost only.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from crane_reference.model.config import load_config
+from crane_reference.model.parameters import CraneParameters
+from crane_reference.motion.simulation import Scenario
+
+ROS_MODULE_PREFIX = "test_ros_"
+os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+
+
+def _deselects_ros(config: pytest.Config) -> bool:
+    return "not ros" in (config.getoption("markexpr") or "")
+
+
+def pytest_ignore_collect(collection_path: Path, config: pytest.Config) -> bool | None:
+    """Do not import the ROS test modules when the ``ros`` tests are deselected."""
+    if collection_path.name.startswith(ROS_MODULE_PREFIX) and _deselects_ros(config):
+        return True
+    return None
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if item.path.name.startswith(ROS_MODULE_PREFIX):
+            item.add_marker(pytest.mark.ros)
+
+
+@pytest.fixture(scope="session")
+def params() -> CraneParameters:
+    """The packaged default crane (config/crane.yaml)."""
+    return load_config()
+
+
+@pytest.fixture(scope="session")
+def flexible(params: CraneParameters) -> Scenario:
+    """The paper's scenario on the flexible (RFE) crane."""
+    return Scenario(params, "flexible")
+
+
+@pytest.fixture(scope="session")
+def rigid(params: CraneParameters) -> Scenario:
+    """The paper's scenario on the rigid-boom crane."""
+    return Scenario(params, "rigid")
