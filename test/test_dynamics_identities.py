@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.model.chain import VARIANTS, ChainModel, build_model
 from crane_reference.model.drive import TorqueSource
 from crane_reference.model.parameters import Damping

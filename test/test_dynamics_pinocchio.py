@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.model.chain import VARIANTS, ChainModel, build_model, rotation
 from crane_reference.model.config import load_config
 from crane_reference.model.drive import make_drive

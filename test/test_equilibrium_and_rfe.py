@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.model.chain import AXES, REVOLUTE, VARIANTS, Body, ChainModel, Joint, build_model, homogeneous
 from crane_reference.model.drive import TorqueSource, make_drive
 from crane_reference.model.parameters import Boom, CraneParameters

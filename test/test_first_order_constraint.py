@@ -20,7 +20,7 @@ import pytest
 from scipy.integrate import quad
 
 from crane_reference.analysis.modal import linearise
-from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.model.chain import build_model
 from crane_reference.model.config import load_config
 from crane_reference.model.drive import make_drive

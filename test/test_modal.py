@@ -34,7 +34,7 @@ from crane_reference.analysis.modal import (
     scenario_motion,
 )
 from crane_reference.cli import main
-from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.model.chain import AXES, PRISMATIC, VARIANTS, Body, ChainModel, Joint
 from crane_reference.model.drive import TorqueSource
 from crane_reference.model.parameters import FlexibleDrive, RigidBody

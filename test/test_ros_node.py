@@ -36,7 +36,7 @@ from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.interface import messages
 from crane_reference.model.config import load_config
 from crane_reference.model.drive import make_drive

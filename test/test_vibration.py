@@ -39,7 +39,7 @@ from crane_reference.analysis.vibration import (
     spectrum,
 )
 from crane_reference.cli import main
-from crane_reference.dynamics.terms import CraneDynamics
+from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.model.chain import AXES, PRISMATIC, Body, ChainModel, Joint, build_model, rotation
 from crane_reference.model.drive import TorqueSource, make_drive
 from crane_reference.model.parameters import RigidBody

@@ -47,9 +47,9 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg
 
+from ..dynamics.chain_dynamics import CraneDynamics
 from ..dynamics.inertia import composite_inertias, mass_matrix, world_pseudo_inertias
 from ..dynamics.kinematics import forward_kinematics
-from ..dynamics.terms import CraneDynamics
 from ..model.chain import AXES, REVOLUTE, Body, ChainModel, Joint, homogeneous
 from ..model.parameters import BeamSection, CraneParameters
 from ..model.rfe import discretise_beam
@@ -69,7 +69,8 @@ DRIVE = "drive spring"
 
 def gravity_stiffness(dynamics: CraneDynamics, q: np.ndarray) -> np.ndarray:
     """Hessian of the gravity potential, d2E_p,g/dq2 = -dQ_g/dq (n, n), analytic (see module docstring)."""
-    kinds, axes, origins, body_joint, body_H = dynamics.chain[:5]
+    chain = dynamics.chain
+    kinds, axes, origins, body_joint, body_H = chain.kinds, chain.axes, chain.origins, chain.body_joint, chain.body_H
     n = q.size
     T, S = forward_kinematics(np.ascontiguousarray(q, dtype=float), kinds, axes, origins)
     Hc = composite_inertias(world_pseudo_inertias(T, body_joint, body_H), body_joint, n)
@@ -81,14 +82,11 @@ def gravity_stiffness(dynamics: CraneDynamics, q: np.ndarray) -> np.ndarray:
 def constraint_hessian(dynamics: CraneDynamics, motion_constraints: ConstraintSet, t: float, q: np.ndarray,
                        weights: np.ndarray) -> np.ndarray:
     """sum_i w_i Phi_i,qq (n, n) of the quadric end-effector constraints at (t, q), analytic."""
-    model = dynamics.model
-    kinds, axes, origins = dynamics.chain[:3]
-    e = model.end_effector_joint
-    T, S = forward_kinematics(np.ascontiguousarray(q, dtype=float), kinds, axes, origins)
-    p_bar = T[e] @ np.append(model.end_effector_point, 1.0)
-    p = p_bar[:3]
-    C = np.einsum("iab,b->ai", S[:, :3, :], p_bar)
-    C[:, e + 1:] = 0.0
+    chain = dynamics.chain
+    e = chain.ee_joint
+    _, S = forward_kinematics(np.ascontiguousarray(q, dtype=float), chain.kinds, chain.axes, chain.origins)
+    p, C = dynamics.end_effector(q)
+    p_bar = np.append(p, 1.0)
     quadric = motion_constraints.coefficients(t).Q[:, 0, :3, :3]  # (m, 3, 3) (holonomic rows: the p block)
     w = weights @ motion_constraints.position_jacobian(t, p)  # sum_i w_i Phi_i,p
     v = S @ p_bar  # S_b [p; 1]
@@ -107,7 +105,8 @@ def body_group(name: str) -> str:
 
 def body_mass_matrices(dynamics: CraneDynamics, q: np.ndarray) -> dict[str, np.ndarray]:
     """The mass matrix split by body group (:func:`body_group`): M = sum of the parts."""
-    kinds, axes, origins, body_joint, body_H = dynamics.chain[:5]
+    chain = dynamics.chain
+    kinds, axes, origins, body_joint, body_H = chain.kinds, chain.axes, chain.origins, chain.body_joint, chain.body_H
     n = q.size
     T, S = forward_kinematics(np.ascontiguousarray(q, dtype=float), kinds, axes, origins)
     parts: dict[str, np.ndarray] = {}
@@ -334,7 +333,8 @@ def skeleton(dynamics: CraneDynamics, q: np.ndarray) -> np.ndarray:
     origin to E, for stick drawings; an offset with both a vertical and a horizontal part is drawn along
     the previous frame's z axis first (column, then luff pivot).  k does not depend on q."""
     model = dynamics.model
-    kinds, axes, origins = dynamics.chain[:3]
+    chain = dynamics.chain
+    kinds, axes, origins = chain.kinds, chain.axes, chain.origins
     T, _ = forward_kinematics(np.ascontiguousarray(q, dtype=float), kinds, axes, origins)
     points = [T[0][:3, 3]]
     for k in range(1, model.dof):

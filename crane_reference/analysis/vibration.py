@@ -60,6 +60,7 @@ from scipy import signal
 from scipy.ndimage import uniform_filter1d
 
 from ..dynamics.kinematics import forward_kinematics
+from ..dynamics.structures import ChainData
 from ..model.chain import VARIANTS, ChainModel
 from ..model.parameters import CraneParameters
 from ..motion.equilibrium import EquilibriumError
@@ -85,9 +86,9 @@ def rfe_indices(model: ChainModel, suffix: str = "") -> np.ndarray:
                      if name.startswith("boom_sde") and name.endswith(suffix)], dtype=np.int64)
 
 
-def boom_tip_deflection(model: ChainModel, chain: tuple, q: np.ndarray) -> np.ndarray:
+def boom_tip_deflection(model: ChainModel, chain: ChainData, q: np.ndarray) -> np.ndarray:
     """w (N, 3) [m] for q (N, n), see the module docstring; ``chain`` is ``CraneDynamics.chain``."""
-    kinds, axes, origins = chain[:3]
+    kinds, axes, origins = chain.kinds, chain.axes, chain.origins
     luff, tip = model.index("boom_luff"), model.index("knuckle")
     rfe = rfe_indices(model)
     q = np.atleast_2d(q)
@@ -101,7 +102,7 @@ def boom_tip_deflection(model: ChainModel, chain: tuple, q: np.ndarray) -> np.nd
     return out
 
 
-def deflection_signals(model: ChainModel, chain: tuple, trajectory: Trajectory) -> dict[str, np.ndarray]:
+def deflection_signals(model: ChainModel, chain: ChainData, trajectory: Trajectory) -> dict[str, np.ndarray]:
     """The signals of :data:`SIGNALS` over a run."""
     w = boom_tip_deflection(model, chain, trajectory.q)
     return {"tip_vertical": w[:, 1], "tip_horizontal": w[:, 2],

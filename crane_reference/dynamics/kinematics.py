@@ -170,10 +170,3 @@ def point_bias(B: np.ndarray, joint: int, p: np.ndarray):
     for r in range(3):
         d[r] = Bj[r, 0] * p[0] + Bj[r, 1] * p[1] + Bj[r, 2] * p[2] + Bj[r, 3]
     return d
-
-
-@njit(cache=True)
-def point_position_jacobian(q, kinds, axes, origins, joint, point):
-    """Position and Jacobian of a point fixed after ``joint``, without velocity terms (for projection)."""
-    T, S = forward_kinematics(q, kinds, axes, origins)
-    return point_jacobian(T, S, joint, point)

@@ -5,7 +5,7 @@
   generalized force -dE_p,dr/dpsi2 = s_dr (psi_a(t) - psi2), following a motor angle psi_a(t).
 
 Both hand the compiled solver (tau0, s_dr, psi_a, dpsi_a/dt) with t_dr = tau0 + s_dr (psi_a - psi2);
-the energies and powers of the drive follow from these (:func:`crane_reference.dynamics.energy_accounts`):
+the energies and powers of the drive follow from these (:func:`crane_reference.dynamics.terms.energy_accounts`):
 a torque source delivers t_dr * dpsi2/dt; for the spring drive the stored energy E_p,dr is counted as
 potential energy and the motor feeds s_dr (psi_a - psi2) * dpsi_a/dt.
 """
@@ -31,14 +31,11 @@ class TorqueSource:
         """Times where the torque jumps (an integrator should step onto them)."""
         return (self.start, self.end)
 
-    def torque(self, t: float, psi2: float, left_limit: bool = False) -> float:
-        """t_dr(t); with ``left_limit`` the limit from below, t_dr(t-) (for a step ending on a jump)."""
-        on = self.start < t <= self.end if left_limit else self.start <= t < self.end
-        return self.torque_value if on else 0.0
-
     def kernel_parameters(self, t: float, left_limit: bool = False) -> np.ndarray:
-        """(tau0, s_dr, psi_a, dpsi_a/dt) with t_dr = tau0 + s_dr (psi_a - psi2), for the compiled solver."""
-        return np.array([self.torque(t, 0.0, left_limit), 0.0, 0.0, 0.0])
+        """(tau0, s_dr, psi_a, dpsi_a/dt) = (t_dr(t), 0, 0, 0), for the compiled solver; with ``left_limit``
+        the limit from below, t_dr(t-) (for a step ending on a jump)."""
+        on = self.start < t <= self.end if left_limit else self.start <= t < self.end
+        return np.array([self.torque_value if on else 0.0, 0.0, 0.0, 0.0])
 
 
 @dataclass(frozen=True)
@@ -50,12 +47,9 @@ class SpringDrive:
     def breakpoints(self) -> tuple[float, ...]:
         return ()
 
-    def torque(self, t: float, psi2: float, left_limit: bool = False) -> float:
-        """s_dr (psi_a(t) - psi2); continuous in t, so ``left_limit`` changes nothing."""
-        return self.stiffness * (self.motor_angle(t)[0] - psi2)
-
     def kernel_parameters(self, t: float, left_limit: bool = False) -> np.ndarray:
-        """(tau0, s_dr, psi_a, dpsi_a/dt) with t_dr = tau0 + s_dr (psi_a - psi2), for the compiled solver."""
+        """(tau0, s_dr, psi_a, dpsi_a/dt) = (0, s_dr, psi_a(t), dpsi_a/dt), for the compiled solver (continuous
+        in t, so ``left_limit`` changes nothing)."""
         angle, rate, _ = self.motor_angle(t)
         return np.array([0.0, self.stiffness, angle, rate])
 

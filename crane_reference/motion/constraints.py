@@ -26,8 +26,10 @@ Their velocity form is Psi = 0 itself, and their acceleration form
 A new task constraint is a new :class:`EndEffectorConstraint` (holonomic: writes the coefficients of
 a :class:`Quadric` with their first two time derivatives) or :class:`EndEffectorRateConstraint` (first
 order: a :class:`RateQuadric` with its first time derivative); the solver (compiled,
-:mod:`crane_reference.kernels`) does not change.  For the ellipse, the paper's u and v are Phi_p C / 2
-and (Phi_p d + convective) / 2: it divides (6.3) by two, which changes only the scale of the multiplier.
+:mod:`crane_reference.dynamics.kernels`) does not change.  The formulas above are implemented once, in
+:mod:`crane_reference.dynamics.quadrics`; the methods here call them.
+For the ellipse, the paper's u and v are Phi_p C / 2 and (Phi_p d + convective) / 2: it divides (6.3)
+by two, which changes only the scale of the multiplier.
 """
 
 from __future__ import annotations
@@ -38,7 +40,13 @@ from functools import cached_property
 
 import numpy as np
 
+from ..dynamics import quadrics
+from ..dynamics.structures import Coefficients
 from ..model.profiles import Profile
+
+
+def _vector(x: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -51,17 +59,21 @@ class Quadric:
     c: np.ndarray
 
     def residual(self, p: np.ndarray) -> float:
-        return float(p @ self.Q[0] @ p + self.g[0] @ p + self.c[0])
+        """Phi at p."""
+        return float(quadrics.holonomic_value(self.Q, self.g, self.c, _vector(p))[0])
 
     def gradient(self, p: np.ndarray) -> np.ndarray:
-        return 2.0 * self.Q[0] @ p + self.g[0]
+        """Phi_p at p."""
+        return quadrics.holonomic_value(self.Q, self.g, self.c, _vector(p))[1]
 
     def time_derivative(self, p: np.ndarray) -> float:
-        return float(p @ self.Q[1] @ p + self.g[1] @ p + self.c[1])
+        """Phi_t at p (dPhi/dt at rest)."""
+        return float(quadrics.holonomic_rate(self.Q, self.g, self.c, _vector(p), np.zeros(3))[0])
 
     def convective(self, p: np.ndarray, v: np.ndarray) -> float:
-        return float(2.0 * v @ self.Q[0] @ v + 2.0 * (2.0 * self.Q[1] @ p + self.g[1]) @ v
-                     + p @ self.Q[2] @ p + self.g[2] @ p + self.c[2])
+        """The convective part of d2Phi/dt2 at (p, v) (d2Phi/dt2 with zero acceleration)."""
+        return -float(quadrics.holonomic_acceleration(self.Q, self.g, self.c, _vector(p), _vector(v),
+                                                      np.zeros(3))[1])
 
 
 @dataclass(frozen=True)
@@ -74,8 +86,8 @@ class RateQuadric:
     c: np.ndarray
 
     def residual(self, p: np.ndarray, v: np.ndarray) -> float:
-        z = np.concatenate((p, v))
-        return float(z @ self.Q[0] @ z + self.g[0] @ z + self.c[0])
+        """Psi at (p, v)."""
+        return float(quadrics.rate_value(self.Q, self.g, self.c, _vector(p), _vector(v))[0])
 
 
 class EndEffectorConstraint(ABC):
@@ -159,19 +171,6 @@ class ArealRate(EndEffectorRateConstraint):
 
 
 @dataclass(frozen=True)
-class ConstraintCoefficients:
-    """The quadrics of a constraint set at one time, stacked for the compiled solver in z = (p, p'):
-    Q (m, 3, 6, 6), g (m, 3, 6), c (m, 3) (second axis: value, first, second time derivative; a
-    holonomic row uses the p block only, a first-order row the value and first derivative only) and
-    the order of each row (0 holonomic, 1 first order)."""
-
-    Q: np.ndarray
-    g: np.ndarray
-    c: np.ndarray
-    order: np.ndarray
-
-
-@dataclass(frozen=True)
 class ConstraintTerms:
     """Stacked constraint quantities at one state, in generalized coordinates: ``residual`` Phi
     (holonomic rows) or Psi (first-order rows); ``gradients`` Phi_p or Psi_v (m, 3), the direction in
@@ -203,8 +202,9 @@ class ConstraintSet:
         """0 for a holonomic, 1 for a first-order constraint, per row."""
         return np.array([c.order for c in self.constraints], dtype=np.int64)
 
-    def coefficients_at(self, times: np.ndarray) -> ConstraintCoefficients:
-        """The coefficients at each of ``times``, stacked on a leading axis: Q (N, m, 3, 6, 6) etc."""
+    def coefficients_at(self, times: np.ndarray) -> Coefficients:
+        """The coefficients (:class:`~crane_reference.dynamics.structures.Coefficients`) at each of ``times``,
+        stacked on a leading axis: Q (N, m, 3, 6, 6) etc."""
         n, m = len(times), self.size
         Q, g, c = np.zeros((n, m, 3, 6, 6)), np.zeros((n, m, 3, 6)), np.zeros((n, m, 3))
         for k, t in enumerate(times):
@@ -213,11 +213,11 @@ class ConstraintSet:
                     constraint.write(t, Q[k, i, :, :3, :3], g[k, i, :, :3], c[k, i])
                 else:
                     constraint.write(t, Q[k, i, :2], g[k, i, :2], c[k, i, :2])
-        return ConstraintCoefficients(Q, g, c, self.orders)
+        return Coefficients(Q, g, c, self.orders)
 
-    def coefficients(self, t: float) -> ConstraintCoefficients:
+    def coefficients(self, t: float) -> Coefficients:
         stacked = self.coefficients_at([t])
-        return ConstraintCoefficients(stacked.Q[0], stacked.g[0], stacked.c[0], stacked.order)
+        return Coefficients(stacked.Q[0], stacked.g[0], stacked.c[0], stacked.order)
 
     def _holonomic(self) -> tuple[EndEffectorConstraint, ...]:
         if any(c.order != 0 for c in self.constraints):

@@ -37,11 +37,11 @@ default 1e-9, 10 s of the default motion at h = 1 ms differ from a run at 1e-12 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
 from ..dynamics import kernels
+from ..dynamics.structures import AlphaSettings, StepRows
 from .programmed_motion import MotionSolution, ProgrammedMotion, ProjectionError
 
 PROJECTION_TOLERANCE = 1e-9
@@ -73,26 +73,6 @@ class GeneralizedAlphaParameters:
         return cls(alpha_m, alpha_f, gamma, 0.25 * (gamma + 0.5) ** 2)
 
 
-class StepRows(NamedTuple):
-    """Per-step results of :meth:`GeneralizedAlpha.run` (first axis: step): q, qd, qdd, the reactions and
-    their generalized force, E's position, rotation matrix and velocity, the constraint residuals and
-    distances, the accounts (E_k, E_p, t_dr, P_dr, P_constraints, P_D, sigma_min(K_dc)) and the Newton
-    iterations."""
-
-    q: np.ndarray
-    qd: np.ndarray
-    qdd: np.ndarray
-    reactions: np.ndarray
-    constraint_forces: np.ndarray
-    ee_position: np.ndarray
-    ee_rotation: np.ndarray
-    ee_velocity: np.ndarray
-    residual: np.ndarray
-    residual_distance: np.ndarray
-    accounts: np.ndarray
-    iterations: np.ndarray
-
-
 @dataclass(frozen=True)
 class StepState:
     """Integrator state at t: full q, qd, the solution of (8) there and the pseudo-acceleration a~ of
@@ -118,6 +98,10 @@ class GeneralizedAlpha:
         self.coefficients = GeneralizedAlphaParameters.from_spectral_radius(rho_inf)
         self.tolerance = tolerance
         self.max_iterations = max_iterations
+        c = self.coefficients
+        self.settings = AlphaSettings(c.alpha_m, c.alpha_f, c.gamma, c.beta, tolerance, max_iterations,
+                                      PROJECTION_TOLERANCE)
+        """The method in the layout of the compiled kernels."""
         self.last_iterations = 0
         """Newton iterations of the last step (a diagnostic)."""
 
@@ -143,25 +127,22 @@ class GeneralizedAlpha:
         """Advance ``state`` through the increasing ``times`` [s] in one compiled call (the steps of
         :meth:`step`); the last one ends on a drive jump with ``ends_on_jump``.  Returns the final state
         and the per-step rows."""
-        c = self.coefficients
         motion = self.motion
         drive = motion.dynamics.drive
-        k = motion.constraints.coefficients_at(times)
         drives = np.array([drive.kernel_parameters(t, ends_on_jump and i == len(times) - 1)
                            for i, t in enumerate(times)])
         previous = state.solution
-        completed, status, rows, at1, result = kernels.generalized_alpha_run(
+        run = kernels.generalized_alpha_run(
             state.q, state.qd, previous.qdd, state.pseudo_acceleration, previous.dynamics.M, previous.velocity_map,
-            state.t, np.asarray(times, dtype=float), k.Q, k.g, k.c, k.order, drives, c.alpha_m, c.alpha_f, c.gamma,
-            c.beta, motion.independent, motion.dependent, motion.integrated, motion.holonomic_dependent,
-            motion.dynamics.chain, motion.servo, self.tolerance, self.max_iterations, PROJECTION_TOLERANCE)
-        self._check(status, times[completed - 1] if completed else state.t, times[min(completed, len(times) - 1)])
-        rows = StepRows(*rows)
+            state.t, np.asarray(times, dtype=float), motion.constraints.coefficients_at(times), drives,
+            motion.partition, motion.dynamics.chain, self.settings)
+        self._check(run.status, times[run.completed - 1] if run.completed else state.t,
+                    times[min(run.completed, len(times) - 1)])
+        rows = run.rows
         motion.check_singularity(float(np.min(rows.accounts[:, 6])))
         self.last_iterations = int(rows.iterations[-1])
-        t1 = float(times[-1])
-        return StepState(t1, rows.q[-1], rows.qd[-1], motion.solution_from_evaluation(t1, rows.q[-1], rows.qd[-1],
-                                                                                       result), at1), rows
+        return StepState(float(times[-1]), rows.q[-1], rows.qd[-1],
+                         motion.solution_from_evaluation(run.last.evaluation), run.last.pseudo_acceleration), rows
 
     def _check(self, status: int, t0: float, t1: float) -> None:
         """Raise for a step from t0 to t1 that did not converge (status 1) or could not meet the

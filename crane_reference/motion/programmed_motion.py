@@ -33,7 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..dynamics import kernels
-from ..dynamics.terms import CraneDynamics, DynamicsTerms
+from ..dynamics.chain_dynamics import CraneDynamics, DynamicsTerms
+from ..dynamics.structures import Evaluation, Partition
 from .constraints import ConstraintSet, ConstraintTerms
 
 
@@ -105,6 +106,9 @@ class ProgrammedMotion:
         """Coordinates whose velocities first-order constraints fix; their positions are integrated."""
         self.integrated = np.concatenate((self.independent, self.velocity_dependent))
         """Coordinates the integrator advances: independent first, then velocity-dependent."""
+        self.partition = Partition(self.independent, self.dependent, self.integrated, self.holonomic_dependent,
+                                   self.servo)
+        """The partitioning in the layout of the compiled kernels."""
         self.min_singular_value = min_singular_value
 
     def require_holonomic(self, purpose: str) -> None:
@@ -128,10 +132,9 @@ class ProgrammedMotion:
                           max_iterations: int = 25) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """q with q_hd solved from Phi(q, t) = 0 (Newton, Jacobian Phi_p C[:, hd]; the paper's K_dc), and
         (p_E, C) from the last Newton iterate (within ``tolerance`` of the returned q)."""
-        k = self.constraints.coefficients(t)
-        q, p, C, converged = kernels.project_positions(np.ascontiguousarray(q, dtype=float), k.Q, k.g, k.c, k.order,
-                                                       self.holonomic_dependent, self.dynamics.chain,
-                                                       tolerance, max_iterations)
+        q, p, C, converged = kernels.project_positions(np.ascontiguousarray(q, dtype=float),
+                                                       self.constraints.coefficients(t), self.holonomic_dependent,
+                                                       self.dynamics.chain, tolerance, max_iterations)
         if not converged:
             raise ProjectionError(f"position constraints not met after {max_iterations} Newton iterations at "
                                   f"t = {t:.6g} s: the target is not reachable from here")
@@ -142,22 +145,23 @@ class ProgrammedMotion:
         """qd with its dependent part solved from the velocity-level constraints (eq. (7) for the paper's);
         ``kinematics`` = (p_E, C) at q if known."""
         p, C = self.dynamics.end_effector(q) if kinematics is None else kinematics
-        k = self.constraints.coefficients(t)
-        qd, converged = kernels.dependent_velocities(np.ascontiguousarray(qd, dtype=float), p, C, k.Q, k.g, k.c,
-                                                     k.order, self.dependent)
+        qd, converged = kernels.dependent_velocities(np.ascontiguousarray(qd, dtype=float), p, C,
+                                                     self.constraints.coefficients(t), self.dependent)
         if not converged:
             raise ProjectionError(f"velocity constraints not met at t = {t:.6g} s")
         return qd
 
-    def solution_from_evaluation(self, t: float, q: np.ndarray, qd: np.ndarray, result: tuple) -> MotionSolution:
-        """Wrap the arrays returned by :func:`kernels.evaluate` (checks the singularity)."""
-        (M, h, Q, Vg, p, R, C, d, residual, grads, A, c, distance, rate, B, qdd, reactions, reaction_force,
-         accounts) = result
-        kinetic, potential, torque, drive_power, constraint_power, damping_power, sigma = accounts
+    def solution_from_evaluation(self, e: Evaluation) -> MotionSolution:
+        """Wrap an :class:`~crane_reference.dynamics.structures.Evaluation` of the kernels (checks the
+        singularity)."""
+        kinetic, potential, torque, drive_power, constraint_power, damping_power, sigma = e.accounts
         self.check_singularity(sigma)
-        return MotionSolution(qdd, reactions, reaction_force, DynamicsTerms(M, h, Q, p, R, C, d, Vg),
-                              ConstraintTerms(residual, grads, A, c, distance, rate), B, sigma, kinetic, potential,
-                              torque, np.array([drive_power, constraint_power, damping_power]))
+        return MotionSolution(e.qdd, e.reactions, e.constraint_forces,
+                              DynamicsTerms(e.M, e.h, e.forces, e.ee_position, e.ee_rotation, e.ee_jacobian, e.ee_bias,
+                                            e.gravity_potential),
+                              ConstraintTerms(e.residual, e.gradients, e.A, e.c, e.distance, e.velocity_residual),
+                              e.velocity_map, sigma, kinetic, potential, torque,
+                              np.array([drive_power, constraint_power, damping_power]))
 
     def projection(self, solution: MotionSolution) -> np.ndarray:
         """P of (8) at a solution: B (ideal constraints) or E_ic (servo-constraints)."""
@@ -166,9 +170,7 @@ class ProgrammedMotion:
     def solve(self, t: float, q: np.ndarray, qd: np.ndarray, left_limit: bool = False) -> MotionSolution:
         """qdd from the programmed motion equations (8) and the multipliers lambda (drive taken just
         before t with ``left_limit``)."""
-        k, drive = self.constraints.coefficients(t), self.dynamics.drive.kernel_parameters(t, left_limit)
-        q = np.ascontiguousarray(q, dtype=float)
-        qd = np.ascontiguousarray(qd, dtype=float)
-        result = kernels.evaluate(q, qd, k.Q, k.g, k.c, k.order, drive, self.independent, self.dependent,
-                                  self.dynamics.chain, self.servo)
-        return self.solution_from_evaluation(t, q, qd, result)
+        return self.solution_from_evaluation(kernels.evaluate(
+            np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float),
+            self.constraints.coefficients(t), self.dynamics.drive.kernel_parameters(t, left_limit), self.partition,
+            self.dynamics.chain))

@@ -17,7 +17,7 @@ from itertools import pairwise
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from ..dynamics.terms import CraneDynamics
+from ..dynamics.chain_dynamics import CraneDynamics
 from ..model.chain import ChainModel, build_model
 from ..model.drive import make_drive
 from ..model.parameters import CraneParameters, Task

@@ -1,0 +1,76 @@
+"""The Python face of the chain's compiled dynamics: :class:`CraneDynamics` (a model with its drive and
+damping) evaluates M, h, Q and E's kinematics through the kernels of :mod:`.terms`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model.chain import ChainModel
+from ..model.drive import Drive
+from ..model.parameters import Damping
+from .structures import ChainData
+from .terms import chain_terms, end_effector_jacobian, end_effector_pose, energy_accounts, generalized_forces
+
+
+@dataclass(frozen=True)
+class DynamicsTerms:
+    """Everything eqs. (6)-(8) need at one (t, q, qd): M, h, the generalized forces Q (gravity, springs,
+    dampers, drive), E's position, frame rotation, Jacobian C and bias d, the gravity potential."""
+
+    M: np.ndarray
+    h: np.ndarray
+    Q: np.ndarray
+    ee_position: np.ndarray
+    ee_rotation: np.ndarray
+    ee_jacobian: np.ndarray
+    ee_bias: np.ndarray
+    gravity_potential: float
+
+
+def chain_data(model: ChainModel, damping_matrix: np.ndarray) -> ChainData:
+    """The compiled description of ``model`` with the damping matrix D."""
+    return ChainData(
+        kinds=np.array([j.kind for j in model.joints], dtype=np.int64),
+        axes=np.array([j.axis for j in model.joints], dtype=np.int64),
+        origins=np.ascontiguousarray([j.origin for j in model.joints], dtype=float),
+        body_joint=np.array([b.joint for b in model.bodies], dtype=np.int64),
+        body_H=np.ascontiguousarray([b.inertia.pseudo_inertia() for b in model.bodies], dtype=float),
+        gravity=float(model.gravity), ee_joint=int(model.end_effector_joint),
+        ee_point=np.asarray(model.end_effector_point, dtype=float),
+        stiffness=np.ascontiguousarray(model.stiffness, dtype=float),
+        damping=np.ascontiguousarray(damping_matrix, dtype=float), drive_joint=int(model.drive_joint))
+
+
+class CraneDynamics:
+    """Evaluates M, h, Q and the end-effector kinematics of a :class:`ChainModel` driven by ``drive``,
+    with Rayleigh ``damping`` (D = beta_sup K_sup + beta_boom K_boom)."""
+
+    def __init__(self, model: ChainModel, drive: Drive, damping: Damping | None = None):
+        self.model = model
+        self.drive = drive
+        damping = damping or Damping()
+        self.damping_matrix = damping.support * model.support_stiffness + damping.boom * model.boom_stiffness
+        self.chain = chain_data(model, self.damping_matrix)
+        """Model data in the layout of the compiled kernels."""
+
+    def terms(self, t: float, q: np.ndarray, qd: np.ndarray, left_limit: bool = False) -> DynamicsTerms:
+        """Terms at (t, q, qd); ``left_limit`` evaluates the drive just before t (a step ending on a jump)."""
+        M, h, Qg, Vg, p, R, C, d = chain_terms(q, qd, self.chain)
+        Q = generalized_forces(q, qd, Qg, self.chain, self.drive.kernel_parameters(t, left_limit))
+        return DynamicsTerms(M, h, Q, p, R, C, d, Vg)
+
+    def end_effector(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Position of E and its Jacobian C (3, n) at q."""
+        return end_effector_jacobian(np.ascontiguousarray(q, dtype=float), self.chain)
+
+    def end_effector_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Position of E and the rotation matrix of link 4's frame (world) at q."""
+        return end_effector_pose(np.ascontiguousarray(q, dtype=float), self.chain)
+
+    def accounts(self, t: float, q: np.ndarray, qd: np.ndarray, terms: DynamicsTerms,
+                 left_limit: bool = False) -> np.ndarray:
+        """(E_k, E_p, t_dr, P_dr, P_D) at (t, q, qd), see :func:`~.terms.energy_accounts`."""
+        return energy_accounts(q, qd, terms.M, terms.gravity_potential, self.chain,
+                               self.drive.kernel_parameters(t, left_limit))

@@ -1,0 +1,107 @@
+"""Small dense linear algebra for the kernels, without LAPACK/BLAS call overhead where the matrices are
+tiny (K_dc is 2 x 2 or 3 x 3), and the products with the velocity map B of eq. (7) without forming it."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def solve_small(A, B):
+    """X = A^-1 B for a small square A (Gaussian elimination with partial pivoting; K_dc is 2 x 2 or
+    3 x 3 here, where a LAPACK call costs more than the arithmetic), B of shape (m, k)."""
+    m = A.shape[0]
+    a = A.copy()
+    x = B.copy()
+    for col in range(m):
+        pivot = col
+        for row in range(col + 1, m):
+            if abs(a[row, col]) > abs(a[pivot, col]):
+                pivot = row
+        if a[pivot, col] == 0.0:
+            raise np.linalg.LinAlgError("singular matrix")
+        if pivot != col:
+            for k in range(m):
+                a[col, k], a[pivot, k] = a[pivot, k], a[col, k]
+            for k in range(x.shape[1]):
+                x[col, k], x[pivot, k] = x[pivot, k], x[col, k]
+        for row in range(col + 1, m):
+            factor = a[row, col] / a[col, col]
+            for k in range(col, m):
+                a[row, k] -= factor * a[col, k]
+            for k in range(x.shape[1]):
+                x[row, k] -= factor * x[col, k]
+    for col in range(m - 1, -1, -1):
+        for k in range(x.shape[1]):
+            total = x[col, k]
+            for j in range(col + 1, m):
+                total -= a[col, j] * x[j, k]
+            x[col, k] = total / a[col, col]
+    return x
+
+
+@njit(cache=True, nogil=True)
+def solve_small_vector(A, b):
+    """x = A^-1 b for a small square A (see :func:`solve_small`)."""
+    return solve_small(A, b.reshape((b.size, 1)))[:, 0]
+
+
+@njit(cache=True, nogil=True)
+def cholesky_solve(L, b):
+    """x with L L^T x = b (L lower triangular)."""
+    n = b.size
+    y = np.empty(n)
+    for i in range(n):
+        total = b[i]
+        for k in range(i):
+            total -= L[i, k] * y[k]
+        y[i] = total / L[i, i]
+    x = np.empty(n)
+    for i in range(n - 1, -1, -1):
+        total = y[i]
+        for k in range(i + 1, n):
+            total -= L[k, i] * x[k]
+        x[i] = total / L[i, i]
+    return x
+
+
+@njit(cache=True, nogil=True)
+def smallest_singular_value(K):
+    """Smallest singular value of a square matrix (closed form for 2 x 2, the paper's K_dc)."""
+    if K.shape[0] == 2:
+        a, b, c, d = K[0, 0], K[0, 1], K[1, 0], K[1, 1]
+        half_trace = 0.5 * (a * a + b * b + c * c + d * d)
+        det = a * d - b * c
+        return np.sqrt(max(half_trace - np.sqrt(max(half_trace * half_trace - det * det, 0.0)), 0.0))
+    return np.linalg.svd(K)[1][-1]
+
+
+@njit(cache=True, nogil=True)
+def project_rows(X, B, independent, dependent, servo):
+    """P^T X for X (n, k) without forming P: X[ic] + Gamma^T X[dc] for ideal constraints (P = B, whose
+    rows are the identity on ic and Gamma on dc), X[ic] for servo-constraints (P = E_ic)."""
+    out = np.empty((independent.size, X.shape[1]))
+    for j in range(independent.size):
+        out[j] = X[independent[j]]
+    if not servo:
+        for r in range(dependent.size):
+            row = X[dependent[r]]
+            for j in range(independent.size):
+                weight = B[dependent[r], j]
+                for k in range(X.shape[1]):
+                    out[j, k] += weight * row[k]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def map_columns(Y, B, independent, dependent):
+    """Y B for Y (k, n) without forming B: Y[:, ic] + Y[:, dc] Gamma."""
+    out = np.empty((Y.shape[0], independent.size))
+    for i in range(Y.shape[0]):
+        for j in range(independent.size):
+            total = Y[i, independent[j]]
+            for r in range(dependent.size):
+                total += Y[i, dependent[r]] * B[dependent[r], j]
+            out[i, j] = total
+    return out

@@ -1,0 +1,169 @@
+"""Named data passed to and returned by the compiled kernels (numba-compatible named tuples).
+
+In the spirit of Pinocchio's Model / Data: :class:`ChainData` is the immutable description of the
+chain (built once per model by :class:`~crane_reference.dynamics.chain_dynamics.CraneDynamics`),
+:class:`Partition` and :class:`AlphaSettings` fix the problem and the method, and the kernels return
+:class:`Evaluation`, :class:`Step` and :class:`StepRows` by name.  Every field is documented here once.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class ChainData(NamedTuple):
+    """The serial chain in the layout of the kernels.
+
+    ``kinds`` (n,) joint kind (0 prismatic, 1 revolute), ``axes`` (n,) local axis index, ``origins``
+    (n, 4, 4) constant offsets; ``body_joint`` (b,) the joint each body moves with, ``body_H`` (b, 4, 4)
+    their pseudo-inertia matrices in the joint frame; ``gravity`` [m/s^2] (along -z);
+    ``ee_joint`` and ``ee_point`` (3,): E's frame and position in it; ``stiffness`` K and ``damping``
+    D (n, n); ``drive_joint``: the coordinate the column drive acts on (psi2)."""
+
+    kinds: np.ndarray
+    axes: np.ndarray
+    origins: np.ndarray
+    body_joint: np.ndarray
+    body_H: np.ndarray  # noqa: N815 (the paper's H)
+    gravity: float
+    ee_joint: int
+    ee_point: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    drive_joint: int
+
+
+class Coefficients(NamedTuple):
+    """Quadric task constraints stacked in z = (p, p') [m, m/s] (see :mod:`crane_reference.motion.constraints`):
+    Q (m, 3, 6, 6), g (m, 3, 6), c (m, 3) (second axis: value, first and second time derivative; a
+    holonomic row uses the p block only, a first-order row the value and first derivative only) and
+    ``order`` (m,): 0 holonomic, 1 first order.  For a run of steps Q, g, c carry a leading step axis."""
+
+    Q: np.ndarray
+    g: np.ndarray
+    c: np.ndarray
+    order: np.ndarray
+
+
+class Partition(NamedTuple):
+    """Coordinate partitioning (eqs. (2)-(3)): ``independent`` q_ic; ``dependent`` q_dc (dependent[i] is
+    solved from constraint i); ``integrated`` the coordinates the integrator advances, q_ic then those
+    made dependent by first-order constraints (q_vd); ``holonomic_dependent`` q_hd, solved from the
+    position constraints; ``servo``: servo-constraints (P = E_ic) instead of ideal ones (P = B)."""
+
+    independent: np.ndarray
+    dependent: np.ndarray
+    integrated: np.ndarray
+    holonomic_dependent: np.ndarray
+    servo: bool
+
+
+class AlphaSettings(NamedTuple):
+    """Generalized-alpha coefficients and the Newton stopping rules (see
+    :mod:`crane_reference.motion.integration`): ``tolerance`` on the accepted velocity correction,
+    ``max_iterations`` per step, ``projection_tolerance`` [rad] of Newton on the position constraints."""
+
+    alpha_m: float
+    alpha_f: float
+    gamma: float
+    beta: float
+    tolerance: float
+    max_iterations: int
+    projection_tolerance: float
+
+
+class Accelerations(NamedTuple):
+    """What (8) needs and gives at (q, qd): mass matrix M, velocity terms h, generalized forces
+    (gravity, springs, dampers, drive), total gravity potential, E's position, frame rotation,
+    Jacobian C (3, n) and bias d (p'' = C qdd + d), the constraint rows A (m, n) and right-hand side
+    c of A qdd = c, the velocity map B (n, n_ic) and qdd."""
+
+    M: np.ndarray
+    h: np.ndarray
+    forces: np.ndarray
+    gravity_potential: float
+    ee_position: np.ndarray
+    ee_rotation: np.ndarray
+    ee_jacobian: np.ndarray
+    ee_bias: np.ndarray
+    A: np.ndarray
+    c: np.ndarray
+    velocity_map: np.ndarray
+    qdd: np.ndarray
+
+
+class Evaluation(NamedTuple):
+    """:class:`Accelerations` completed with the constraint residuals (Phi or Psi), their gradients
+    (Phi_p or Psi_v, (m, 3)), distances |residual| / |gradient| and velocity-level residuals; the
+    reactions (lambda for ideal constraints, the dependent joints' torques for servo-constraints),
+    their generalized force M qdd + h - forces, and the accounts (see :data:`ACCOUNTS`)."""
+
+    M: np.ndarray
+    h: np.ndarray
+    forces: np.ndarray
+    gravity_potential: float
+    ee_position: np.ndarray
+    ee_rotation: np.ndarray
+    ee_jacobian: np.ndarray
+    ee_bias: np.ndarray
+    residual: np.ndarray
+    gradients: np.ndarray
+    A: np.ndarray
+    c: np.ndarray
+    distance: np.ndarray
+    velocity_residual: np.ndarray
+    velocity_map: np.ndarray
+    qdd: np.ndarray
+    reactions: np.ndarray
+    constraint_forces: np.ndarray
+    accounts: np.ndarray
+
+
+ACCOUNTS = ("kinetic_energy", "potential_energy", "drive_torque", "drive_power", "constraint_power",
+            "damping_power", "kdc_min_singular_value")
+"""Columns of :attr:`Evaluation.accounts`: E_k, E_p [J], t_dr [N m], the powers fed in by the drive, the
+constraint forces and the dampers [W], and sigma_min(K_dc)."""
+
+
+class Step(NamedTuple):
+    """One generalized-alpha step: q, qd at its end, the pseudo-acceleration a~ of the integrated
+    coordinates, the evaluation there, ``status`` (0 converged, 1 Newton did not converge, 2 the
+    position or velocity constraints could not be solved) and the Newton iterations."""
+
+    q: np.ndarray
+    qd: np.ndarray
+    pseudo_acceleration: np.ndarray
+    evaluation: Evaluation
+    status: int
+    iterations: int
+
+
+class StepRows(NamedTuple):
+    """Per-step results of a compiled run (first axis: step): q, qd, qdd, the reactions and their
+    generalized force, E's position, rotation matrix and velocity, the constraint residuals and
+    distances, the accounts (:data:`ACCOUNTS`) and the Newton iterations."""
+
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    reactions: np.ndarray
+    constraint_forces: np.ndarray
+    ee_position: np.ndarray
+    ee_rotation: np.ndarray
+    ee_velocity: np.ndarray
+    residual: np.ndarray
+    residual_distance: np.ndarray
+    accounts: np.ndarray
+    iterations: np.ndarray
+
+
+class Run(NamedTuple):
+    """A compiled run of steps: how many completed, the status of the last one (0 when all
+    converged), the per-step rows and the last :class:`Step`."""
+
+    completed: int
+    status: int
+    rows: StepRows
+    last: Step
