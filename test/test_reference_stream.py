@@ -9,9 +9,14 @@ give the same reference, before and after a re-target that falls inside a run.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from crane_reference.model.chain import build_model
 from crane_reference.model.config import load_config
-from crane_reference.stream.reference_stream import CHUNK_STEPS, ReferenceStream, TaskTargets
+from crane_reference.model.parameters import Task
+from crane_reference.model.profiles import Constant, QuinticRise
+from crane_reference.motion.constraints import ArealRate, ConstraintSet, EllipseXY, HeightZ
+from crane_reference.stream.reference_stream import CHUNK_STEPS, ReferenceStream
 
 STEP = 1e-3  # [s]
 RETARGET_AT = 0.2037  # [s], inside the eleventh run of CHUNK_STEPS steps
@@ -28,7 +33,7 @@ def follow(stream: ReferenceStream, until: float, one_step_at_a_time: bool) -> N
 
 def test_chunked_and_stepwise_streams_agree_across_a_retarget():
     params = load_config()
-    targets = TaskTargets(ellipse_a=3.2, ellipse_b=2.1, z_increment=0.1, rise_time=5.0)
+    targets = Task(ellipse_a=3.2, ellipse_b=2.1, z_increment=0.1, rise_time=5.0)
     streams = []
     for one_step_at_a_time in (False, True):
         stream = ReferenceStream(params, "flexible", step=STEP, blend_time=0.5)
@@ -45,3 +50,52 @@ def test_chunked_and_stepwise_streams_agree_across_a_retarget():
     # the re-target took effect: E heads for the new ellipse
     p = streams[0].sample(END).ee_position
     assert abs((p[0] / 3.2) ** 2 + (p[1] / 2.1) ** 2 - 1.0) < 1e-9
+
+
+OMEGA = QuinticRise(0.0, 0.8, 0.0, 1.0)  # [rad/s], E's parametric-angle rate along the ellipse
+
+
+def areal_task_constraints(task: Task, z_static: float) -> ConstraintSet:
+    """The paper's ellipse and height and the first-order row x y' - y x' = a b omega(t): E runs along the
+    ellipse with the parametric-angle rate omega (the column slew becomes dependent)."""
+    ab = task.ellipse_a * task.ellipse_b
+
+    def rate(t: float) -> tuple[float, float, float]:
+        return tuple(ab * value for value in OMEGA(t))
+
+    return ConstraintSet((EllipseXY(Constant(task.ellipse_a), Constant(task.ellipse_b)),
+                          HeightZ(QuinticRise(z_static, task.z_increment, 0.0, task.rise_time)), ArealRate(rate)))
+
+
+def test_streams_and_retargets_a_first_order_constraint_set():
+    """A stream of the areal-rate set follows the row x y' - y x' = a b omega(t) (checked from E's
+    kinematics) before and after a re-target to a larger ellipse, stays on the new ellipse after the
+    blend, and its velocities stay continuous through the re-target."""
+    params = load_config()
+    names = build_model(params, "rigid").joint_names
+    dependent = (names.index("boom_luff"), names.index("knuckle"), names.index("column_slew"))
+    stream = ReferenceStream(params, "rigid", step=STEP, blend_time=0.3, task_constraints=areal_task_constraints,
+                             dependent=dependent)
+    new = Task(ellipse_a=3.2, ellipse_b=2.1, z_increment=0.2, rise_time=5.0)
+    stream.compute(0.6)
+    stream.retarget(0.5, new)
+    stream.compute(1.2)
+    dynamics = stream.scenario.dynamics
+
+    def areal_rate(tau: float) -> float:
+        s = stream.sample(tau)
+        p, C = dynamics.end_effector(s.q)
+        v = C @ s.qd
+        return p[0] * v[1] - p[1] * v[0]
+
+    for tau in np.arange(0.05, 0.5, 0.05):
+        assert areal_rate(tau) == pytest.approx(3.0 * 2.0 * OMEGA(tau)[0], abs=1e-9)
+    for tau in np.arange(0.85, 1.2, 0.05):
+        assert areal_rate(tau) == pytest.approx(3.2 * 2.1 * OMEGA(tau)[0], abs=1e-9)
+        x, y, _ = stream.sample(tau).ee_position
+        assert abs((x / 3.2) ** 2 + (y / 2.1) ** 2 - 1.0) < 1e-9
+    taus = np.arange(0.0, 1.2, STEP)
+    qd = np.array([stream.sample(tau).qd for tau in taus])
+    jumps = np.max(np.abs(np.diff(qd, axis=0)), axis=1)
+    around = (taus[1:] > 0.45) & (taus[1:] < 0.55)
+    assert np.max(jumps[around]) <= 2.0 * np.max(jumps[~around])  # no step in the velocity at the re-target

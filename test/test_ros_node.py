@@ -40,11 +40,12 @@ from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.interface import messages
 from crane_reference.model.config import load_config
 from crane_reference.model.drive import make_drive
+from crane_reference.model.parameters import Task
 from crane_reference.motion.programmed_motion import ConstraintSingularityError
 from crane_reference.ros.message_types import rclpy_types
 from crane_reference.ros.node import LOOKAHEAD, CraneReferenceNode, Frame
 from crane_reference.ros.parameters import PARAMETERS, SPECS
-from crane_reference.stream.reference_stream import ReferenceStream, TaskTargets
+from crane_reference.stream.reference_stream import ReferenceStream
 
 NS = 10**9
 NODE = "crane_reference"
@@ -349,7 +350,7 @@ def test_rejected_changes_leave_the_stream_untouched(ros: Harness) -> None:
         assert node.get_parameter(parameter.name).value == before, case
     (result,) = ros.set_parameters(Parameter("ellipse.a", value=15.0))
     assert "reach" in result.reason
-    assert retargets == [] and node._stream.targets == TaskTargets(3.0, 2.0, 0.2, 5.0)
+    assert retargets == [] and node._stream.targets == Task(3.0, 2.0, 0.2, 5.0)
     # The motion goes on exactly as without the requests (same samples as an independent stream).
     end = ros.samples()["stamp"][-1] + NS // 2
     ros.wait_until_stamp(end)
@@ -400,7 +401,7 @@ def test_atomic_ellipse_change_is_smooth_and_converges(ros: Harness) -> None:
     assert result.successful, result.reason
     assert len(retargets) == 1, "a and b set atomically must be one re-target"
     tau_change, targets = retargets[0]
-    assert targets == TaskTargets(3.3, 2.2, 0.2, 5.0)
+    assert targets == Task(3.3, 2.2, 0.2, 5.0)
     change = stamp_of(ros, times, tau_change)
     ros.wait_until_stamp(change + round((blend + 0.3) * NS))
     data = ros.samples()

@@ -63,10 +63,9 @@ from ..dynamics.kinematics import forward_kinematics
 from ..dynamics.structures import ChainData
 from ..model.chain import VARIANTS, ChainModel
 from ..model.parameters import CraneParameters
-from ..motion.equilibrium import EquilibriumError
-from ..motion.integration import GeneralizedAlphaParameters, IntegrationError
-from ..motion.programmed_motion import REALISATIONS, ConstraintSingularityError, ProgrammedMotion, ProjectionError
-from ..motion.simulation import MotionStepper, Scenario
+from ..motion.integration import GeneralizedAlphaParameters
+from ..motion.programmed_motion import REALISATIONS, ProgrammedMotion
+from ..motion.simulation import SOLVER_FAILURES, MotionStepper, Scenario
 from ..motion.trajectory import Trajectory
 from .modal import Modes, linearise, modal_analysis, scenario_motion
 
@@ -77,7 +76,6 @@ SIGNALS = {"tip_vertical": "tip deflection $w_y$ (luffing plane) [m]",
            "tip_horizontal": "tip deflection $w_z$ (horizontal) [m]",
            "tip_torsion": r"tip torsion $\sum \varphi$ [rad]"}
 MEAN_WINDOW = 0.1  # [s] moving mean that separates drift from ringing in the differences
-FAILURES = (IntegrationError, ProjectionError, ConstraintSingularityError, EquilibriumError)
 
 
 def rfe_indices(model: ChainModel, suffix: str = "") -> np.ndarray:
@@ -262,7 +260,7 @@ def run(params: CraneParameters, variant: str, realisation: str, duration: float
     wall = time.perf_counter()
     try:
         motion, q0 = scenario_motion(scenario, realisation)
-    except FAILURES as error:
+    except SOLVER_FAILURES as error:
         return Run(realisation, variant, scenario.motion, None, time.perf_counter() - wall, str(error), None)
     start_modes = modal_analysis(linearise(motion, 0.0, q0))
     stepper = MotionStepper(motion, 0.0, q0, np.zeros_like(q0), step, rho_inf)
@@ -270,7 +268,7 @@ def run(params: CraneParameters, variant: str, realisation: str, duration: float
     try:
         while stepper.state.t < duration - 1e-9 * step:
             samples.append(stepper.advance())
-    except FAILURES as failure:
+    except SOLVER_FAILURES as failure:
         error = f"stopped at t = {stepper.state.t:.6g} s: {failure}"
     model = scenario.model
     trajectory = Trajectory.from_samples(model.variant, model.joint_names, model.drive_joint, samples)

@@ -38,8 +38,10 @@ from rosbags.interfaces import Connection, Qos, QosDurability, QosHistory, QosLi
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 
-from ..model.parameters import CraneParameters, TorqueDrive
-from ..stream.reference_stream import ERROR, ReferenceSample, ReferenceStream
+from ..model.drive import column_drive
+from ..model.parameters import CraneParameters
+from ..stream.reference_stream import ERROR, ReferenceStream
+from ..stream.sample import ReferenceSample
 from . import messages
 
 STORAGES = ("mcap", "sqlite3")
@@ -249,12 +251,9 @@ class ReferenceBag:
 
 def node_stream(config: CraneParameters, variant: str = "flexible", step: float = 1e-3,
                 rho_inf: float = 0.8) -> ReferenceStream:
-    """The stream the node builds for ``config`` with its parameters at their defaults (the torque drive
-    rebuilt from start and duration as the node does, so that the motion is the same to the bit)."""
-    drive = config.drive
-    if isinstance(drive, TorqueDrive):
-        drive = TorqueDrive(torque=drive.torque, start=drive.start, end=drive.start + (drive.end - drive.start))
-    return ReferenceStream(config, variant, step, drive=drive, rho_inf=rho_inf)
+    """The stream the node builds for ``config`` with its parameters at their defaults (the column drive
+    made as the node makes it, so that the motion is the same to the bit)."""
+    return ReferenceStream(config, variant, step, drive=column_drive(config), rho_inf=rho_inf)
 
 
 def export_reference(bag: BagWriter, stream: ReferenceStream, rate: int, duration: float, *,
@@ -285,20 +284,9 @@ def export_reference(bag: BagWriter, stream: ReferenceStream, rate: int, duratio
             last_wall, last_motion = wall, sample.t
             level, message = ((messages.ERROR, f"{ERROR}: {stream.last_error}") if stream.state == ERROR
                               else (messages.OK, stream.state))
-            values = {
-                "state": stream.state,
-                "motion_time_s": f"{sample.t:.6f}",
-                "constraint_residual_m": f"{sample.residual_distance:.3e}",
-                "real_time_factor": f"{factor:.3f}",
-                "publish_rate_hz": rate,
-                "achieved_rate_hz": f"{float(rate):.3f}",
-                "published": k + 1,
-                "held_late": 0,
-                "skipped": 0,
-                "held_non_finite": 0,
-                "targets": str(stream.targets),
-                "last_error": stream.last_error,
-            }
+            counters = {"published": k + 1, "held_late": 0, "skipped": 0, "held_non_finite": 0}
+            values = messages.diagnostic_values(stream.state, sample, factor, rate, float(rate), counters,
+                                                stream.targets, stream.last_error)
             reference.write_diagnostics(stamp, f"{node_name}: reference", f"/{node_name}", level, message, values)
         stream.release(tau, RELEASE_KEEP)
         if progress is not None:

@@ -196,6 +196,27 @@ def diagnostics(types: MessageTypes, stamp_ns: int, name: str, hardware_id: str,
     return types.DiagnosticArray(header=header(types, stamp_ns, ""), status=[status])
 
 
+def diagnostic_values(state: str, sample: ReferenceSample | None, real_time_factor: float, publish_rate: int,
+                      achieved_rate: float, counters: Mapping[str, int], targets: object, last_error: str,
+                      extra: Mapping[str, object] | None = None) -> dict[str, object]:
+    """The key/value pairs of the node's reference status (the node and the offline bag export): stream
+    state, motion time [s] and largest constraint distance [m] of the last sample, solver real-time
+    factor, publish and achieved rate [Hz], the sample counters, ``extra`` pairs, the targets and the
+    last error."""
+    return {
+        "state": state,
+        "motion_time_s": f"{sample.t:.6f}" if sample else "",
+        "constraint_residual_m": f"{sample.residual_distance:.3e}" if sample else "",
+        "real_time_factor": f"{real_time_factor:.3f}",
+        "publish_rate_hz": publish_rate,
+        "achieved_rate_hz": f"{achieved_rate:.3f}",
+        **counters,
+        **(extra or {}),
+        "targets": str(targets),
+        "last_error": last_error,
+    }
+
+
 def _line_strip(types: MessageTypes, stamp_ns: int, frame_id: str, namespace: str,
                 points: np.ndarray, rgba: Sequence[float]) -> Any:
     """A LINE_STRIP marker through ``points`` (N, 3) in ``frame_id``; every Marker field given."""

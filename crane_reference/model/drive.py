@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .parameters import FlexibleDrive, TorqueDrive
+from .parameters import CraneParameters, FlexibleDrive, TorqueDrive
 from .profiles import Profile, QuinticRise
 
 
@@ -55,6 +55,17 @@ class SpringDrive:
 
 
 Drive = TorqueSource | SpringDrive
+
+
+def column_drive(config: CraneParameters, torque: float | None = None,
+                 duration: float | None = None) -> TorqueDrive | FlexibleDrive:
+    """The column drive of ``config``: its flexible drive as it is, else its torque profile with
+    ``torque`` [N m] applied for ``duration`` [s] from its start (by default the config's own)."""
+    if isinstance(config.drive, FlexibleDrive):
+        return config.drive
+    torque = config.drive.torque if torque is None else torque
+    duration = config.drive.end - config.drive.start if duration is None else duration
+    return TorqueDrive(torque=torque, start=config.drive.start, end=config.drive.start + duration)
 
 
 def make_drive(spec: TorqueDrive | FlexibleDrive, psi2_start: float) -> Drive:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from itertools import pairwise
+from typing import NamedTuple
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -23,12 +24,18 @@ from ..model.drive import make_drive
 from ..model.parameters import CraneParameters, Task
 from ..model.profiles import Constant, QuinticRise
 from .constraints import ConstraintSet, paper_constraints
-from .equilibrium import Equilibrium, static_equilibrium
-from .integration import GeneralizedAlpha, StepState
-from .programmed_motion import ProgrammedMotion
+from .equilibrium import Equilibrium, EquilibriumError, static_equilibrium
+from .integration import GeneralizedAlpha, IntegrationError, StepState
+from .programmed_motion import ConstraintSingularityError, ProgrammedMotion, ProjectionError
 from .trajectory import Sample, Trajectory, make_sample, stack_samples
 
 Progress = Callable[[float], None]
+TaskConstraints = Callable[[Task, float], ConstraintSet]
+"""Builds the programmed constraints of a :class:`Task` given E's static height z_E,s [m]."""
+SOLVER_FAILURES = (ConstraintSingularityError, ProjectionError, IntegrationError, EquilibriumError,
+                   np.linalg.LinAlgError, FloatingPointError)
+"""What a failed computation of the programmed motion raises (singular task, unreachable target, no
+convergence, no static equilibrium, a singular linear system, a non-finite state)."""
 
 
 def paper_task_constraints(task: Task, z_static: float) -> ConstraintSet:
@@ -58,6 +65,17 @@ class Scenario:
         if self._equilibrium is None:
             self._equilibrium = static_equilibrium(self.motion, self.model.initial_q)
         return self._equilibrium
+
+
+class StepperSnapshot(NamedTuple):
+    """A :class:`MotionStepper` at one step: integrator state, grid index, work accounts [J], the sample
+    and the programmed motion in force."""
+
+    state: StepState
+    k: int
+    work: np.ndarray
+    sample: Sample
+    motion: ProgrammedMotion
 
 
 class MotionStepper:
@@ -134,11 +152,11 @@ class MotionStepper:
                     potential_energy=accounts[:, 1], work_drive=work[:, 0], work_constraints=work[:, 1],
                     work_damping=work[:, 2])
 
-    def snapshot(self) -> tuple[StepState, int, np.ndarray, Sample, ProgrammedMotion]:
+    def snapshot(self) -> StepperSnapshot:
         """Everything needed to continue from the current step later (see :meth:`rewind`)."""
-        return self.state, self._k, self._work.copy(), self.sample, self.integrator.motion
+        return StepperSnapshot(self.state, self._k, self._work.copy(), self.sample, self.integrator.motion)
 
-    def rewind(self, snapshot: tuple[StepState, int, np.ndarray, Sample, ProgrammedMotion]) -> None:
+    def rewind(self, snapshot: StepperSnapshot) -> None:
         """Return to a state saved by :meth:`snapshot` (the motion after it is recomputed)."""
         self.state, self._k, work, self.sample, self.integrator.motion = snapshot
         self._work = work.copy()

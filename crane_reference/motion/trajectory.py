@@ -13,7 +13,6 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
-from scipy.interpolate import CubicHermiteSpline
 from scipy.spatial.transform import Rotation
 
 from .programmed_motion import MotionSolution
@@ -51,6 +50,27 @@ def make_sample(t: float, q: np.ndarray, qd: np.ndarray, solution: MotionSolutio
                   dyn.ee_position, dyn.ee_rotation, dyn.ee_jacobian @ qd, con.residual, con.distance,
                   solution.kdc_min_singular_value, solution.kinetic_energy, solution.potential_energy,
                   float(work[0]), float(work[1]), float(work[2]))
+
+
+def cubic_hermite(t: float | np.ndarray, times: np.ndarray, values: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """The piecewise cubic Hermite interpolant of ``values`` (N, ...) with derivatives ``rates`` at the
+    increasing ``times`` (N,), at t (scalar or (M,)) inside [times[0], times[-1]]: on [t_k, t_k+1] with
+    h = t_k+1 - t_k and s = (t - t_k) / h,
+
+        y = (2s^3 - 3s^2 + 1) y_k + (s^3 - 2s^2 + s) h y'_k + (-2s^3 + 3s^2) y_k+1 + (s^3 - s^2) h y'_k+1.
+
+    (scipy's CubicHermiteSpline, without its set-up cost for the two-point case of the online sampler.)"""
+    times = np.asarray(times, dtype=float)
+    t_array = np.asarray(t, dtype=float)
+    k = np.clip(np.searchsorted(times, t_array, side="right") - 1, 0, max(times.size - 2, 0))
+    if times.size == 1:
+        return np.broadcast_to(values[0], (*t_array.shape, *values.shape[1:])).copy()
+    h = times[k + 1] - times[k]
+    s = (t_array - times[k]) / h
+    shape = (*s.shape, *(1,) * (values.ndim - 1))
+    s, h = s.reshape(shape), h.reshape(shape)
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    return h00 * values[k] + h10 * h * rates[k] + h01 * values[k + 1] + h11 * h * rates[k + 1]
 
 
 def generalized_effort(constraint_forces: np.ndarray, drive_torque: float | np.ndarray,
@@ -132,10 +152,8 @@ class Trajectory:
 
     def interpolate(self, t: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """q, qd (cubic Hermite: C1 and consistent with the stored rates) and E's position at t."""
-        q = CubicHermiteSpline(self.t, self.q, self.qd, axis=0)(t)
-        qd = CubicHermiteSpline(self.t, self.qd, self.qdd, axis=0)(t)
-        p = CubicHermiteSpline(self.t, self.ee_position, self.ee_velocity, axis=0)(t)
-        return q, qd, p
+        return (cubic_hermite(t, self.t, self.q, self.qd), cubic_hermite(t, self.t, self.qd, self.qdd),
+                cubic_hermite(t, self.t, self.ee_position, self.ee_velocity))
 
     def columns(self) -> tuple[list[str], np.ndarray]:
         """CSV layout: t, one column per joint, ee_x ee_y ee_z, then velocities, E's orientation,

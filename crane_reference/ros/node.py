@@ -72,18 +72,13 @@ from visualization_msgs.msg import MarkerArray
 
 from ..interface import messages
 from ..model.config import ConfigError, load_config
-from ..model.parameters import CraneParameters, FlexibleDrive, TorqueDrive
+from ..model.drive import column_drive
+from ..model.parameters import CraneParameters, Task
 from ..model.urdf import model_to_urdf
-from ..motion.equilibrium import EquilibriumError
-from ..stream.reference_stream import (
-    ERROR,
-    PAUSED,
-    SOLVER_FAILURES,
-    ReferenceSample,
-    ReferenceStream,
-    TaskTargets,
-    UnreachableTargetError,
-)
+from ..motion.simulation import SOLVER_FAILURES
+from ..stream.reference_stream import ERROR, PAUSED, ReferenceStream
+from ..stream.sample import ReferenceSample
+from ..stream.targets import UnreachableTargetError
 from .message_types import rclpy_types
 from .parameters import PARAMETERS, SPECS, TARGET_PARAMETERS, ParameterError, check, coerce_parameters, declare
 
@@ -117,25 +112,6 @@ class Frame:
     sample: ReferenceSample
     preview: list[ReferenceSample] | None = None
     horizon: float = 0.0
-
-
-def _finite(sample: ReferenceSample) -> bool:
-    """Whether every number of ``sample`` is finite (a NaN or infinity propagates into the sum)."""
-    arrays = (sample.q, sample.qd, sample.qdd, sample.effort, sample.ee_position, sample.ee_quaternion)
-    return math.isfinite(sum(float(np.sum(a)) for a in arrays) + sample.residual_distance)
-
-
-def _held(sample: ReferenceSample) -> ReferenceSample:
-    """``sample`` held: same position and effort, zero velocity and acceleration."""
-    zero = np.zeros_like(sample.qd)
-    return replace(sample, qd=zero, qdd=zero.copy(), held=True)
-
-
-def _drive(config: CraneParameters, torque: float, duration: float) -> TorqueDrive | FlexibleDrive:
-    """The column drive: the config's flexible drive as it is, else the torque profile of the parameters."""
-    if isinstance(config.drive, FlexibleDrive):
-        return config.drive
-    return TorqueDrive(torque=torque, start=config.drive.start, end=config.drive.start + duration)
 
 
 class CraneReferenceNode(Node):
@@ -211,21 +187,21 @@ class CraneReferenceNode(Node):
 
     # -- set-up ---------------------------------------------------------------------------------------
 
-    def _targets(self, overrides: dict[str, float] | None = None) -> TaskTargets:
+    def _targets(self, overrides: dict[str, float] | None = None) -> Task:
         """Targets of the current parameter values, with ``overrides`` (parameter name -> value)."""
         values = {**self._values, **(overrides or {})}
-        return TaskTargets(**{field: float(values[name]) for name, field in TARGET_PARAMETERS.items()})
+        return Task(**{field: float(values[name]) for name, field in TARGET_PARAMETERS.items()})
 
     def _make_stream(self, config: CraneParameters) -> ReferenceStream:
         v = self._values
         targets = self._targets()
         try:
             stream = ReferenceStream(config, v["model"], v["integrator.step"], v["blend_time"], targets,
-                                     _drive(config, v["drive.torque"], v["drive.duration"]))
+                                     column_drive(config, v["drive.torque"], v["drive.duration"]))
             stream.check_targets(targets)
         except UnreachableTargetError as error:
             raise StartupError(f"ellipse.* / z.* = {targets}: {error}") from error
-        except (*SOLVER_FAILURES, EquilibriumError) as error:
+        except SOLVER_FAILURES as error:
             raise StartupError(f"no consistent start for the targets {targets}: {error}") from error
         if not v["autostart"]:
             stream.pause(0.0)
@@ -279,7 +255,7 @@ class CraneReferenceNode(Node):
             for i in range(count):
                 t = tau + i * dt
                 if stream.state == ERROR:  # hold the last sample made, not the stream's (computed further ahead)
-                    frames.append(Frame(k + i, t, _held(last)))
+                    frames.append(Frame(k + i, t, last.hold()))
                     continue
                 if t > stream.computed_until - TIME_TOLERANCE:
                     break
@@ -299,13 +275,14 @@ class CraneReferenceNode(Node):
 
     def _checked(self, frame: Frame, last_valid: ReferenceSample) -> Frame:
         """``frame`` if finite, else ``last_valid`` held (never publish NaN); a non-finite preview is dropped."""
-        preview = frame.preview if frame.preview is None or all(map(_finite, frame.preview)) else None
-        if _finite(frame.sample):
+        finite = frame.preview is None or all(sample.is_finite() for sample in frame.preview)
+        preview = frame.preview if finite else None
+        if frame.sample.is_finite():
             return replace(frame, preview=preview)
         self._fault = f"non-finite sample at stream time {frame.tau:.3f} s: holding the last valid one"
         self.get_logger().error(self._fault, throttle_duration_sec=1.0)
         self._counters["held_non_finite"] += 1
-        return Frame(frame.k, frame.tau, _held(last_valid))
+        return Frame(frame.k, frame.tau, last_valid.hold())
 
     # -- commands (executor threads) ------------------------------------------------------------------
 
@@ -334,7 +311,7 @@ class CraneReferenceNode(Node):
         """~/restart: back to the static-equilibrium start of the current targets."""
         try:
             k = self._command(self._stream.restart)
-        except (*SOLVER_FAILURES, EquilibriumError) as error:
+        except SOLVER_FAILURES as error:
             response.success, response.message = False, f"restart failed, stream unchanged: {error}"
         else:
             response.success = True
@@ -447,7 +424,7 @@ class CraneReferenceNode(Node):
         if frame is None:
             if self._last is None:
                 return
-            frame = Frame(k, math.nan, _held(self._last))
+            frame = Frame(k, math.nan, self._last.hold())
             self._counters["held_late"] += 1
         sample = frame.sample
         types, frame_id = self._types, self._values["frame_id"]
@@ -499,19 +476,11 @@ class CraneReferenceNode(Node):
             level, message = messages.ERROR, f"{stream.state}: {stream.last_error or self._fault}"
         elif late > 0:
             level, message = messages.WARN, f"{stream.state}: {late} samples held or skipped (solver or publisher late)"
-        values = {
-            "state": stream.state,
-            "motion_time_s": f"{sample.t:.6f}" if sample else "",
-            "constraint_residual_m": f"{sample.residual_distance:.3e}" if sample else "",
-            "real_time_factor": f"{factor:.3f}",
-            "publish_rate_hz": self._rate,
-            "achieved_rate_hz": f"{rate:.3f}",
-            **self._counters,
-            "frames_ready": len(self._frames),
-            **{f"{name}_stamp_s": f"{stamp:.6f}" for name, stamp in self._effective.items()},
-            "targets": str(stream.targets),
-            "last_error": stream.last_error or self._fault,
-        }
+        values = messages.diagnostic_values(
+            stream.state, sample, factor, self._rate, rate, self._counters, stream.targets,
+            stream.last_error or self._fault,
+            {"frames_ready": len(self._frames),
+             **{f"{name}_stamp_s": f"{stamp:.6f}" for name, stamp in self._effective.items()}})
         stamp = self.get_clock().now().nanoseconds
         self._diagnostics_pub.publish(messages.diagnostics(
             self._types, stamp, f"{self.get_name()}: reference", self.get_fully_qualified_name(), level, message,

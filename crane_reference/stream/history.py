@@ -1,0 +1,71 @@
+"""The computed motion kept for sampling and for rewinding (a re-target or a command in the past)."""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass
+
+from ..motion.programmed_motion import ProgrammedMotion
+from ..motion.simulation import StepperSnapshot
+from ..motion.trajectory import Sample
+
+TIME_SLACK = 1e-12  # [s], rounding slack when locating a motion time among the computed ones
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One computed instant: its sample, the programmed motion in force and, at the end of a compiled
+    run, the stepper's snapshot to restart from (None inside a run)."""
+
+    sample: Sample
+    motion: ProgrammedMotion
+    snapshot: StepperSnapshot | None
+
+
+class History:
+    """Computed instants in increasing motion time, the first one always restartable."""
+
+    def __init__(self, start: StepperSnapshot):
+        self.entries: list[Entry] = [Entry(start.sample, start.motion, start)]
+        self.times: list[float] = [start.sample.t]
+
+    @property
+    def last(self) -> Entry:
+        return self.entries[-1]
+
+    def extend(self, samples: list[Sample], motion: ProgrammedMotion, end: StepperSnapshot) -> None:
+        """Append a compiled run: its samples (the last one restartable from ``end``)."""
+        self.entries += [Entry(sample, motion, None) for sample in samples[:-1]]
+        self.entries.append(Entry(end.sample, end.motion, end))
+        self.times += [sample.t for sample in samples]
+
+    def bracket(self, t: float) -> tuple[int, bool]:
+        """Index k of the last instant at or before motion time t, and whether t is (within rounding)
+        that instant itself or beyond the last one."""
+        k = min(max(bisect.bisect_right(self.times, t) - 1, 0), len(self.times) - 1)
+        return k, k + 1 == len(self.times) or t <= self.times[k] + TIME_SLACK
+
+    def first_at_or_after(self, t: float) -> int:
+        """Index of the first instant at or after motion time t (the last one if none)."""
+        return min(bisect.bisect_left(self.times, t - TIME_SLACK), len(self.times) - 1)
+
+    def restart_point(self, k: int) -> int:
+        """The last restartable instant at or before k."""
+        return max(i for i in range(k + 1) if self.entries[i].snapshot is not None)
+
+    def set_snapshot(self, k: int, snapshot: StepperSnapshot) -> None:
+        self.entries[k] = Entry(snapshot.sample, snapshot.motion, snapshot)
+
+    def truncate(self, k: int) -> None:
+        """Forget everything after instant k."""
+        del self.entries[k + 1:]
+        del self.times[k + 1:]
+
+    def release(self, t: float) -> None:
+        """Forget instants before motion time t, keeping a restartable one at or before it."""
+        k = bisect.bisect_left(self.times, t) - 1
+        while k > 0 and self.entries[k].snapshot is None:
+            k -= 1
+        if k > 0:
+            del self.entries[:k]
+            del self.times[:k]
