@@ -504,9 +504,9 @@ def test_solver_failure_holds_and_reports_error(ros: Harness) -> None:
 
 def test_non_finite_samples_are_never_published(ros: Harness) -> None:
     node = ros.start(publish_rate=100)
-    valid = node._last_valid
+    valid = node._schedule.last_valid
     broken = dataclasses.replace(valid, q=np.full_like(valid.q, np.nan))
-    checked = node._checked(Frame(7, 0.07, broken, [broken]), valid)
+    checked = node._schedule.checked(Frame(7, 0.07, broken, [broken]), valid)
     assert checked.k == 7 and checked.preview is None and checked.sample.held
     np.testing.assert_array_equal(checked.sample.q, valid.q)
     assert np.all(checked.sample.qd == 0.0)

@@ -49,10 +49,8 @@ from __future__ import annotations
 import math
 import sys
 import threading
-import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, replace
 
 import numpy as np
 import rclpy
@@ -77,7 +75,7 @@ from ..model.parameters import CraneParameters, Task
 from ..model.urdf import model_to_urdf
 from ..motion.simulation import SOLVER_FAILURES
 from ..stream.reference_stream import ERROR, PAUSED, ReferenceStream
-from ..stream.sample import ReferenceSample
+from ..stream.schedule import Frame, FrameSchedule
 from ..stream.targets import UnreachableTargetError
 from .message_types import rclpy_types
 from .parameters import PARAMETERS, SPECS, TARGET_PARAMETERS, ParameterError, check, coerce_parameters, declare
@@ -87,31 +85,17 @@ LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
 COMMAND_LEAD = 0.25  # [s] from the next sample to publish to the one a command takes effect at
 COMPUTE_SLICE = 0.005  # [s] of wall time the worker holds the stream per compute call
 FRAME_BATCH = 20  # frames sampled per hold of the stream lock
-COMPUTE_MARGIN = 0.05  # [s] of motion computed beyond the preview horizon
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to compute (for commands)
 MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, older samples are skipped
 MARKER_RATE = 10.0  # [Hz]
 TRAIL_RATE = 50.0  # [Hz] of points added to E's trail
 TRAIL_POINTS = 500
-TIME_TOLERANCE = 1e-9  # [s], rounding slack when comparing stream times
 NANOSECONDS = messages.NANOSECONDS
 RCLError = rclpy_implementation.RCLError
 
 
 class StartupError(RuntimeError):
     """The node cannot start (unusable configuration or target)."""
-
-
-@dataclass(frozen=True)
-class Frame:
-    """Sample k of the reference, at stream publish time ``tau``, with its preview (or None) over
-    ``horizon`` seconds."""
-
-    k: int
-    tau: float
-    sample: ReferenceSample
-    preview: list[ReferenceSample] | None = None
-    horizon: float = 0.0
 
 
 class CraneReferenceNode(Node):
@@ -129,29 +113,20 @@ class CraneReferenceNode(Node):
         config = load_config(config_file or None)
         self._values = {spec.name: declare(self, spec, config) for spec in PARAMETERS if spec.name != "config_file"}
         self._rate = int(self._values["publish_rate"])
-        self._lookahead = max(2, math.ceil(LOOKAHEAD * self._rate))
         self._stream = self._make_stream(config)
-        self._last_valid = self._stream.sample(0.0)
+        self._schedule = FrameSchedule(self._rate, max(2, math.ceil(LOOKAHEAD * self._rate)), COMMAND_LEAD,
+                                       MAX_CATCH_UP, self._stream.sample(0.0))
         self._types = rclpy_types()
         self._joint_names = list(self._stream.joint_names)
 
-        # Buffer of frames [next to publish ... _gen_k - 1], guarded by _lock (never held while solving).
+        # The schedule's buffer and counters are guarded by _lock (never held while solving), the stream by
+        # _stream_lock.
         self._lock = threading.Condition()
         self._stream_lock = threading.Lock()
-        self._frames: deque[Frame] = deque()
-        self._next_k = 0
-        self._gen_k = 0
-        self._gen_tau = 0.0
-        self._generation = 0
-        self._next_preview_k = 0
         self._start_ns: int | None = None
-        self._last: ReferenceSample | None = None
         self._last_stamp = 0
         self._achieved_rate = 0.0
         self._late_reported = 0
-        self._fault = ""
-        self._counters = {"published": 0, "held_late": 0, "skipped": 0, "held_non_finite": 0}
-        self._compute = {"wall": 0.0, "motion": 0.0}
         self._effective: dict[str, float] = {}
         self._trail: deque[np.ndarray] = deque(maxlen=TRAIL_POINTS)
         self._diagnostics_reference = (0, 0.0, 0.0, self.get_clock().now().nanoseconds)
@@ -211,96 +186,43 @@ class CraneReferenceNode(Node):
 
     def _work(self) -> None:
         """Keep LOOKAHEAD of frames ready ahead of publishing and the motion computed beyond them."""
+        schedule = self._schedule
         try:
             while not self._stop.is_set():
                 with self._lock:
-                    k = max(self._gen_k, self._next_k)  # the stream time goes on from gen_tau: no jump
-                    tau, generation, next_preview_k = self._gen_tau, self._generation, self._next_preview_k
-                    room = self._lookahead - (k - self._next_k)
-                frames, next_preview_k, busy = self._make_frames(k, tau, min(room, FRAME_BATCH), next_preview_k)
+                    plan = schedule.plan()
+                    fault = schedule.fault
+                with self._stream_lock:
+                    frames, next_preview_k, busy = schedule.make_frames(
+                        self._stream, plan, min(plan.room, FRAME_BATCH), self._values["preview.horizon"],
+                        self._values["preview.points"], self._preview_decimation(),
+                        COMPUTE_SLICE if self._start_ns is not None else None)  # all before starting
+                    self._stream.release(plan.tau, RELEASE_KEEP + LOOKAHEAD)
+                if schedule.fault != fault:
+                    self.get_logger().error(schedule.fault, throttle_duration_sec=1.0)
                 with self._lock:
-                    if generation != self._generation:
-                        continue
-                    if frames and frames[0].k < self._next_k:  # publishing held meanwhile: continue after it
-                        frames = [replace(f, k=f.k + self._next_k - frames[0].k) for f in frames]
-                    if frames:
-                        self._frames.extend(frames)
-                        self._gen_k, self._gen_tau = frames[-1].k + 1, frames[-1].tau + 1.0 / self._rate
-                        self._next_preview_k = next_preview_k
-                        self._last_valid = frames[-1].sample
-                    elif not busy:
+                    if schedule.accept(frames, plan, next_preview_k) and not frames and not busy:
                         self._lock.wait(timeout=LOOKAHEAD)
         except Exception as error:  # publishing goes on (holding) and reports it
-            self._fault = f"solver thread stopped: {type(error).__name__}: {error}"
-            self.get_logger().error(self._fault)
-
-    def _make_frames(self, k: int, tau: float, count: int, next_preview_k: int) -> tuple[list[Frame], int, bool]:
-        """Up to ``count`` frames from sample k at stream time tau on, as far as the motion is computed,
-        after one slice of computing ahead; returns them, the next sample due a preview, and whether the
-        motion is still short of the preview horizon."""
-        dt = 1.0 / self._rate
-        horizon, points = self._values["preview.horizon"], self._values["preview.points"]
-        ahead = tau + count * dt + horizon + COMPUTE_MARGIN
-        frames = []
-        with self._stream_lock:
-            stream = self._stream
-            before = stream.computed_until
-            if before < ahead:
-                start = time.perf_counter()
-                stream.compute(ahead, COMPUTE_SLICE if self._start_ns is not None else None)  # all before starting
-                if math.isfinite(stream.computed_until):
-                    self._compute["wall"] += time.perf_counter() - start
-                    self._compute["motion"] += stream.computed_until - before
-            last = self._last_valid  # the last sample of the frames made so far (finite)
-            for i in range(count):
-                t = tau + i * dt
-                if stream.state == ERROR:  # hold the last sample made, not the stream's (computed further ahead)
-                    frames.append(Frame(k + i, t, last.hold()))
-                    continue
-                if t > stream.computed_until - TIME_TOLERANCE:
-                    break
-                preview = None
-                if k + i >= next_preview_k and stream.computed_until >= t + horizon:
-                    preview = stream.preview(t, horizon, points)
-                    next_preview_k = k + i + self._preview_decimation()
-                frames.append(self._checked(Frame(k + i, t, stream.sample(t), preview, horizon), last))
-                last = frames[-1].sample
-            stream.release(tau, RELEASE_KEEP + LOOKAHEAD)
-            busy = stream.computed_until < ahead
-        return frames, next_preview_k, busy
+            schedule.fault = f"solver thread stopped: {type(error).__name__}: {error}"
+            self.get_logger().error(schedule.fault)
 
     def _preview_decimation(self) -> int:
         """Samples between two previews."""
         return max(1, round(self._rate / self._values["preview.rate"]))
 
-    def _checked(self, frame: Frame, last_valid: ReferenceSample) -> Frame:
-        """``frame`` if finite, else ``last_valid`` held (never publish NaN); a non-finite preview is dropped."""
-        finite = frame.preview is None or all(sample.is_finite() for sample in frame.preview)
-        preview = frame.preview if finite else None
-        if frame.sample.is_finite():
-            return replace(frame, preview=preview)
-        self._fault = f"non-finite sample at stream time {frame.tau:.3f} s: holding the last valid one"
-        self.get_logger().error(self._fault, throttle_duration_sec=1.0)
-        self._counters["held_non_finite"] += 1
-        return Frame(frame.k, frame.tau, last_valid.hold())
-
     # -- commands (executor threads) ------------------------------------------------------------------
 
     def _command(self, action: Callable[[float], None]) -> int:
-        """Apply ``action(tau)`` to the stream at the frame COMMAND_LEAD after the next one to publish
-        (or at the next frame to compute, if earlier); drop the frames from there on.  Returns the index
-        of that frame; exceptions of ``action`` propagate with the stream and the buffer untouched."""
+        """Apply ``action(tau)`` to the stream at the schedule's command point (COMMAND_LEAD after the next
+        sample to publish) and drop the frames from there on.  Returns the index of that frame;
+        exceptions of ``action`` propagate with the stream and the buffer untouched."""
         with self._stream_lock:
             with self._lock:
-                free = max(self._gen_k, self._next_k)  # the next frame the worker computes
-                k = min(self._next_k + math.ceil(COMMAND_LEAD * self._rate), free)
-                tau = self._gen_tau if k == free else next(f.tau for f in self._frames if f.k == k)
+                k, tau = self._schedule.command_point()
             action(tau)
             with self._lock:
-                self._frames = deque(f for f in self._frames if f.k < k)
-                self._gen_k, self._gen_tau = k, tau
-                self._generation += 1
-                self._next_preview_k = k
+                self._schedule.after_command(k, tau)
         return k
 
     def _stamp_s(self, k: int) -> float:
@@ -317,7 +239,7 @@ class CraneReferenceNode(Node):
             response.success = True
             response.message = f"restarted from the static equilibrium at the sample stamped {self._stamp_s(k):.6f} s"
             self._effective["restart"] = self._stamp_s(k)
-            self._fault = ""
+            self._schedule.fault = ""
         self.get_logger().info(response.message)
         return response
 
@@ -382,16 +304,18 @@ class CraneReferenceNode(Node):
         """
         clock = self.get_clock()
         try:
-            while not self._stop.is_set() and (self._gen_k < self._lookahead or clock.now().nanoseconds == 0):
+            while not self._stop.is_set() and (self._schedule.made_k < self._schedule.lookahead
+                                               or clock.now().nanoseconds == 0):
                 self._stop.wait(1.0 / self._rate)
             self._start_ns = clock.now().nanoseconds
             self._diagnostics_reference = (0, 0.0, 0.0, self._start_ns)
             while not self._stop.is_set():
                 now = clock.now().nanoseconds
-                if now < messages.stamp_at(self._start_ns, self._next_k - 1, self._rate):
-                    self._start_ns = now - self._next_k * NANOSECONDS // self._rate
+                next_k = self._schedule.next_k
+                if now < messages.stamp_at(self._start_ns, next_k - 1, self._rate):
+                    self._start_ns = now - next_k * NANOSECONDS // self._rate
                 self._publish(now)
-                left = messages.stamp_at(self._start_ns, self._next_k, self._rate) - clock.now().nanoseconds
+                left = messages.stamp_at(self._start_ns, self._schedule.next_k, self._rate) - clock.now().nanoseconds
                 if left > 0:
                     self._stop.wait(left / NANOSECONDS)
         except RCLError:
@@ -401,31 +325,16 @@ class CraneReferenceNode(Node):
     def _publish(self, now: int) -> None:
         """Publish every sample due by ``now`` [ns] (normally one), each stamped start + k / rate."""
         with self._lock:
-            due = (now - self._start_ns) * self._rate // NANOSECONDS
-            oldest = due - math.ceil(MAX_CATCH_UP * self._rate) + 1
-            if self._next_k < oldest:
-                self._counters["skipped"] += oldest - self._next_k
-                self._next_k = oldest
-            batch = []
-            while self._next_k <= due:
-                while self._frames and self._frames[0].k < self._next_k:
-                    self._frames.popleft()
-                if self._frames and self._frames[0].k == self._next_k:
-                    batch.append((self._next_k, self._frames.popleft()))
-                else:
-                    batch.append((self._next_k, None))
-                self._next_k += 1
+            batch = self._schedule.due(now, self._start_ns)
             self._lock.notify()
         for k, frame in batch:
             self._send(k, frame)
 
     def _send(self, k: int, frame: Frame | None) -> None:
         """Publish sample k: the frame's, or the last one held if the solver is late."""
+        frame = self._schedule.outgoing(k, frame)
         if frame is None:
-            if self._last is None:
-                return
-            frame = Frame(k, math.nan, self._last.hold())
-            self._counters["held_late"] += 1
+            return
         sample = frame.sample
         types, frame_id = self._types, self._values["frame_id"]
         stamp = messages.stamp_at(self._start_ns, k, self._rate)
@@ -438,12 +347,11 @@ class CraneReferenceNode(Node):
                                                                  frame.preview))
         if k % max(1, round(self._rate / TRAIL_RATE)) == 0:
             self._trail.append(sample.ee_position)
-        self._last, self._last_stamp = sample, stamp
-        self._counters["published"] += 1
+        self._last_stamp = stamp
 
     def _publish_markers(self) -> None:
         """~/markers (timer): the target ellipse at the final height and E's trail, stamped like the last sample."""
-        if self._last is None:
+        if self._schedule.last is None:
             return
         targets = self._stream.targets
         z = self._stream.scenario.z_static + targets.z_increment
@@ -452,7 +360,8 @@ class CraneReferenceNode(Node):
 
     def _rates(self) -> tuple[float, float]:
         """Achieved publish rate [Hz] and solver real-time factor since the last call."""
-        published, wall, motion, now = (self._counters["published"], self._compute["wall"], self._compute["motion"],
+        schedule = self._schedule
+        published, wall, motion, now = (schedule.counters.published, schedule.compute_wall, schedule.compute_motion,
                                         self.get_clock().now().nanoseconds)
         last_published, last_wall, last_motion, last_now = self._diagnostics_reference
         self._diagnostics_reference = (published, wall, motion, now)
@@ -466,20 +375,21 @@ class CraneReferenceNode(Node):
             return
         rate, factor = self._rates()
         self._achieved_rate = rate
-        late, self._late_reported = (self._counters["held_late"] + self._counters["skipped"] - self._late_reported,
-                                     self._counters["held_late"] + self._counters["skipped"])
+        counters, fault = self._schedule.counters, self._schedule.fault
+        late, self._late_reported = (counters.held_late + counters.skipped - self._late_reported,
+                                     counters.held_late + counters.skipped)
         stream = self._stream
-        sample = self._last
+        sample = self._schedule.last
         level = messages.OK
         message = stream.state
-        if stream.state == ERROR or self._fault:
-            level, message = messages.ERROR, f"{stream.state}: {stream.last_error or self._fault}"
+        if stream.state == ERROR or fault:
+            level, message = messages.ERROR, f"{stream.state}: {stream.last_error or fault}"
         elif late > 0:
             level, message = messages.WARN, f"{stream.state}: {late} samples held or skipped (solver or publisher late)"
         values = messages.diagnostic_values(
-            stream.state, sample, factor, self._rate, rate, self._counters, stream.targets,
-            stream.last_error or self._fault,
-            {"frames_ready": len(self._frames),
+            stream.state, sample, factor, self._rate, rate, counters.as_dict(), stream.targets,
+            stream.last_error or fault,
+            {"frames_ready": len(self._schedule.frames),
              **{f"{name}_stamp_s": f"{stamp:.6f}" for name, stamp in self._effective.items()}})
         stamp = self.get_clock().now().nanoseconds
         self._diagnostics_pub.publish(messages.diagnostics(
@@ -490,7 +400,7 @@ class CraneReferenceNode(Node):
 
     def _log_status(self) -> None:
         """One-line status: stream time, E, residual, achieved rate, state."""
-        sample = self._last
+        sample = self._schedule.last
         if sample is None:
             return
         x, y, z = sample.ee_position

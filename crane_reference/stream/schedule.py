@@ -1,0 +1,205 @@
+"""Which reference sample goes out when: the publishing schedule of a node, as plain logic.
+
+Sample k of a stream published at ``rate`` Hz is stamped ``start + k / rate``
+(:func:`~crane_reference.interface.messages.stamp_at`) and shows the stream at publish time tau_k.
+:class:`FrameSchedule` keeps the buffer of frames [next to publish ... made], made ahead of publishing
+by a worker and taken by a publisher; it has no threads or locks of its own (the ROS node holds them)
+and no ROS types, so every rule here is tested without rclpy:
+
+* making frames (:meth:`FrameSchedule.plan`, :meth:`FrameSchedule.make_frames`, :meth:`FrameSchedule.accept`):
+  up to the look-ahead, after one slice of computing ahead, with a preview every ``decimation`` frames;
+  a frame that is not finite is replaced by the last valid sample held;
+* commands (:meth:`FrameSchedule.command_point`, :meth:`FrameSchedule.after_command`): a command takes
+  effect at the frame ``lead`` seconds after the next one to publish (or at the next one to make, if
+  earlier); frames from there on are dropped and made again;
+* publishing (:meth:`FrameSchedule.due`, :meth:`FrameSchedule.outgoing`): every sample due by now,
+  skipping those more than ``max_catch_up`` seconds late; a sample whose frame is not ready is the last
+  one published, held (zero velocity).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+from dataclasses import dataclass, field, replace
+
+from .reference_stream import ERROR, ReferenceStream
+from .sample import ReferenceSample
+
+TIME_TOLERANCE = 1e-9  # [s], rounding slack when comparing stream times
+COMPUTE_MARGIN = 0.05  # [s] of motion computed beyond the preview horizon
+NANOSECONDS = 10**9
+
+
+@dataclass(frozen=True)
+class Frame:
+    """Sample k of the reference, at stream publish time ``tau``, with its preview (or None) over
+    ``horizon`` seconds."""
+
+    k: int
+    tau: float
+    sample: ReferenceSample
+    preview: list[ReferenceSample] | None = None
+    horizon: float = 0.0
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What the worker makes next: frames from k at stream time tau, for buffer ``generation``, at most
+    ``room`` of them, the next preview due at ``next_preview_k``."""
+
+    k: int
+    tau: float
+    generation: int
+    next_preview_k: int
+    room: int
+
+
+@dataclass
+class Counters:
+    """Samples published, held because no frame was ready (solver late), skipped (publisher more than
+    the catch-up limit behind) and held because a frame was not finite."""
+
+    published: int = 0
+    held_late: int = 0
+    skipped: int = 0
+    held_non_finite: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return {"published": self.published, "held_late": self.held_late, "skipped": self.skipped,
+                "held_non_finite": self.held_non_finite}
+
+
+@dataclass
+class FrameSchedule:
+    """The frame buffer and sample accounting of a stream published at ``rate`` Hz (see the module)."""
+
+    rate: int
+    lookahead: int
+    lead: float
+    max_catch_up: float
+    last_valid: ReferenceSample
+    frames: deque[Frame] = field(default_factory=deque)
+    next_k: int = 0
+    made_k: int = 0
+    made_tau: float = 0.0
+    generation: int = 0
+    next_preview_k: int = 0
+    counters: Counters = field(default_factory=Counters)
+    last: ReferenceSample | None = None
+    fault: str = ""
+    compute_wall: float = 0.0
+    compute_motion: float = 0.0
+
+    # -- making frames (worker) ------------------------------------------------------------------------
+
+    def plan(self) -> Plan:
+        """Where the worker goes on: after the last frame made (or the next one to publish, if publishing
+        overtook it: the stream time goes on from made_tau, so nothing jumps)."""
+        k = max(self.made_k, self.next_k)
+        return Plan(k, self.made_tau, self.generation, self.next_preview_k, self.lookahead - (k - self.next_k))
+
+    def make_frames(self, stream: ReferenceStream, plan: Plan, count: int, horizon: float, points: int,
+                    decimation: int, compute_budget: float | None) -> tuple[list[Frame], int, bool]:
+        """Up to ``count`` frames of ``plan`` as far as the motion is computed, after computing ahead (for
+        at most ``compute_budget`` s of wall time, unbounded with None) far enough for them and a
+        ``horizon``-second preview of ``points`` points every ``decimation`` frames.  Returns the frames,
+        the next frame due a preview and whether the motion is still short of the preview horizon."""
+        dt = 1.0 / self.rate
+        tau, next_preview_k = plan.tau, plan.next_preview_k
+        ahead = tau + count * dt + horizon + COMPUTE_MARGIN
+        before = stream.computed_until
+        if before < ahead:
+            start = time.perf_counter()
+            stream.compute(ahead, compute_budget)
+            if math.isfinite(stream.computed_until):
+                self.compute_wall += time.perf_counter() - start
+                self.compute_motion += stream.computed_until - before
+        frames: list[Frame] = []
+        last = self.last_valid  # the last sample of the frames made so far (finite)
+        for i in range(count):
+            t = tau + i * dt
+            if stream.state == ERROR:  # hold the last sample made, not the stream's (computed further ahead)
+                frames.append(Frame(plan.k + i, t, last.hold()))
+                continue
+            if t > stream.computed_until - TIME_TOLERANCE:
+                break
+            preview = None
+            if plan.k + i >= next_preview_k and stream.computed_until >= t + horizon:
+                preview = stream.preview(t, horizon, points)
+                next_preview_k = plan.k + i + decimation
+            frames.append(self.checked(Frame(plan.k + i, t, stream.sample(t), preview, horizon), last))
+            last = frames[-1].sample
+        return frames, next_preview_k, stream.computed_until < ahead
+
+    def checked(self, frame: Frame, last_valid: ReferenceSample) -> Frame:
+        """``frame`` if finite, else ``last_valid`` held (never publish NaN, :attr:`fault` says why); a
+        non-finite preview is dropped."""
+        finite_preview = frame.preview is None or all(sample.is_finite() for sample in frame.preview)
+        if frame.sample.is_finite():
+            return replace(frame, preview=frame.preview if finite_preview else None)
+        self.fault = f"non-finite sample at stream time {frame.tau:.3f} s: holding the last valid one"
+        self.counters.held_non_finite += 1
+        return Frame(frame.k, frame.tau, last_valid.hold())
+
+    def accept(self, frames: list[Frame], plan: Plan, next_preview_k: int) -> bool:
+        """Append frames made for ``plan`` unless a command replaced the buffer meanwhile (False)."""
+        if plan.generation != self.generation:
+            return False
+        if frames and frames[0].k < self.next_k:  # publishing held meanwhile: continue after it
+            frames = [replace(f, k=f.k + self.next_k - frames[0].k) for f in frames]
+        if frames:
+            self.frames.extend(frames)
+            self.made_k, self.made_tau = frames[-1].k + 1, frames[-1].tau + 1.0 / self.rate
+            self.next_preview_k = next_preview_k
+            self.last_valid = frames[-1].sample
+        return True
+
+    # -- commands -------------------------------------------------------------------------------------
+
+    def command_point(self) -> tuple[int, float]:
+        """The frame a command takes effect at, and its stream time."""
+        free = max(self.made_k, self.next_k)  # the next frame the worker makes
+        k = min(self.next_k + math.ceil(self.lead * self.rate), free)
+        tau = self.made_tau if k == free else next(f.tau for f in self.frames if f.k == k)
+        return k, tau
+
+    def after_command(self, k: int, tau: float) -> None:
+        """Drop the frames from k on: the worker makes them again from stream time tau."""
+        self.frames = deque(f for f in self.frames if f.k < k)
+        self.made_k, self.made_tau = k, tau
+        self.generation += 1
+        self.next_preview_k = k
+
+    # -- publishing -----------------------------------------------------------------------------------
+
+    def due(self, now_ns: int, start_ns: int) -> list[tuple[int, Frame | None]]:
+        """Every sample due by ``now_ns`` with its frame (None: not ready), the oldest first; samples more
+        than the catch-up limit late are skipped."""
+        due = (now_ns - start_ns) * self.rate // NANOSECONDS
+        oldest = due - math.ceil(self.max_catch_up * self.rate) + 1
+        if self.next_k < oldest:
+            self.counters.skipped += oldest - self.next_k
+            self.next_k = oldest
+        batch: list[tuple[int, Frame | None]] = []
+        while self.next_k <= due:
+            while self.frames and self.frames[0].k < self.next_k:
+                self.frames.popleft()
+            ready = self.frames and self.frames[0].k == self.next_k
+            batch.append((self.next_k, self.frames.popleft() if ready else None))
+            self.next_k += 1
+        return batch
+
+    def outgoing(self, k: int, frame: Frame | None) -> Frame | None:
+        """The frame to publish as sample k: ``frame``, or the last sample published, held, if the frame
+        was not ready (None before anything was published).  Counts it as published."""
+        if frame is None:
+            if self.last is None:
+                return None
+            frame = Frame(k, math.nan, self.last.hold())
+            self.counters.held_late += 1
+        self.last = frame.sample
+        self.counters.published += 1
+        return frame
+

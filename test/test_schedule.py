@@ -1,0 +1,97 @@
+"""The publishing schedule (:mod:`crane_reference.stream.schedule`) without ROS: which sample goes out
+when, commands, held and skipped samples, and frames made from a real stream."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from crane_reference.stream.reference_stream import ReferenceStream
+from crane_reference.stream.schedule import NANOSECONDS, Frame, FrameSchedule
+
+RATE = 100  # [Hz]
+LEAD = 0.25  # [s]
+
+
+@pytest.fixture(scope="module")
+def stream_factory(params):
+    return lambda: ReferenceStream(params, "rigid", step=1e-3)
+
+
+def schedule_with(sample, frames: int = 0, lookahead: int = 100) -> FrameSchedule:
+    schedule = FrameSchedule(RATE, lookahead, LEAD, 1.0, sample)
+    plan = schedule.plan()
+    schedule.accept([Frame(k, k / RATE, sample) for k in range(frames)], plan, 0)
+    return schedule
+
+
+def test_due_samples_are_consecutive_and_skipped_beyond_the_catch_up(stream_factory):
+    sample = stream_factory().sample(0.0)
+    schedule = schedule_with(sample, frames=300, lookahead=300)
+    # at 25 ms after the start samples 0, 1, 2 are due (stamps 0, 10, 20 ms)
+    assert [k for k, _ in schedule.due(25_000_000, 0)] == [0, 1, 2]
+    assert [k for k, _ in schedule.due(25_000_000, 0)] == []
+    # 2.5 s later: only the last second (100 samples) is published, the rest is skipped
+    batch = schedule.due(2_500_000_000, 0)
+    assert [k for k, _ in batch] == list(range(151, 251))
+    assert schedule.counters.skipped == 151 - 3
+    assert all(frame.k == k for k, frame in batch)  # the frames of the samples, older ones dropped
+    assert [frame is None for _, frame in schedule.due(3_050_000_000, 0)][-7:] == [False] + [True] * 6  # 300..305
+
+
+def test_a_missing_frame_holds_the_last_published_sample(stream_factory):
+    stream = stream_factory()
+    stream.compute(0.5)
+    moving = stream.sample(0.3)
+    assert np.max(np.abs(moving.qd)) > 0.0
+    schedule = schedule_with(moving)
+    assert schedule.outgoing(0, None) is None  # nothing published yet: nothing to hold
+    assert schedule.outgoing(0, Frame(0, 0.3, moving)).sample is moving
+    held = schedule.outgoing(1, None)
+    np.testing.assert_array_equal(held.sample.q, moving.q)
+    assert held.sample.held and np.all(held.sample.qd == 0.0) and np.all(held.sample.qdd == 0.0)
+    assert schedule.counters.published == 2 and schedule.counters.held_late == 1
+
+
+def test_commands_take_effect_lead_seconds_ahead_and_replace_the_frames(stream_factory):
+    sample = stream_factory().sample(0.0)
+    schedule = schedule_with(sample, frames=80)
+    schedule.due(5 * NANOSECONDS // RATE, 0)  # samples 0..5 published
+    k, tau = schedule.command_point()
+    assert k == 6 + round(LEAD * RATE) and tau == pytest.approx(k / RATE)
+    plan = schedule.plan()  # a plan made before the command
+    schedule.after_command(k, tau)
+    assert [f.k for f in schedule.frames] == list(range(6, k))
+    assert schedule.plan().k == k and schedule.plan().tau == tau
+    assert not schedule.accept([Frame(80, 0.8, sample)], plan, 0)  # made for the old buffer: dropped
+    # with fewer frames made than the lead, the command applies at the next frame to make
+    short = schedule_with(sample, frames=10)
+    assert short.command_point() == (10, pytest.approx(0.1))
+
+
+def test_frames_are_the_stream_sampled_at_the_rate_with_decimated_previews(stream_factory):
+    stream, truth = stream_factory(), stream_factory()
+    schedule = FrameSchedule(RATE, 100, LEAD, 1.0, stream.sample(0.0))
+    plan = schedule.plan()
+    frames, next_preview_k, busy = schedule.make_frames(stream, plan, 20, 0.2, 5, 4, None)
+    assert not busy and [f.k for f in frames] == list(range(20))
+    assert [f.k for f in frames if f.preview is not None] == [0, 4, 8, 12, 16] and next_preview_k == 20
+    truth.compute(0.5)
+    for frame in frames:
+        assert frame.tau == pytest.approx(frame.k / RATE, abs=1e-12)
+        np.testing.assert_array_equal(frame.sample.q, truth.sample(frame.tau).q)
+    preview = frames[4].preview
+    np.testing.assert_array_equal([p.t for p in preview], [truth.sample(0.04 + 0.04 * (i + 1)).t for i in range(5)])
+    assert schedule.accept(frames, plan, next_preview_k) and schedule.plan().k == 20
+
+
+def test_a_non_finite_frame_is_replaced_by_the_last_valid_sample_held(stream_factory):
+    valid = stream_factory().sample(0.0)
+    schedule = schedule_with(valid)
+    broken = dataclasses.replace(valid, qd=np.full_like(valid.qd, np.inf))
+    checked = schedule.checked(Frame(3, 0.03, broken, [broken]), valid)
+    assert checked.k == 3 and checked.preview is None and checked.sample.held
+    np.testing.assert_array_equal(checked.sample.q, valid.q)
+    assert schedule.counters.held_non_finite == 1 and "non-finite" in schedule.fault
