@@ -262,13 +262,3 @@ def test_cli_simulate_bag(tmp_path, capsys):
     assert "--rate 0" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         cli.main(["simulate", "--bag", str(tmp_path / "s"), "--bag-storage", "rosbag"])
-
-
-@pytest.mark.ros
-def test_constants_match_the_node():
-    """The export's node name and rate bound are the node's (bag_export must not import rclpy)."""
-    from crane_reference.ros import node
-    from crane_reference.ros import parameters as node_parameters
-
-    assert bag_export.NODE_NAME == node.NODE_NAME
-    assert node_parameters.SPECS["publish_rate"].bounds[1] == bag_export.MAX_RATE

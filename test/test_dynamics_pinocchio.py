@@ -1,6 +1,6 @@
 """Independent checks of :class:`CraneDynamics`.
 
-* Pinocchio, run on the URDF of the same chain (:func:`crane_reference.urdf.model_to_urdf`): mass matrix
+* Pinocchio, run on the URDF of the same chain (:func:`crane_reference.model.urdf.model_to_urdf`): mass matrix
   (CRBA), gravity and velocity terms (RNEA) and the end-effector frame, its Jacobian and its
   velocity-product acceleration, at random configurations of both model variants.
 * Finite differences (no Pinocchio): C = dp_E/dq, and d = d/dt (C qd) along q(t) = q + qd t.

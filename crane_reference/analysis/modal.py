@@ -12,11 +12,11 @@ gives the linearised equations
 * K_t = -dQ/dq at qd = 0: the spring matrix K (support springs U^T S U and the RFE springs S^(3)), the
   gravity stiffness d2E_p,g/dq2 and, for a flexible drive, s_dr on psi2 (a torque source is constant in q
   and adds nothing).  Analytic: with T_k,ij = S_i S_j T_k for i <= j <= k (joint twists S, see
-  :mod:`crane_reference.kinematics`), d2E_p,g/dq_i dq_j = g J_3 S_i S_j Hc_j e_4 for i <= j, where Hc_j e_4
-  = sum of m [c; 1] over the bodies beyond joint j (:mod:`crane_reference.inertia`).
+  :mod:`crane_reference.dynamics.kinematics`), d2E_p,g/dq_i dq_j = g J_3 S_i S_j Hc_j e_4 for i <= j, where Hc_j e_4
+  = sum of m [c; 1] over the bodies beyond joint j (:mod:`crane_reference.dynamics.inertia`).
 * K_lambda = -sum_i lambda_i Phi_i,qq, the curvature of the constraint surfaces loaded by the constraint
   force (ideal constraints only; it comes from dB/dx^T (Q - h - M qdd) = dB/dx^T (-A^T lambda)).  With
-  Phi = p^T Q p + g^T p + c (:mod:`crane_reference.constraints`) and the kinematics Hessian
+  Phi = p^T Q p + g^T p + c (:mod:`crane_reference.motion.constraints`) and the kinematics Hessian
   d2p/dq_a dq_b = J S_a S_b [p; 1] (a <= b <= joint of E):
   Phi_qq = C^T 2Q C + sum_ab Phi_p . d2p/dq_a dq_b.  It turns the hanging load into a pendulum.
   For servo-constraints P = E_ic is constant and there is no such term; M_r and K_r are then not

@@ -1,6 +1,6 @@
 """Vibration of the flexible boom during the programmed motion, and the rigid-vs-flexible report.
 
-Signals of a run (:class:`~crane_reference.trajectory.Trajectory`):
+Signals of a run (:class:`~crane_reference.motion.trajectory.Trajectory`):
 
 * the RFE angles psi, theta, phi of every spring-damping element of the boom;
 * the boom-tip deflection relative to the rigid chord, in the frame of the first boom element (the frame
@@ -16,12 +16,12 @@ Signals of a run (:class:`~crane_reference.trajectory.Trajectory`):
 Spectra: Welch's method (scipy.signal.welch: Hann windows of 2^k samples, at least four per run, 50 %
 overlap, linear detrend per window), one-sided PSD, resolution df = fs / nperseg.
 
-Agreement with the modal analysis (:mod:`crane_reference.modal`): the constrained modes are computed at
+Agreement with the modal analysis (:mod:`crane_reference.analysis.modal`): the constrained modes are computed at
 states of the run every ``modal_interval`` s (linearised with the state's velocities).  The crane's
 configuration changes as E goes round the ellipse, so mode k sweeps a band [min_t f_k, max_t f_k].  The
 integrator reproduces a mode of frequency f at a slightly lower frequency (period elongation, ~(omega
-h)^2 / 12: 0.3 % at 200 Hz but 4 % at 430 Hz with h = 2.5e-4 s), computed exactly for the linear
-oscillator by :func:`generalized_alpha_frequency`; the bands are shifted accordingly.  A spectral peak
+h)^2 / 12), computed exactly for the linear oscillator by :func:`generalized_alpha_frequency`; the bands
+are shifted accordingly.  A spectral peak
 agrees with mode k if it lies in k's shifted band widened by the tolerance
 
     delta = df + 0.01 f,
@@ -29,16 +29,16 @@ agrees with mode k if it lies in k's shifted band widened by the tolerance
 one bin of the spectrum plus 1 % for the frozen-time linearisation.  A peak no mode explains may be a
 second-order combination f_i + f_j or |f_i - f_j| (e.g. 2 f_i: the vertical tip deflection has a
 component quadratic in the horizontal one); it is reported as such.  Peaks below ``MIN_FREQUENCY`` are
-the quasi-static response to the slewing (the drive torque acts for 1 s, E takes ~10 s round the
-ellipse), not vibration, and are left out.
+the quasi-static response to the slewing (in the paper's scenario the drive torque acts for 1 s and E
+takes about 10 s round the ellipse), not vibration, and are left out.
 
 Realisations: the paper's ideal constraints (a force at E) and servo-constraints (luff and knuckle
-torques, :class:`~crane_reference.programmed_motion.ProgrammedMotion` with ``realisation="servo"``).
+torques, :class:`~crane_reference.motion.programmed_motion.ProgrammedMotion` with ``realisation="servo"``).
 Each realisation starts from its own static equilibrium: with ideal constraints the height constraint's
 force at E (6.0 kN) carries the payload and link 4, and the boom tip sits 0.05 mm above its chord; with
 servo-constraints they hang on the boom, whose tip sags 2.05 mm.  On the flexible boom the servo
 torques act at the luff, away from E, and the internal dynamics they leave are unstable (the luffing-plane
-bending, exponents up to 6.6e3 1/s, see :mod:`crane_reference.modal`): such a run stops within a few
+bending, exponents up to 6.6e3 1/s, see :mod:`crane_reference.analysis.modal`): such a run stops within a few
 steps, and the report says so and lists the unstable modes.
 
 Report (:func:`analyze`): both models under each realisation; joint differences flexible - rigid (per
@@ -141,7 +141,7 @@ def spectral_peaks(spec: Spectrum, count: int = 4, min_frequency: float = MIN_FR
 
 
 def generalized_alpha_frequency(frequency: np.ndarray, step: float, rho_inf: float) -> np.ndarray:
-    """Frequency [Hz] at which the generalized-alpha method (:mod:`crane_reference.integration`) with step h
+    """Frequency [Hz] at which the generalized-alpha method (:mod:`crane_reference.motion.integration`) with step h
     reproduces an undamped mode of frequency f: |arg lambda| / (2 pi h) of the complex pair of eigenvalues
     lambda of its amplification matrix for x'' = -omega^2 x (the third, real root is the method's spurious
     one), with state (x, v, a~) and a = -omega^2 x:

@@ -1,6 +1,6 @@
 """Mass matrix, velocity terms and gravity forces from pseudo-inertia matrices (compiled with numba).
 
-With T_i^(l) = S_i T^(l) (see :mod:`crane_reference.kinematics`) the paper's mass matrix entries are
+With T_i^(l) = S_i T^(l) (see :mod:`crane_reference.dynamics.kinematics`) the paper's mass matrix entries are
 
     m_ij = sum_l tr(T_i^(l) H^(l) T_j^(l)T) = tr(S_i Hc_max(i,j) S_j^T),
 

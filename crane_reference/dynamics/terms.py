@@ -7,7 +7,7 @@ terms e = g + f_sup + f_l + d of eq. (8):
 
 with E_p,g = sum_l m^(l) g J_3 T^(l) r_C^(l), K = sum_s U^T S U (support springs, base block) +
 S^(3) (RFE springs, boom block), D = beta_sup K_sup + beta_boom K_boom (optional Rayleigh damping,
-zero in the paper) and t_dr the column drive (:mod:`crane_reference.drive`).
+zero in the paper) and t_dr the column drive (:mod:`crane_reference.model.drive`).
 """
 
 from __future__ import annotations

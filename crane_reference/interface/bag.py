@@ -5,19 +5,19 @@ the offline export of the reference (:func:`export_reference`).
 (Jazzy, the default) or 8 (Humble reads it), every topic registered with its message definition and
 RIHS01 type hash from rosbags' ROS 2 Jazzy typestore (the hashes equal the message packages'
 ``share/<pkg>/msg/<Msg>.json``) and the offered QoS profiles.  Messages are written already serialized
-(CDR), with a timestamp in integer nanoseconds.  The live recorder (:mod:`crane_reference.recorder`)
+(CDR), with a timestamp in integer nanoseconds.  The live recorder (:mod:`crane_reference.ros.recorder`)
 uses it; it needs no ROS installation.
 
 :class:`ReferenceBag` writes the node's topics (joint states, end-effector pose, diagnostics) with the
-messages built by :mod:`crane_reference.messages` from rosbags' classes, so they are the node's
+messages built by :mod:`crane_reference.interface.messages` from rosbags' classes, so they are the node's
 messages.  (rclpy's ``serialize_message`` is no alternative: its buffers can carry up to 8 bytes of
 junk after the message, which rosbags rejects on reading.)
 
 :func:`export_reference` writes what the node publishes, computed offline: a
-:class:`~crane_reference.reference_stream.ReferenceStream` stepped and sampled at the publish rate,
+:class:`~crane_reference.stream.reference_stream.ReferenceStream` stepped and sampled at the publish rate,
 written through a :class:`ReferenceBag`, so the messages are the node's for the same parameters.
 Time is simulated time: sample k has header stamp and bag timestamp ``start_ns + k * 10**9 // rate``
-(:func:`~crane_reference.messages.stamp_at`).  ``crane-reference simulate --bag DIR [--rate HZ]`` runs
+(:func:`~crane_reference.interface.messages.stamp_at`).  ``crane-reference simulate --bag DIR [--rate HZ]`` runs
 it (:func:`export_command`).
 """
 
@@ -215,7 +215,7 @@ class BagWriter:
 
 
 class ReferenceBag:
-    """The node's topics in a bag, with the messages of :mod:`crane_reference.messages` built from rosbags'
+    """The node's topics in a bag, with the messages of :mod:`crane_reference.interface.messages` built from rosbags'
     classes: joint states and end-effector pose of each sample, and diagnostics.  The offline export
     writes through it, and so can the node (to record itself, stamped with the sample stamps).
 
@@ -241,7 +241,7 @@ class ReferenceBag:
 
     def write_diagnostics(self, stamp_ns: int, name: str, hardware_id: str, level: int, message: str,
                           values: Mapping[str, object]) -> None:
-        """/diagnostics (arguments of :func:`crane_reference.messages.diagnostics`)."""
+        """/diagnostics (arguments of :func:`crane_reference.interface.messages.diagnostics`)."""
         self.bag.write_message(self.diagnostics, messages.diagnostics(self.types, stamp_ns, name, hardware_id, level,
                                                                       message, values), stamp_ns)
 

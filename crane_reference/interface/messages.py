@@ -1,4 +1,5 @@
-"""Every ROS message crane_reference publishes, built from a :class:`~crane_reference.reference_stream.ReferenceSample`.
+"""Every ROS message crane_reference publishes, built from a
+:class:`~crane_reference.stream.sample.ReferenceSample`.
 
 The builders never import a message package themselves: they take a :class:`MessageTypes`, a small
 namespace of message constructors and array converters, so that the same code makes

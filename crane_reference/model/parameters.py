@@ -11,7 +11,7 @@ Frames (all right-handed):
   column's -y axis), so that a positive luff angle ``psi(3,0)`` raises the boom.
 * link 4 frame: x along link 4 from the knuckle towards E; the knuckle axis is the boom tip's z axis.
 
-The dataclasses hold numbers only; validation lives in :mod:`crane_reference.config`.
+The dataclasses hold numbers only; validation lives in :mod:`crane_reference.model.config`.
 """
 
 from __future__ import annotations

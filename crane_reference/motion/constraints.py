@@ -6,7 +6,7 @@ here is a quadric in p with time-dependent coefficients,
     Phi(p, t) = p^T Q(t) p + g(t)^T p + c(t)        (Q symmetric),
 
 which covers the paper's ellipse (5.1) and height (5.2) as well as planes, spheres, cylinders and
-other surfaces.  With p' = C qd and p'' = C qdd + d (C, d from :mod:`crane_reference.kinematics`)
+other surfaces.  With p' = C qd and p'' = C qdd + d (C, d from :mod:`crane_reference.dynamics.kinematics`)
 
     dPhi/dt   = Phi_p C qd + Phi_t = 0                                     (6.1), (6.2)
     d2Phi/dt2 = Phi_p (C qdd + d) + convective = 0                         (6.3), (6.4)

@@ -25,13 +25,12 @@ The nonlinear step equation for a_{n+1} is solved by a modified Newton method wh
 is M_r + beta' K_r + gamma' D_r (B^T M B, B^T K B, B^T D B: reduced mass, spring stiffness and
 damping; beta' = h^2 beta (1 - alpha_f)/(1 - alpha_m), gamma' = h gamma (1 - alpha_f)/(1 - alpha_m)):
 exact for the stiff linear springs, approximate for gravity, velocity and constraint-curvature terms
-(a contraction of ~3e-4 per iteration on the default crane at h = 1 ms); the q_vd accelerations are
+(the iterations per step are printed by benchmarks/bench_core.py, [speed]); the q_vd accelerations are
 iterated as a fixed point.  The iterate is accepted once the last correction, in velocities
 (gamma' |da|), is below ``tolerance`` [rad/s or m/s]: that correction is the error of the accepted
 iterate.  The bound is on velocities, not positions (beta' |da|, smaller by h beta / gamma): a
-velocity error persists and makes the positions drift, for ever on the undamped crane.  With the
-default 1e-9, 10 s of the default motion at h = 1 ms differ from a run at 1e-12 by at most 5e-8 rad
-(1e-8: 3e-5 rad; benchmarks/bench_core.py, [newton]).
+velocity error persists and makes the positions drift, for ever on the undamped crane.  How far the
+tolerance moves the motion is printed by benchmarks/bench_core.py, [newton].
 """
 
 from __future__ import annotations

@@ -75,7 +75,7 @@ class MotionSolution:
 
 class ProgrammedMotion:
     """Equations (7)-(8) of a crane model under a :class:`ConstraintSet` (evaluated by the compiled
-    kernels of :mod:`crane_reference.kernels`).
+    kernels of :mod:`crane_reference.dynamics.kernels`).
 
     ``realisation`` says who enforces the constraints.  ``"ideal"`` (the paper): ideal forces at E,
     and the dynamic rows of (8) are projected with B on the directions the constraints leave free.

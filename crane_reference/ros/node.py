@@ -1,12 +1,14 @@
 """ROS 2 node publishing the crane's programmed motion as a reference: ``ros2 run crane_reference node``.
 
-The node is thin: the motion comes from :class:`~crane_reference.reference_stream.ReferenceStream`, the
-messages from :mod:`crane_reference.messages`, the parameters from :mod:`crane_reference.node_parameters`.
+The node is thin: it wires threads, locks and rclpy to the publishing schedule
+(:class:`~crane_reference.stream.schedule.FrameSchedule`), the motion
+(:class:`~crane_reference.stream.reference_stream.ReferenceStream`), the messages
+(:mod:`crane_reference.interface.messages`) and the parameter table (:mod:`crane_reference.ros.parameters`).
 
 Clocks and stamps
-    Sample k is stamped ``start + k / publish_rate`` (integer nanoseconds, :func:`~crane_reference.messages.stamp_at`),
-    where ``start`` is the node clock's time when publishing begins; it is never the time a message
-    happens to be sent.  The publisher thread is a timer on the node clock: it sleeps until the next
+    Sample k is stamped ``start + k / publish_rate`` (integer nanoseconds,
+    :func:`~crane_reference.interface.messages.stamp_at`), where ``start`` is the node clock's time when
+    publishing begins; it is never the time a message happens to be sent.  The publisher thread is a timer on the node clock: it sleeps until the next
     sample's stamp and publishes every sample due (normally one), so no sample is skipped or
     duplicated even when it wakes late.  ``use_sim_time`` is honoured: the samples follow /clock.  With
     ``use_sim_time`` true and no /clock published, ROS time stays at zero, so publishing does not start
@@ -33,7 +35,7 @@ Commands
     frame :data:`COMMAND_LEAD` s after the next one to be published (the frames computed beyond it are
     dropped and computed again), so a change reaches the published samples about COMMAND_LEAD after it
     is accepted.  Parameter values are validated in the on-set callback (table of
-    :mod:`~crane_reference.node_parameters`, then ``ReferenceStream.check_targets`` for the targets) and
+    :mod:`~crane_reference.ros.parameters`, then ``ReferenceStream.check_targets`` for the targets) and
     applied in the post-set callback, so ``set_parameters_atomically`` of ellipse.a and ellipse.b is one
     re-target, and a rejected change leaves the stream untouched.
 
@@ -105,8 +107,8 @@ class CraneReferenceNode(Node):
         """Declare and read the parameters, build the stream and start publishing.
 
         ``kwargs`` go to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``, ``cli_args``...).
-        Raises :class:`StartupError`, :class:`~crane_reference.config.ConfigError` or
-        :class:`~crane_reference.node_parameters.ParameterError` if it cannot start.
+        Raises :class:`StartupError`, :class:`~crane_reference.model.config.ConfigError` or
+        :class:`~crane_reference.ros.parameters.ParameterError` if it cannot start.
         """
         super().__init__(node_name, **kwargs)
         config_file = declare(self, SPECS["config_file"])

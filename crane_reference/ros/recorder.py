@@ -4,7 +4,7 @@
 A :class:`Recorder` subscribes with rclpy to each topic once a publisher of it is discovered
 (``get_topic_names_and_types`` / ``get_publishers_info_by_topic``, polled, so topics that appear later
 are added then), with ``raw=True``: the serialized CDR bytes go to a
-:class:`~crane_reference.bag_export.BagWriter` unchanged, stamped with the receive time on the node
+:class:`~crane_reference.interface.bag.BagWriter` unchanged, stamped with the receive time on the node
 clock (rosbag2's semantics).  Each topic is registered with the publishers' type (its RIHS01 hash must
 equal rosbags' Jazzy typestore's, i.e. the installed message packages') and their offered QoS profiles;
 the subscription adapts to the offers as rosbag2 does (reliable if every publisher is, transient local
