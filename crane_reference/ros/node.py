@@ -8,14 +8,14 @@ The node is thin: it wires threads, locks and rclpy to the publishing schedule
 Clocks and stamps
     Sample k is stamped ``start + k / publish_rate`` (integer nanoseconds,
     :func:`~crane_reference.interface.messages.stamp_at`), where ``start`` is the node clock's time when
-    publishing begins; it is never the time a message happens to be sent.  The publisher thread is a timer on the node clock: it sleeps until the next
-    sample's stamp and publishes every sample due (normally one), so no sample is skipped or
-    duplicated even when it wakes late.  ``use_sim_time`` is honoured: the samples follow /clock.  With
-    ``use_sim_time`` true and no /clock published, ROS time stays at zero, so publishing does not start
-    and ROS-time timers never fire: nothing is published (no joint_states, pose, preview, markers or
-    diagnostics) until /clock runs; the services and parameters keep working.
-    A thread rather than an rclpy timer publishes because rclpy's executor costs about 0.3 ms per timer
-    callback and runs the (slow) parameter validation on the same thread.
+    publishing begins; it is never the time a message happens to be sent.  The publisher thread is a timer on
+    the node clock: it sleeps until the next sample's stamp and publishes every sample due (normally one), so no
+    sample is skipped or duplicated even when it wakes late.  ``use_sim_time`` is honoured: the samples follow
+    /clock.  With ``use_sim_time`` true and no /clock published, ROS time stays at zero, so publishing does not
+    start and ROS-time timers never fire: nothing is published (no joint_states, pose, preview, markers or
+    diagnostics) until /clock runs; the services and parameters keep working. A thread rather than an rclpy
+    timer publishes because rclpy's executor adds its overhead to every timer callback and runs the (slow)
+    parameter validation on the same thread.
 
 Computing ahead
     A worker thread advances the solver (``ReferenceStream.compute`` in slices of at most
