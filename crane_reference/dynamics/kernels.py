@@ -152,9 +152,7 @@ def complete(q, qd, acc: Accelerations, k: Coefficients, drive, partition: Parti
     energy = energy_accounts(q, qd, acc.M, acc.gravity_potential, chain, drive)
     accounts = np.array([energy[0], energy[1], energy[2], energy[3], reaction_force @ qd, energy[4],
                          smallest_singular_value(np.ascontiguousarray(acc.A[:, dependent]))])
-    return Evaluation(acc.M, acc.h, acc.forces, acc.gravity_potential, acc.ee_position, acc.ee_rotation,
-                      acc.ee_jacobian, acc.ee_bias, residual, grads, acc.A, acc.c, distance, rate, acc.velocity_map,
-                      acc.qdd, reactions, reaction_force, accounts)
+    return Evaluation(acc, residual, grads, distance, rate, reactions, reaction_force, accounts)
 
 
 @njit(cache=True, nogil=True)
@@ -247,16 +245,17 @@ def generalized_alpha_run(q, qd, qdd, at, M, B, t0, times, k: Coefficients, driv
     completed = 0
     while step.status == 0:
         e = step.evaluation
-        rows.q[completed], rows.qd[completed], rows.qdd[completed] = step.q, step.qd, e.qdd
+        acc = e.terms
+        rows.q[completed], rows.qd[completed], rows.qdd[completed] = step.q, step.qd, acc.qdd
         rows.reactions[completed], rows.constraint_forces[completed] = e.reactions, e.constraint_forces
-        rows.ee_position[completed], rows.ee_rotation[completed] = e.ee_position, e.ee_rotation
-        rows.ee_velocity[completed] = e.ee_jacobian @ step.qd
+        rows.ee_position[completed], rows.ee_rotation[completed] = acc.ee_position, acc.ee_rotation
+        rows.ee_velocity[completed] = acc.ee_jacobian @ step.qd
         rows.residual[completed], rows.residual_distance[completed] = e.residual, e.distance
         rows.accounts[completed], rows.iterations[completed] = e.accounts, step.iterations
         completed += 1
         if completed == N:
             break
-        step = generalized_alpha_step(step.q, step.qd, e.qdd, step.pseudo_acceleration, e.M, e.velocity_map,
+        step = generalized_alpha_step(step.q, step.qd, acc.qdd, step.pseudo_acceleration, acc.M, acc.velocity_map,
                                       times[completed] - times[completed - 1], _at_step(k, completed),
                                       drives[completed], partition, chain, settings)
     return Run(completed, step.status, rows, step)

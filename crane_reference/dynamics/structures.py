@@ -95,27 +95,16 @@ class Accelerations(NamedTuple):
 
 
 class Evaluation(NamedTuple):
-    """:class:`Accelerations` completed with the constraint residuals (Phi or Psi), their gradients
-    (Phi_p or Psi_v, (m, 3)), distances |residual| / |gradient| and velocity-level residuals; the
-    reactions (lambda for ideal constraints, the dependent joints' torques for servo-constraints),
+    """:class:`Accelerations` (``terms``) completed with the constraint residuals (Phi or Psi), their
+    gradients (Phi_p or Psi_v, (m, 3)), distances |residual| / |gradient| and velocity-level residuals;
+    the reactions (lambda for ideal constraints, the dependent joints' torques for servo-constraints),
     their generalized force M qdd + h - forces, and the accounts (see :data:`ACCOUNTS`)."""
 
-    M: np.ndarray
-    h: np.ndarray
-    forces: np.ndarray
-    gravity_potential: float
-    ee_position: np.ndarray
-    ee_rotation: np.ndarray
-    ee_jacobian: np.ndarray
-    ee_bias: np.ndarray
+    terms: Accelerations
     residual: np.ndarray
     gradients: np.ndarray
-    A: np.ndarray
-    c: np.ndarray
     distance: np.ndarray
     velocity_residual: np.ndarray
-    velocity_map: np.ndarray
-    qdd: np.ndarray
     reactions: np.ndarray
     constraint_forces: np.ndarray
     accounts: np.ndarray

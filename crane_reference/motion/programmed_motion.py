@@ -156,11 +156,12 @@ class ProgrammedMotion:
         singularity)."""
         kinetic, potential, torque, drive_power, constraint_power, damping_power, sigma = e.accounts
         self.check_singularity(sigma)
-        return MotionSolution(e.qdd, e.reactions, e.constraint_forces,
-                              DynamicsTerms(e.M, e.h, e.forces, e.ee_position, e.ee_rotation, e.ee_jacobian, e.ee_bias,
-                                            e.gravity_potential),
-                              ConstraintTerms(e.residual, e.gradients, e.A, e.c, e.distance, e.velocity_residual),
-                              e.velocity_map, sigma, kinetic, potential, torque,
+        a = e.terms
+        return MotionSolution(a.qdd, e.reactions, e.constraint_forces,
+                              DynamicsTerms(a.M, a.h, a.forces, a.ee_position, a.ee_rotation, a.ee_jacobian, a.ee_bias,
+                                            a.gravity_potential),
+                              ConstraintTerms(e.residual, e.gradients, a.A, a.c, e.distance, e.velocity_residual),
+                              a.velocity_map, sigma, kinetic, potential, torque,
                               np.array([drive_power, constraint_power, damping_power]))
 
     def projection(self, solution: MotionSolution) -> np.ndarray:
