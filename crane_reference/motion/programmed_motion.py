@@ -154,7 +154,7 @@ class ProgrammedMotion:
     def solution_from_evaluation(self, e: Evaluation) -> MotionSolution:
         """Wrap an :class:`~crane_reference.dynamics.structures.Evaluation` of the kernels (checks the
         singularity)."""
-        kinetic, potential, torque, drive_power, constraint_power, damping_power, sigma = e.accounts
+        kinetic, potential, torque, drive_power, constraint_power, damping_power, sigma = e.accounts.tolist()
         self.check_singularity(sigma)
         a = e.terms
         return MotionSolution(a.qdd, e.reactions, e.constraint_forces,
