@@ -120,7 +120,7 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int) -> di
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(subscriber)
     recorder = Recorder()
-    subscriber.create_subscription(JointState, "/joint_states", recorder.joint_state, 10000)
+    subscriber.create_subscription(JointState, "/crane_reference/joint_states", recorder.joint_state, 10000)
     subscriber.create_subscription(DiagnosticArray, "/diagnostics", recorder.diagnostic, 100)
     client = AsyncParameterClient(subscriber, NODE)
     try:

@@ -71,7 +71,7 @@ from sensor_msgs.msg import JointState
 rclpy.init()
 node = Node("check_colcon_listener")
 received = []
-node.create_subscription(JointState, "/joint_states", received.append, 10)
+node.create_subscription(JointState, "/crane_reference/joint_states", received.append, 10)
 deadline = time.monotonic() + 300.0  # a fresh install compiles the numba kernels first (about a minute)
 while len(received) < 5 and time.monotonic() < deadline:
     rclpy.spin_once(node, timeout_sec=0.1)

@@ -32,7 +32,7 @@ def test_publishes_and_exits_cleanly_on_sigint() -> None:
     received: list[JointState] = []
     try:
         node = Node("listener", context=context)
-        node.create_subscription(JointState, "/joint_states", received.append, 100)
+        node.create_subscription(JointState, "/crane_reference/joint_states", received.append, 100)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         deadline = time.monotonic() + 60.0

@@ -47,7 +47,7 @@ from . import messages
 STORAGES = ("mcap", "sqlite3")
 VERSIONS = (9, 8)
 NODE_NAME = messages.NODE_NAME
-JOINT_STATES = f"/{messages.JOINT_STATES_TOPIC}"
+JOINT_STATES = messages.JOINT_STATES_TOPIC.replace("~", f"/{NODE_NAME}", 1)
 END_EFFECTOR_POSE = messages.END_EFFECTOR_POSE_TOPIC.replace("~", f"/{NODE_NAME}", 1)
 DIAGNOSTICS = messages.DIAGNOSTICS_TOPIC
 TOPIC_TYPES = {
@@ -286,7 +286,7 @@ def export_reference(bag: BagWriter, stream: ReferenceStream, rate: int, duratio
                               else (messages.OK, stream.state))
             counters = {"published": k + 1, "held_late": 0, "skipped": 0, "held_non_finite": 0}
             values = messages.diagnostic_values(stream.state, sample, factor, rate, float(rate), counters,
-                                                stream.targets, stream.last_error)
+                                                stream.targets, stream.rate, stream.last_error)
             reference.write_diagnostics(stamp, f"{node_name}: reference", f"/{node_name}", level, message, values)
         stream.release(tau, RELEASE_KEEP)
         if progress is not None:

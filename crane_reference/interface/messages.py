@@ -26,14 +26,21 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from ..stream.reference_stream import ReferenceSample
+    from ..model.parameters import Task
+    from ..stream.sample import ReferenceSample
 
 NANOSECONDS = 10**9
 # The node's interface, shared by the node and the offline bag export (which must not import rclpy)
 NODE_NAME = "crane_reference"
-JOINT_STATES_TOPIC = "joint_states"
+# Every reference topic lives in the node's namespace (~/...), never on a topic that measured state uses.
+JOINT_STATES_TOPIC = "~/joint_states"
 END_EFFECTOR_POSE_TOPIC = "~/end_effector_pose"
+REFERENCE_PREVIEW_TOPIC = "~/reference_preview"
+MARKERS_TOPIC = "~/markers"
+ROBOT_DESCRIPTION_TOPIC = "~/robot_description"
+SPEED_SCALING_TOPIC = "~/speed_scaling"  # input, std_msgs/Float64
 DIAGNOSTICS_TOPIC = "/diagnostics"
+ACTUATED_JOINTS = ("column_slew", "boom_luff", "knuckle")  # default joints of ~/reference_preview
 PUBLISHER_DEPTH = 10  # keep-last depth of every publisher (reliable, volatile)
 DIAGNOSTICS_PERIOD = 1.0  # [s]
 MAX_PUBLISH_RATE = 1000  # [Hz], upper bound of the publish_rate parameter
@@ -170,18 +177,23 @@ def end_effector_pose(types: MessageTypes, stamp_ns: int, frame_id: str, sample:
 
 
 def reference_preview(types: MessageTypes, stamp_ns: int, frame_id: str, joint_names: Sequence[str],
-                      offsets_ns: Sequence[int], samples: Sequence[ReferenceSample]) -> Any:
-    """trajectory_msgs/JointTrajectory starting at ``stamp_ns``: point i is ``samples[i]`` at
-    time_from_start ``offsets_ns[i]`` (which must increase strictly)."""
-    if len(offsets_ns) != len(samples):
-        raise ValueError(f"{len(offsets_ns)} offsets for {len(samples)} preview samples")
-    if any(b <= a for a, b in itertools.pairwise(offsets_ns)) or (offsets_ns and offsets_ns[0] <= 0):
-        raise ValueError(f"preview offsets must be positive and increase strictly, got {list(offsets_ns)}")
+                      indices: Sequence[int], offsets_ns: Sequence[int], samples: Sequence[ReferenceSample],
+                      effort: bool = False) -> Any:
+    """trajectory_msgs/JointTrajectory of the joints ``joint_names`` (coordinates ``indices`` of the
+    samples) whose first point is at ``stamp_ns`` (header.stamp, time_from_start 0): point i is
+    ``samples[i]`` at time_from_start ``offsets_ns[i]`` (0 first, then strictly increasing); positions,
+    velocities and accelerations, efforts only with ``effort``."""
+    if len(offsets_ns) != len(samples) or len(joint_names) != len(indices):
+        raise ValueError(f"{len(offsets_ns)} offsets for {len(samples)} samples, {len(joint_names)} names for "
+                         f"{len(indices)} coordinates")
+    if (offsets_ns and offsets_ns[0] != 0) or any(b <= a for a, b in itertools.pairwise(offsets_ns)):
+        raise ValueError(f"preview offsets must start at 0 and increase strictly, got {list(offsets_ns)}")
+    columns = list(indices)
     points = [types.JointTrajectoryPoint(
-        positions=types.float64_array(s.q),
-        velocities=types.float64_array(s.qd),
-        accelerations=types.float64_array(s.qdd),
-        effort=types.float64_array(s.effort),
+        positions=types.float64_array(s.q[columns]),
+        velocities=types.float64_array(s.qd[columns]),
+        accelerations=types.float64_array(s.qdd[columns]),
+        effort=types.float64_array(s.effort[columns] if effort else []),
         time_from_start=duration_msg(types, offset),
     ) for offset, s in zip(offsets_ns, samples, strict=True)]
     return types.JointTrajectory(header=header(types, stamp_ns, frame_id), joint_names=list(joint_names),
@@ -198,24 +210,29 @@ def diagnostics(types: MessageTypes, stamp_ns: int, name: str, hardware_id: str,
 
 
 def diagnostic_values(state: str, sample: ReferenceSample | None, real_time_factor: float, publish_rate: int,
-                      achieved_rate: float, counters: Mapping[str, int], targets: object, last_error: str,
-                      extra: Mapping[str, object] | None = None) -> dict[str, object]:
-    """The key/value pairs of the node's reference status (the node and the offline bag export): stream
-    state, motion time [s] and largest constraint distance [m] of the last sample, solver real-time
-    factor, publish and achieved rate [Hz], the sample counters, ``extra`` pairs, the targets and the
-    last error."""
-    return {
+                      achieved_rate: float, counters: Mapping[str, int], targets: Task, speed_scaling: float,
+                      last_error: str, extra: Mapping[str, object] | None = None) -> dict[str, str]:
+    """The key/value pairs of the node's reference status (the node and the offline bag export), every
+    value a number (or the state and the error text): stream state, motion time [s] and largest
+    constraint distance [m] of the last sample, solver real-time factor, publish and achieved rate
+    [Hz], the sample counters, the targets and speed scaling, ``extra`` pairs and the last error."""
+    values = {
         "state": state,
-        "motion_time_s": f"{sample.t:.6f}" if sample else "",
-        "constraint_residual_m": f"{sample.residual_distance:.3e}" if sample else "",
+        "motion_time_s": f"{sample.t:.6f}" if sample else "nan",
+        "constraint_residual_m": f"{sample.residual_distance:.3e}" if sample else "nan",
         "real_time_factor": f"{real_time_factor:.3f}",
         "publish_rate_hz": publish_rate,
         "achieved_rate_hz": f"{achieved_rate:.3f}",
         **counters,
+        "target_ellipse_a_m": f"{targets.ellipse_a:g}",
+        "target_ellipse_b_m": f"{targets.ellipse_b:g}",
+        "target_z_increment_m": f"{targets.z_increment:g}",
+        "target_rise_time_s": f"{targets.rise_time:g}",
+        "speed_scaling": f"{speed_scaling:g}",
         **(extra or {}),
-        "targets": str(targets),
         "last_error": last_error,
     }
+    return {key: str(value) for key, value in values.items()}
 
 
 def _line_strip(types: MessageTypes, stamp_ns: int, frame_id: str, namespace: str,
@@ -251,5 +268,6 @@ def markers(types: MessageTypes, stamp_ns: int, frame_id: str, ellipse: tuple[fl
 
 
 def robot_description(types: MessageTypes, urdf: str) -> Any:
-    """std_msgs/String with the URDF (for robot_state_publisher / RViz)."""
+    """std_msgs/String with the URDF of the model the reference is computed for (RViz's RobotModel can
+    read it from ~/robot_description; robot_state_publisher takes the same URDF as its parameter)."""
     return types.String(data=urdf)

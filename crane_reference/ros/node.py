@@ -59,13 +59,14 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.exceptions import ParameterNotDeclaredException
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
-from std_msgs.msg import String
+from std_msgs.msg import Float64, String
 from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
@@ -114,12 +115,16 @@ class CraneReferenceNode(Node):
         config_file = declare(self, SPECS["config_file"])
         config = load_config(config_file or None)
         self._values = {spec.name: declare(self, spec, config) for spec in PARAMETERS if spec.name != "config_file"}
+        self._check_overrides()
         self._rate = int(self._values["publish_rate"])
         self._stream = self._make_stream(config)
         self._schedule = FrameSchedule(self._rate, max(2, math.ceil(LOOKAHEAD * self._rate)), COMMAND_LEAD,
                                        MAX_CATCH_UP, self._stream.sample(0.0))
         self._types = rclpy_types()
         self._joint_names = list(self._stream.joint_names)
+        self._preview_indices = self._joint_indices(self._values["preview.joints"])
+        self._pending_restart: int | None = None  # sample at which a restart waits for the motion to rest
+        self._last_restart: dict[str, str] = {}
 
         # The schedule's buffer and counters are guarded by _lock (never held while solving), the stream by
         # _stream_lock.
@@ -137,10 +142,10 @@ class CraneReferenceNode(Node):
         depth = messages.PUBLISHER_DEPTH
         self._joint_pub = self.create_publisher(JointState, messages.JOINT_STATES_TOPIC, depth)
         self._pose_pub = self.create_publisher(PoseStamped, messages.END_EFFECTOR_POSE_TOPIC, depth)
-        self._preview_pub = self.create_publisher(JointTrajectory, "~/reference_preview", depth)
-        self._marker_pub = self.create_publisher(MarkerArray, "~/markers", depth)
+        self._preview_pub = self.create_publisher(JointTrajectory, messages.REFERENCE_PREVIEW_TOPIC, depth)
+        self._marker_pub = self.create_publisher(MarkerArray, messages.MARKERS_TOPIC, depth)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, messages.DIAGNOSTICS_TOPIC, depth)
-        self._description_pub = self.create_publisher(String, "robot_description", latched)
+        self._description_pub = self.create_publisher(String, messages.ROBOT_DESCRIPTION_TOPIC, latched)
         self._description_pub.publish(messages.robot_description(self._types, model_to_urdf(self._stream.model)))
 
         self.add_pre_set_parameters_callback(coerce_parameters)
@@ -148,6 +153,7 @@ class CraneReferenceNode(Node):
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.create_service(Trigger, "~/restart", self._on_restart)
         self.create_service(SetBool, "~/pause", self._on_pause)
+        self.create_subscription(Float64, messages.SPEED_SCALING_TOPIC, self._on_speed_scaling, depth)
 
         self._stop = threading.Event()
         self._threads = [threading.Thread(target=self._work, name="crane_reference_solver", daemon=True),
@@ -164,6 +170,32 @@ class CraneReferenceNode(Node):
 
     # -- set-up ---------------------------------------------------------------------------------------
 
+    def _check_undeclared_parameters(self, parameter_list: list[Parameter]) -> None:
+        """Reject parameters this node does not have, naming them and the node's parameters (rclpy's own
+        message lists none of them)."""
+        unknown = [p.name for p in parameter_list if not self.has_parameter(p.name)]
+        if unknown:
+            raise ParameterNotDeclaredException(
+                f"{', '.join(unknown)}: not a parameter of {self.get_fully_qualified_name()}; its parameters are "
+                f"{', '.join(sorted(self._parameters))}")
+        super()._check_undeclared_parameters(parameter_list)
+
+    def _check_overrides(self) -> None:
+        """Refuse to start with a parameter override (``-p``, a params file) for a name the node lacks."""
+        unknown = sorted(name for name in self._parameter_overrides
+                         if not self.has_parameter(name) and not name.startswith("qos_overrides."))
+        if unknown:
+            raise StartupError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
+                               f"{', '.join(sorted(self._parameters))}")
+
+    def _joint_indices(self, names: list[str]) -> list[int]:
+        """Coordinates of the joints ``names`` (StartupError / ParameterError naming the unknown ones)."""
+        unknown = [name for name in names if name not in self._joint_names]
+        if unknown:
+            raise ParameterError(f"preview.joints = {names!r}: {', '.join(unknown)} not joints of the "
+                                 f"{self._values['model']} model; its joints are {', '.join(self._joint_names)}")
+        return [self._joint_names.index(name) for name in names]
+
     def _targets(self, overrides: dict[str, float] | None = None) -> Task:
         """Targets of the current parameter values, with ``overrides`` (parameter name -> value)."""
         values = {**self._values, **(overrides or {})}
@@ -174,14 +206,14 @@ class CraneReferenceNode(Node):
         targets = self._targets()
         try:
             stream = ReferenceStream(config, v["model"], v["integrator.step"], v["blend_time"], targets,
-                                     column_drive(config, v["drive.torque"], v["drive.duration"]))
+                                     column_drive(config, v["drive.torque"], v["drive.duration"]),
+                                     speed_scaling=v["speed_scaling"], ramp_time=v["speed_scaling.ramp_time"],
+                                     at_rest=not v["autostart"])
             stream.check_targets(targets)
         except UnreachableTargetError as error:
             raise StartupError(f"ellipse.* / z.* = {targets}: {error}") from error
         except SOLVER_FAILURES as error:
             raise StartupError(f"no consistent start for the targets {targets}: {error}") from error
-        if not v["autostart"]:
-            stream.pause(0.0)
         return stream
 
     # -- computing ahead (worker thread) --------------------------------------------------------------
@@ -194,10 +226,18 @@ class CraneReferenceNode(Node):
                 with self._lock:
                     plan = schedule.plan()
                     fault = schedule.fault
+                    count = min(plan.room, FRAME_BATCH)
                 with self._stream_lock:
+                    if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
+                        continue
+                    if self._pending_restart is not None:
+                        if plan.k >= self._pending_restart:  # the motion has come to rest: restart here
+                            self._restart_now(plan.tau)
+                        else:
+                            count = min(count, self._pending_restart - plan.k)
                     frames, next_preview_k, busy = schedule.make_frames(
-                        self._stream, plan, min(plan.room, FRAME_BATCH), self._values["preview.horizon"],
-                        self._values["preview.points"], self._preview_decimation(),
+                        self._stream, plan, count, self._values["preview.horizon"],
+                        self._values["preview.points"] - 1, self._preview_decimation(),
                         COMPUTE_SLICE if self._start_ns is not None else None)  # all before starting
                     self._stream.release(plan.tau, RELEASE_KEEP + LOOKAHEAD)
                 if schedule.fault != fault:
@@ -231,17 +271,54 @@ class CraneReferenceNode(Node):
         """Stamp [s] of sample k (relative to the start if publishing has not begun)."""
         return messages.stamp_at(self._start_ns or 0, k, self._rate) / NANOSECONDS
 
+    def _restart_now(self, tau: float) -> None:
+        """Restart the stream at publish time tau (stream lock held)."""
+        self._stream.restart(tau)
+        self._pending_restart = None
+        self._schedule.fault = ""
+
     def _on_restart(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        """~/restart: back to the static-equilibrium start of the current targets."""
+        """~/restart: back to the static-equilibrium start of the current targets.  A moving reference
+        first comes to rest along a speed-scaling ramp; the position then jumps to the start, and the
+        response and the diagnostics (restart_*) say when and by how much."""
+        if self._pending_restart is not None:
+            response.success = True
+            stamp = self._stamp_s(self._pending_restart)
+            response.message = f"a restart is already pending at the sample stamped {stamp:.6f} s"
+            return response
         try:
-            k = self._command(self._stream.restart)
+            with self._stream_lock:
+                with self._lock:
+                    k, tau = self._schedule.command_point()
+                stream = self._stream
+                if stream.state == ERROR or (stream.rate == 0.0 and stream.settled_at() <= tau):
+                    rest_k, last_tau = k, tau
+                else:  # come to rest; the last sample before the restart is the first one at rest
+                    if stream.state != PAUSED:
+                        stream.pause(tau)
+                    rest_k = k + math.ceil((stream.settled_at() - tau) * self._rate - 1e-9) + 1
+                    last_tau = tau + (rest_k - 1 - k) / self._rate
+                stream.compute(last_tau)
+                before = stream.sample(last_tau).q
+                after = stream.start_configuration()
+                if rest_k == k:
+                    self._restart_now(tau)
+                else:
+                    self._pending_restart = rest_k
+                with self._lock:
+                    self._schedule.after_command(k, tau)
         except SOLVER_FAILURES as error:
             response.success, response.message = False, f"restart failed, stream unchanged: {error}"
         else:
+            jump = np.abs(after - before)
+            joint = self._joint_names[int(np.argmax(jump))]
+            stamp = self._stamp_s(rest_k)
+            self._effective["restart"] = stamp
+            self._last_restart = {"restart_jump_rad": f"{jump.max():.6g}", "restart_jump_joint": joint}
             response.success = True
-            response.message = f"restarted from the static equilibrium at the sample stamped {self._stamp_s(k):.6f} s"
-            self._effective["restart"] = self._stamp_s(k)
-            self._schedule.fault = ""
+            response.message = (f"{'coming to rest, then ' if rest_k > k else ''}restarting from the static "
+                                f"equilibrium at the sample stamped {stamp:.6f} s: position jump up to "
+                                f"{jump.max():.6g} (SI units) on {joint}")
         self.get_logger().info(response.message)
         return response
 
@@ -252,19 +329,37 @@ class CraneReferenceNode(Node):
         if state == ERROR:
             response.success = False
             response.message = f"the stream is in ERROR ({self._stream.last_error}); call ~/restart"
+        elif self._pending_restart is not None:
+            response.success = False
+            response.message = (f"a restart is pending at the sample stamped {self._stamp_s(self._pending_restart):.6f}"
+                                " s; the reference stays at rest until then")
         elif state == wanted:
             response.success, response.message = True, f"already {state.lower()}"
         else:
             k = self._command(self._stream.pause if request.data else self._stream.resume)
-            verb = "paused" if request.data else "resumed"
-            response.success, response.message = True, f"{verb} at the sample stamped {self._stamp_s(k):.6f} s"
+            verb = "coming to rest" if request.data else "resuming"
+            response.success = True
+            response.message = (f"{verb} from the sample stamped {self._stamp_s(k):.6f} s over "
+                                f"{self._stream.ramp_time:g} s")
             self._effective["pause" if request.data else "resume"] = self._stamp_s(k)
         self.get_logger().info(f"~/pause {request.data}: {response.message}")
         return response
 
+    def _on_speed_scaling(self, msg: Float64) -> None:
+        """~/speed_scaling (std_msgs/Float64): sets the speed_scaling parameter (same checks and ramp)."""
+        result = self.set_parameters([Parameter("speed_scaling", Parameter.Type.DOUBLE, float(msg.data))])[0]
+        if not result.successful:
+            self.get_logger().error(f"~/speed_scaling rejected: {result.reason}", throttle_duration_sec=1.0)
+
     def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         """On-set callback: the table's checks, then the reachability of changed targets."""
         reason = check(parameters)
+        joints = next((p.value for p in parameters if p.name == "preview.joints"), None)
+        if reason is None and joints is not None:
+            try:
+                self._joint_indices(list(joints))
+            except ParameterError as error:
+                reason = str(error)
         changed = {p.name: p.value for p in parameters if p.name in TARGET_PARAMETERS}
         if reason is None and changed:
             targets = self._targets(changed)
@@ -286,7 +381,14 @@ class CraneReferenceNode(Node):
         if "status_period" in names:
             self._status_timer.timer_period_ns = round(self._values["status_period"] * NANOSECONDS)
             self._status_timer.reset()
-        if any(name in TARGET_PARAMETERS for name in names):
+        if "preview.joints" in names:
+            self._preview_indices = self._joint_indices(list(self._values["preview.joints"]))
+        if "speed_scaling" in names:
+            rate = self._values["speed_scaling"]
+            k = self._command(lambda tau: self._stream.set_speed_scaling(tau, rate))
+            self._effective["speed_scaling"] = self._stamp_s(k)
+            self.get_logger().info(f"speed scaling {rate:g} from the sample stamped {self._stamp_s(k):.6f} s")
+        if any(name in TARGET_PARAMETERS for name in names) and self._targets() != self._stream.targets:
             targets = self._targets()
             # the targets passed check_targets in the on-set callback
             k = self._command(lambda tau: self._stream.retarget(tau, targets, checked=True))
@@ -344,9 +446,11 @@ class CraneReferenceNode(Node):
         self._pose_pub.publish(messages.end_effector_pose(types, stamp, frame_id, sample))
         if frame.preview is not None:
             horizon_ns, count = round(frame.horizon * NANOSECONDS), len(frame.preview)
-            offsets = [(i + 1) * horizon_ns // count for i in range(count)]
-            self._preview_pub.publish(messages.reference_preview(types, stamp, frame_id, self._joint_names, offsets,
-                                                                 frame.preview))
+            offsets = [i * horizon_ns // count for i in range(count + 1)]
+            names = [self._joint_names[i] for i in self._preview_indices]
+            self._preview_pub.publish(messages.reference_preview(
+                types, stamp, frame_id, names, self._preview_indices, offsets, [sample, *frame.preview],
+                self._values["preview.effort"]))
         if k % max(1, round(self._rate / TRAIL_RATE)) == 0:
             self._trail.append(sample.ee_position)
         self._last_stamp = stamp
@@ -389,10 +493,10 @@ class CraneReferenceNode(Node):
         elif late > 0:
             level, message = messages.WARN, f"{stream.state}: {late} samples held or skipped (solver or publisher late)"
         values = messages.diagnostic_values(
-            stream.state, sample, factor, self._rate, rate, counters.as_dict(), stream.targets,
+            stream.state, sample, factor, self._rate, rate, counters.as_dict(), stream.targets, stream.rate,
             stream.last_error or fault,
             {"frames_ready": len(self._schedule.frames),
-             **{f"{name}_stamp_s": f"{stamp:.6f}" for name, stamp in self._effective.items()}})
+             **{f"{name}_stamp_s": f"{stamp:.6f}" for name, stamp in self._effective.items()}, **self._last_restart})
         stamp = self.get_clock().now().nanoseconds
         self._diagnostics_pub.publish(messages.diagnostics(
             self._types, stamp, f"{self.get_name()}: reference", self.get_fully_qualified_name(), level, message,

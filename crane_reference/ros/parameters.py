@@ -31,14 +31,15 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ..interface.messages import MAX_PUBLISH_RATE
+from ..interface.messages import ACTUATED_JOINTS, MAX_PUBLISH_RATE
 from ..model.chain import VARIANTS
 from ..model.parameters import CraneParameters, TorqueDrive
 
-Value = bool | int | float | str
-BOOL, INTEGER, DOUBLE, STRING = (Parameter.Type.BOOL, Parameter.Type.INTEGER, Parameter.Type.DOUBLE,
-                                 Parameter.Type.STRING)
-_TYPE_NAMES = {BOOL: "a boolean", INTEGER: "an integer", DOUBLE: "a number", STRING: "a string"}
+Value = bool | int | float | str | list[str]
+BOOL, INTEGER, DOUBLE, STRING, STRING_ARRAY = (Parameter.Type.BOOL, Parameter.Type.INTEGER, Parameter.Type.DOUBLE,
+                                               Parameter.Type.STRING, Parameter.Type.STRING_ARRAY)
+_TYPE_NAMES = {BOOL: "a boolean", INTEGER: "an integer", DOUBLE: "a number", STRING: "a string",
+               STRING_ARRAY: "a list of distinct, non-empty strings"}
 
 
 class ParameterError(ValueError):
@@ -108,6 +109,10 @@ class ParameterSpec:
 
     def check(self, value: Any) -> str | None:
         """``None`` if ``value`` (already coerced) is allowed, else the reason, naming the parameter."""
+        if self.type is STRING_ARRAY:
+            strings = isinstance(value, list | tuple) and all(isinstance(v, str) and v for v in value)
+            invalid = not strings or not value or len(set(value)) != len(value)
+            return f"{self.name} = {value!r}: {self.allowed()}" if invalid else None
         python_type = {BOOL: bool, INTEGER: int, DOUBLE: float, STRING: str}[self.type]
         wrong_type = not isinstance(value, python_type) or (python_type is int and isinstance(value, bool))
         invalid = (wrong_type
@@ -152,10 +157,18 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("blend_time", DOUBLE, 2.0, "Duration of the C2 blend of the constraint parameters after a "
                   "change of ellipse.* or z.*", "s", (0.01, 600.0)),
     ParameterSpec("preview.horizon", DOUBLE, 1.0, "Time span of ~/reference_preview", "s", (0.01, 10.0)),
-    ParameterSpec("preview.points", INTEGER, 10, "Points of ~/reference_preview, evenly spaced over the horizon "
-                  "(the first one horizon / points after the sample)", "", (1, 1000)),
+    ParameterSpec("preview.points", INTEGER, 11, "Points of ~/reference_preview: the first at the sample's "
+                  "stamp (header.stamp, time_from_start 0), then evenly spaced to the horizon", "", (2, 1000)),
     ParameterSpec("preview.rate", DOUBLE, 10.0, "Rate of ~/reference_preview (every round(publish_rate / "
                   "preview.rate)-th sample, at least every sample)", "Hz", (0.1, 1000.0)),
+    ParameterSpec("preview.joints", STRING_ARRAY, list(ACTUATED_JOINTS), "Joints of ~/reference_preview (names "
+                  "of the model's coordinates, see `crane-reference urdf`); default the actuated ones"),
+    ParameterSpec("preview.effort", BOOL, False, "Fill the efforts of ~/reference_preview (the generalized "
+                  "constraint and drive forces of the motion at its own speed)"),
+    ParameterSpec("speed_scaling", DOUBLE, 1.0, "Speed of the reference relative to the programmed motion "
+                  "(0: at rest); changes are C2 ramps over speed_scaling.ramp_time", "", (0.0, 1.0)),
+    ParameterSpec("speed_scaling.ramp_time", DOUBLE, 1.0, "Duration of a speed-scaling ramp (also of "
+                  "~/pause, resume and the stop before ~/restart)", "s", (0.01, 60.0), read_only=True),
     ParameterSpec("autostart", BOOL, True, "Start the motion at once; if false, hold the static-equilibrium "
                   "start until ~/pause is called with data: false", read_only=True),
     ParameterSpec("status_period", DOUBLE, 5.0, "Period of the one-line status log", "s", (0.1, 3600.0)),

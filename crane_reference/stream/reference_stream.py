@@ -1,14 +1,18 @@
 """Online reference: the programmed motion computed ahead of time and served at any instant.
 
 Two clocks appear here.  *Publish time* tau [s] counts from the stream's (re)start and includes time
-spent paused; every method takes publish times.  *Motion time* t = tau - (time paused) is the time
-of the programmed motion (the drive's torque profile and the z quintic run on it).
+spent paused or slowed down; every method takes publish times.  *Motion time* t is the time of the
+programmed motion (the drive's torque profile and the z quintic run on it); t(tau) is a
+:class:`~.time_warp.TimeWarp` whose rate dt/dtau is the speed scaling in [0, 1], changed along C2 ramps
+(:meth:`ReferenceStream.set_speed_scaling`; :meth:`ReferenceStream.pause` ramps it to 0 and
+:meth:`ReferenceStream.resume` back), so the published position, velocity and acceleration stay continuous.
 
 * :meth:`ReferenceStream.compute` advances the integrator into the :class:`~.history.History` (never
   raises: a solver failure or a singular task switches the stream to ``ERROR`` and holds the last
   valid reference).
-* :meth:`ReferenceStream.sample` interpolates the computed motion (:func:`~.sample.between`).  Held
-  samples (paused or error) keep the position and have zero velocity and acceleration.
+* :meth:`ReferenceStream.sample` interpolates the computed motion (:func:`~.sample.between`) at t(tau)
+  and scales its velocity and acceleration by the time warp (:func:`~.sample.warped`).  Held samples
+  (error) keep the position and have zero velocity and acceleration.
 * :meth:`ReferenceStream.retarget` changes the :class:`Task` from a computed instant at or after the
   given time: the motion computed beyond it is discarded and the constraints move to the new ones along
   a C2 blend (:func:`~.targets.blend_constraints`), so q, qd and qdd stay continuous.
@@ -35,8 +39,9 @@ from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import SOLVER_FAILURES, MotionStepper, Scenario, TaskConstraints, paper_task_constraints
 from ..motion.trajectory import unstack_samples
 from .history import History
-from .sample import ReferenceSample, between, reference_sample
+from .sample import ReferenceSample, between, reference_sample, warped
 from .targets import blend_constraints, check_task
+from .time_warp import TimeWarp, check_rate
 
 RUNNING, PAUSED, ERROR = "RUNNING", "PAUSED", "ERROR"
 CHUNK_STEPS = 20
@@ -52,7 +57,8 @@ class ReferenceStream:
                  blend_time: float = 2.0, targets: Task | None = None,
                  drive: TorqueDrive | FlexibleDrive | None = None, rho_inf: float = 0.8,
                  singular_value_margin: float = 0.1, task_constraints: TaskConstraints = paper_task_constraints,
-                 dependent: tuple[int, ...] | None = None):
+                 dependent: tuple[int, ...] | None = None, speed_scaling: float = 1.0, ramp_time: float = 1.0,
+                 at_rest: bool = False):
         self.params = replace(params, drive=drive or params.drive)
         self.targets = targets or params.task
         self.task_constraints = task_constraints
@@ -64,7 +70,9 @@ class ReferenceStream:
         self.rho_inf = rho_inf
         self.singular_value_margin = singular_value_margin
         self.set_blend_time(blend_time)
-        self.restart()
+        self.speed_scaling = check_rate(speed_scaling)
+        self._warp = TimeWarp(ramp_time, self.speed_scaling)
+        self.restart(at_rest=at_rest)
 
     # -- clocks and state ---------------------------------------------------------------------------
 
@@ -79,32 +87,47 @@ class ReferenceStream:
                                      tuple(self.dependent[i] for i in rows), MIN_SINGULAR_VALUE)
         return static_equilibrium(holonomic, self.model.initial_q).q
 
-    def restart(self, tau: float = 0.0) -> None:
-        """Back to the static-equilibrium start of the current targets; motion time 0 at publish time tau."""
+    def restart(self, tau: float = 0.0, at_rest: bool = False) -> None:
+        """Back to the static-equilibrium start of the current targets; motion time 0 at publish time tau,
+        moving at the speed scaling (or ``at_rest``: PAUSED until :meth:`resume`)."""
         constraints = self.task_constraints(self.targets, self.scenario.z_static)
         start = self._static_start(constraints)
         self._stepper = MotionStepper(self._motion(constraints), 0.0, start, np.zeros_like(start), self.step,
                                       self.rho_inf)
         self._history = History(self._stepper.snapshot())
-        self._origin = tau
-        self._paused_total = 0.0
-        self._pause_started: float | None = None
+        self._warp = TimeWarp(self._warp.ramp_time, 0.0 if at_rest else self.speed_scaling, tau)
         self._hold: ReferenceSample | None = None
-        self.state = RUNNING
+        self.state = PAUSED if at_rest else RUNNING
         self.last_error = ""
+
+    def start_configuration(self) -> np.ndarray:
+        """q at the static-equilibrium start of the current targets (where :meth:`restart` goes)."""
+        return self._static_start(self.task_constraints(self.targets, self.scenario.z_static))
 
     def motion_time(self, tau: float) -> float:
         """Motion time at publish time tau."""
-        if self._pause_started is not None:
-            tau = self._pause_started
-        return tau - self._origin - self._paused_total
+        return self._warp.at(tau)[0]
+
+    @property
+    def rate(self) -> float:
+        """The speed scaling the stream is at or moving to (0 while paused)."""
+        return self._warp.target
+
+    @property
+    def ramp_time(self) -> float:
+        return self._warp.ramp_time
+
+    def settled_at(self) -> float:
+        """Publish time at which the speed scaling reaches the rate it is moving to."""
+        return self._warp.settled_at()
 
     @property
     def computed_until(self) -> float:
-        """Publish time up to which samples are available (infinite while held)."""
-        if self.state != RUNNING:
+        """Publish time up to which samples are available (infinite while held, or at rest before the end
+        of the computed motion)."""
+        if self._hold is not None:
             return math.inf
-        return self._history.times[-1] + self._origin + self._paused_total
+        return self._warp.publish_time(self._history.times[-1])
 
     def set_blend_time(self, seconds: float) -> None:
         if not (math.isfinite(seconds) and seconds > 0.0):
@@ -112,19 +135,24 @@ class ReferenceStream:
         self.blend_time = seconds
 
     def pause(self, tau: float) -> None:
-        """Hold the reference at publish time tau (zero velocity; the position does not jump)."""
+        """Bring the motion to rest from publish time tau along a speed-scaling ramp (C2: no step in
+        velocity or acceleration); returns when the ramp starts (see :class:`~.time_warp.TimeWarp`)."""
         if self.state == RUNNING:
-            self._hold = self.sample(tau).hold()
-            self._pause_started = tau
+            self._warp.set_rate(tau, 0.0)
             self.state = PAUSED
 
     def resume(self, tau: float) -> None:
-        """Continue the motion from where it was paused (motion time resumes at the paused instant)."""
+        """Ramp the motion back to the speed scaling from publish time tau."""
         if self.state == PAUSED:
-            self._paused_total += tau - self._pause_started
-            self._pause_started = None
-            self._hold = None
+            self._warp.set_rate(tau, self.speed_scaling)
             self.state = RUNNING
+
+    def set_speed_scaling(self, tau: float, rate: float) -> None:
+        """Re-time the motion to ``rate`` in [0, 1] of its own speed from publish time tau (a C2 ramp;
+        while paused, the rate resumed to)."""
+        self.speed_scaling = check_rate(rate)
+        if self.state == RUNNING:
+            self._warp.set_rate(tau, self.speed_scaling)
 
     # -- computing and sampling ---------------------------------------------------------------------
 
@@ -134,7 +162,7 @@ class ReferenceStream:
         if self.state != RUNNING:
             return
         deadline = None if wall_budget is None else time.perf_counter() + wall_budget
-        target = until - self._origin - self._paused_total
+        target = self.motion_time(until)
         times = self._history.times
         while times[-1] < target:
             if deadline is not None and time.perf_counter() > deadline:
@@ -174,16 +202,16 @@ class ReferenceStream:
         """The reference at publish time tau (which must not exceed :attr:`computed_until`)."""
         if self._hold is not None:
             return self._hold
-        t = self.motion_time(tau)
+        t, rate, rate_change = self._warp.at(tau)
         times = self._history.times
         if t > times[-1] + 1e-12:
             raise ValueError(f"t = {t:.6g} s is beyond the computed motion ({times[-1]:.6g} s): call compute()")
         k, exact = self._history.bracket(t)
         a = self._reference(self._history.entries[k].sample)
-        if exact:
-            return a
-        return between(a, self._reference(self._history.entries[k + 1].sample), t,
-                       self.scenario.dynamics.end_effector_pose)
+        if not exact:
+            a = between(a, self._reference(self._history.entries[k + 1].sample), t,
+                        self.scenario.dynamics.end_effector_pose)
+        return warped(a, rate, rate_change)
 
     def preview(self, tau: float, horizon: float, count: int) -> list[ReferenceSample]:
         """``count`` samples over (tau, tau + horizon], strictly increasing in time."""
@@ -191,8 +219,9 @@ class ReferenceStream:
         return [self.sample(min(tau + horizon * (i + 1) / count, self.computed_until)) for i in range(count)]
 
     def release(self, tau: float, keep: float = 1.0) -> None:
-        """Forget computed states older than ``keep`` seconds before publish time tau."""
+        """Forget computed states older than ``keep`` seconds of motion before publish time tau."""
         self._history.release(self.motion_time(tau) - keep)
+        self._warp.release(tau)
 
     # -- targets ------------------------------------------------------------------------------------
 

@@ -56,3 +56,12 @@ def between(a: ReferenceSample, b: ReferenceSample, t: float, pose) -> Reference
     p, R = pose(q)
     return ReferenceSample(t, q, qd, (1 - s) * a.qdd + s * b.qdd, (1 - s) * a.effort + s * b.effort, p,
                            Rotation.from_matrix(R).as_quat(), max(a.residual_distance, b.residual_distance), False)
+
+
+def warped(sample: ReferenceSample, rate: float, rate_change: float) -> ReferenceSample:
+    """``sample`` of the motion at its own time t, published at a rate dt/dtau = ``rate`` changing by
+    ``rate_change`` per second of publish time: velocity r q'(t), acceleration r^2 q''(t) + r' q'(t)
+    (see :mod:`~.time_warp`).  Unchanged at r = 1, r' = 0."""
+    if rate == 1.0 and rate_change == 0.0:
+        return sample
+    return replace(sample, qd=rate * sample.qd, qdd=rate * rate * sample.qdd + rate_change * sample.qd)
