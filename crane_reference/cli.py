@@ -157,9 +157,13 @@ def parser() -> argparse.ArgumentParser:
     u.add_argument("--config")
     u.add_argument("--model", choices=VARIANTS, default="flexible")
     sub.add_parser("node", help="run the ROS 2 node (arguments after 'node' go to ROS)", add_help=False)
-    r = sub.add_parser("record", help="record topics to a rosbag2 bag (default: the node's joint_states, "
-                       "end-effector pose and diagnostics) until SIGINT/SIGTERM or --duration")
-    r.add_argument("topics", nargs="*", metavar="TOPIC", help="topics to record (default: the node's)")
+    r = sub.add_parser("record", help="record topics to a rosbag2 bag (default: every topic the crane_reference "
+                       "node publishes) until SIGINT/SIGTERM or --duration")
+    r.add_argument("topics", nargs="*", metavar="TOPIC", help="topics to record (default: every topic --node "
+                   "publishes)")
+    r.add_argument("--node", default="/crane_reference", metavar="NAME",
+                   help="without TOPICs, record what this node publishes, as the ROS graph shows it "
+                   "(default /crane_reference)")
     r.add_argument("-o", "--output", metavar="DIR", help="new bag directory (default rosbag2_YYYY_MM_DD-HH_MM_SS)")
     r.add_argument("--storage", choices=["mcap", "sqlite3"], default="mcap", help="storage (default mcap)")
     r.add_argument("--version", type=int, choices=[9, 8], default=9,

@@ -56,3 +56,11 @@ def test_start_up_error_names_the_parameter() -> None:
     assert process.returncode == 1
     assert "cannot start: ellipse.a = 30.0: must be a number in [0.1, 20] m" in stderr
     assert "Traceback" not in stderr
+
+
+def test_an_unknown_parameter_stops_the_start_naming_it() -> None:
+    process = start("-p", "elipse.a:=3.0")
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 1
+    assert "cannot start: unknown parameter(s) elipse.a; the node's parameters are" in stderr and "ellipse.a" in stderr
+    assert "Traceback" not in stderr

@@ -258,7 +258,10 @@ def test_live_node_matches_offline_export(context, tmp_path):
         probe.destroy_node()
     assert node.returncode == 0, log.read_text()
     connections, by_topic = read_bag(live)
-    assert {t: c.msgtype for t, c in connections.items()} == TOPIC_TYPES
+    recorded = {t: c.msgtype for t, c in connections.items()}
+    assert TOPIC_TYPES.items() <= recorded.items()  # the exported topics, among every topic the node publishes
+    assert {"/crane_reference/reference_preview", "/crane_reference/markers", "/crane_reference/robot_description"} \
+        <= set(recorded) and not {"/rosout", "/parameter_events"} & set(recorded)
     assert all(c.digest == installed_type_hash(c.msgtype) for c in connections.values())
     joints, poses = by_topic[JOINT_STATES], by_topic[END_EFFECTOR_POSE]
     assert len(joints) >= 3 * rate and by_topic[DIAGNOSTICS]
@@ -276,13 +279,13 @@ def test_live_node_matches_offline_export(context, tmp_path):
         export_reference(bag, node_stream(load_config(None), model), rate, published_for + 2.0)
     offline_connections, offline_topics = read_bag(offline)
     assert {t: (c.msgtype, c.digest) for t, c in offline_connections.items()} == {
-        t: (c.msgtype, c.digest) for t, c in connections.items()}
+        t: (c.msgtype, c.digest) for t, c in connections.items() if t in offline_connections}
     q_offline = np.array([m.position for _, m, _ in offline_topics[JOINT_STATES]])
     middle = len(joints) // 2
     k_middle = int(np.argmin(np.abs(q_offline - joints[middle][1].position).max(axis=1)))
     ks = k_middle + offset - offset[middle]
     assert ks[0] >= 0 and ks[-1] < len(q_offline)
-    live_poses = {stamp_ns(m.header): m for _, m, _ in poses}
+    live_poses = {stamp_ns(m.header): m for _, m, _ in poses if stamp_ns(m.header) >= stamps[0]}
     assert set(live_poses) <= set(stamps.tolist()) and len(live_poses) >= len(joints) - rate // 2, \
         "poses at the joint states' stamps (subscriptions may match up to a few samples apart)"
     # The node advances its stream's publish time by summing 1 / rate, the export uses k / rate: the sample
@@ -304,3 +307,28 @@ def test_live_node_matches_offline_export(context, tmp_path):
     assert all(errors[name] <= tolerance for name, tolerance in {**tolerances, "pose": 1e-9}.items()), errors
     offline_keys = {kv.key for kv in offline_topics[DIAGNOSTICS][0][1].status[0].values}
     assert offline_keys <= set(diagnostics)
+
+
+def test_records_the_topics_of_a_renamed_node(context, tmp_path):
+    """Without topics, record takes every topic the named node publishes (its actual, remapped names)."""
+    publisher_node = rclpy.create_node("renamed", namespace="/site_a", context=context)
+    other = rclpy.create_node("other", context=context)
+    joints = publisher_node.create_publisher(JointState, "~/joint_states", 10)
+    other.create_publisher(JointState, "/joint_states", 10)  # measured state of someone else: not recorded
+    stop = threading.Event()
+    result = {}
+    with BagWriter(tmp_path / "bag") as bag:
+        thread = threading.Thread(target=lambda: result.update(recorder=record(
+            bag, [], stop, context=context, source="/site_a/renamed")))
+        thread.start()
+        try:
+            wait_for(lambda: joints.get_subscription_count() > 0, 20.0, "the recorder's subscription")
+            for k in range(5):
+                joints.publish(joint_state(k))
+            wait_for(lambda: bag.counts.get("/site_a/renamed/joint_states") == 5, 5.0, "the messages")
+        finally:
+            stop.set()
+            thread.join()
+    assert set(result["recorder"].topics) == {"/site_a/renamed/joint_states"}
+    publisher_node.destroy_node()
+    other.destroy_node()

@@ -1,5 +1,9 @@
 """Live recording to rosbag2 without rosbag2: ``crane-reference record [-o DIR] [--storage mcap|sqlite3]
-[--version 9|8] [--duration S] [TOPIC ...]``.
+[--version 9|8] [--duration S] [--node NAME] [TOPIC ...]``.
+
+Without TOPICs it records every topic the node ``--node`` (default ``/crane_reference``) publishes, as
+the ROS graph shows them (``get_publisher_names_and_types_by_node``), so a renamed or namespaced node is
+recorded with its actual topics; ``/rosout`` and ``/parameter_events`` are left out.
 
 A :class:`Recorder` subscribes with rclpy to each topic once a publisher of it is discovered
 (``get_topic_names_and_types`` / ``get_publishers_info_by_topic``, polled, so topics that appear later
@@ -36,13 +40,15 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.expand_topic_name import expand_topic_name
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.topic_endpoint_info import TopicEndpointInfo
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 
-from ..interface.bag import DEFAULT_TOPICS, BagError, BagWriter
+from ..interface.bag import BagError, BagWriter
+from ..interface.messages import NODE_NAME
 
 NANOSECONDS = 10**9
 RECORD_DEPTH = 1000  # history depth of the recording subscriptions
@@ -50,6 +56,9 @@ DISCOVERY_PERIOD = 0.2  # [s] between two looks at the ROS graph for topics not 
 STATUS_PERIOD = 1.0  # [s] between two status lines
 SPIN_TIMEOUT = 0.05  # [s], longest wait for a message before the loop looks at signals, discovery and status
 DRAIN_TIME = 0.2  # [s], longest time spent taking the messages already queued when stopping
+NodeNameNonExistentError = rclpy_implementation.NodeNameNonExistentError
+IGNORED_TOPICS = ("/rosout", "/parameter_events")  # published by every node
+DEFAULT_NODE = f"/{NODE_NAME}"
 
 
 def rosbags_qos(profile: QoSProfile) -> Qos:
@@ -90,9 +99,10 @@ class Recorder:
     """Records ``topics`` from the ROS graph of ``node`` into ``bag``: call :meth:`discover` now and
     then, and spin the node.  ``received`` counts the messages per topic (each is written as it arrives)."""
 
-    def __init__(self, node: Node, bag: BagWriter, topics: Iterable[str]) -> None:
+    def __init__(self, node: Node, bag: BagWriter, topics: Iterable[str], source: str | None = None) -> None:
         self.node, self.bag = node, bag
         self.topics = list(dict.fromkeys(node.resolve_topic_name(topic) for topic in topics))
+        self.source = split_node_name(source) if source else None
         self.received = dict.fromkeys(self.topics, 0)
         self.failed: dict[str, str] = {}
         self._subscriptions: dict[str, Any] = {}
@@ -110,7 +120,10 @@ class Recorder:
     def discover(self) -> list[str]:
         """Subscribe to the waiting topics that have publishers now; returns the topics added.  A topic
         that cannot be recorded (unknown type, type hash or type different from the installed
-        definition) is logged once and left out (:attr:`failed`)."""
+        definition) is logged once and left out (:attr:`failed`).  With a ``source`` node, its published
+        topics join the topics to record as they appear."""
+        if self.source is not None:
+            self._add_source_topics()
         waiting = self.waiting
         if not waiting:
             return []
@@ -132,6 +145,17 @@ class Recorder:
                 subscription_qos(p.qos_profile for p in publishers), raw=True)
             added.append(topic)
         return added
+
+    def _add_source_topics(self) -> None:
+        name, namespace = self.source
+        try:
+            published = self.node.get_publisher_names_and_types_by_node(name, namespace)
+        except NodeNameNonExistentError:
+            return
+        for topic, _ in published:
+            if topic not in self.received and topic not in IGNORED_TOPICS:
+                self.topics.append(topic)
+                self.received[topic] = 0
 
     def _unrecordable(self, topic: str, publishers: list[TopicEndpointInfo]) -> str | None:
         """Why ``topic`` cannot be recorded, or None."""
@@ -163,20 +187,28 @@ class Recorder:
                 f"{self.bag.size() / 1e6:.2f} MB")
 
 
+def split_node_name(name: str) -> tuple[str, str]:
+    """(name, namespace) of a node name, absolute (/ns/name) or relative to the root namespace."""
+    namespace, _, base = ("/" + name.strip("/")).rpartition("/")
+    return base, namespace or "/"
+
+
 def node_name() -> str:
     """Name of the recorder's node (with the process id, so that several recorders can run)."""
     return f"crane_reference_recorder_{os.getpid()}"
 
 
 def record(bag: BagWriter, topics: Iterable[str], stop: threading.Event, *, duration: float | None = None,
-           context: Context | None = None, status: Callable[[str], None] | None = None) -> Recorder:
-    """Record ``topics`` into ``bag`` until ``stop`` is set or ``duration`` seconds have passed, then take
-    the messages already queued (for at most :data:`DRAIN_TIME`); ``status`` gets a status line about
-    every :data:`STATUS_PERIOD`.  ``context`` must be initialized; the bag is left open."""
+           context: Context | None = None, status: Callable[[str], None] | None = None,
+           source: str | None = None) -> Recorder:
+    """Record ``topics`` (and those the node ``source`` publishes) into ``bag`` until ``stop`` is set or
+    ``duration`` seconds have passed, then take the messages already queued (for at most
+    :data:`DRAIN_TIME`); ``status`` gets a status line about every :data:`STATUS_PERIOD`.  ``context``
+    must be initialized; the bag is left open."""
     node = Node(node_name(), context=context, start_parameter_services=False)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    recorder = Recorder(node, bag, topics)
+    recorder = Recorder(node, bag, topics, source)
     try:
         start = time.monotonic()
         next_discovery = next_status = start
@@ -225,7 +257,7 @@ def record_command(args: argparse.Namespace) -> int:
         print(f"crane-reference record: --duration {args.duration}: must be a finite number of seconds > 0",
               file=sys.stderr)
         return 2
-    topics = args.topics or DEFAULT_TOPICS
+    topics = args.topics
     for topic in topics:
         try:
             expand_topic_name(topic, node_name(), "/")
@@ -243,7 +275,8 @@ def record_command(args: argparse.Namespace) -> int:
     started = time.monotonic()
     try:
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-        recorder = record(bag, topics, stop, duration=args.duration, status=status)
+        recorder = record(bag, topics, stop, duration=args.duration, status=status,
+                          source=None if topics else args.node)
     finally:
         bag.close()
         rclpy.try_shutdown()
