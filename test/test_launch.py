@@ -1,0 +1,126 @@
+"""The bring-up files, checked without launch_ros, robot_state_publisher or RViz (not on this machine):
+the launch file runs against stand-ins of the launch API and names only executables, packages, files
+and topics that exist; the RViz config is valid YAML and shows the node's topics in the URDF's frame."""
+
+from __future__ import annotations
+
+import ast
+import importlib.util
+import re
+import sys
+import types
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+import yaml
+
+from crane_reference.interface import messages
+from crane_reference.model.chain import build_model
+from crane_reference.model.config import load_config
+from crane_reference.model.urdf import model_to_urdf
+
+ROOT = Path(__file__).resolve().parent.parent
+LAUNCH = ROOT / "launch" / "crane_reference.launch.py"
+RVIZ = ROOT / "rviz" / "crane_reference.rviz"
+NODE = f"/{messages.NODE_NAME}"
+
+
+class Recorded:
+    """Stand-in of a launch action or substitution: keeps its arguments."""
+
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+
+class LaunchConfiguration(Recorded):
+    def perform(self, context):
+        return context[self.args[0]]
+
+
+def stand_ins(share: Path) -> dict[str, types.ModuleType]:
+    modules = {}
+    for name, attributes in {
+        "launch": {"LaunchDescription": Recorded},
+        "launch.actions": {"DeclareLaunchArgument": Recorded, "OpaqueFunction": Recorded},
+        "launch.conditions": {"IfCondition": Recorded},
+        "launch.substitutions": {"LaunchConfiguration": LaunchConfiguration},
+        "launch_ros": {},
+        "launch_ros.actions": {"Node": Recorded},
+        "ament_index_python": {},
+        "ament_index_python.packages": {"get_package_share_directory": lambda package: str(share)},
+    }.items():
+        module = types.ModuleType(name)
+        module.__dict__.update(attributes)
+        modules[name] = module
+    return modules
+
+
+@pytest.fixture
+def launched(monkeypatch, tmp_path):
+    """The launch file's description and the nodes it starts with its default arguments, against a share
+    directory laid out as setup.py installs it."""
+    share = tmp_path / "share"
+    for source, target in (("config/node.yaml", "config/node.yaml"), ("rviz/crane_reference.rviz",
+                                                                       "rviz/crane_reference.rviz")):
+        (share / target).parent.mkdir(parents=True, exist_ok=True)
+        (share / target).write_bytes((ROOT / source).read_bytes())
+    for name, module in stand_ins(share).items():
+        monkeypatch.setitem(sys.modules, name, module)
+    spec = importlib.util.spec_from_file_location("crane_reference_launch", LAUNCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    description = module.generate_launch_description()
+    arguments = {a.args[0]: a.kwargs["default_value"] for a in description.args[0] if not a.kwargs.get("function")
+                 and a.args}
+    (opaque,) = [a for a in description.args[0] if "function" in a.kwargs]
+    nodes = {node.kwargs["package"]: node for node in opaque.kwargs["function"](arguments)}
+    return arguments, nodes, share
+
+
+def test_launch_file_parses_and_declares_its_arguments(launched):
+    ast.parse(LAUNCH.read_text())
+    arguments, _, share = launched
+    assert arguments == {"model": "flexible", "config_file": "", "params_file": str(share / "config" / "node.yaml"),
+                         "rviz": "true"}
+
+
+def test_launch_starts_the_node_robot_state_publisher_and_rviz_consistently(launched):
+    _, nodes, share = launched
+    assert set(nodes) == {"crane_reference", "robot_state_publisher", "rviz2"}
+    node = nodes["crane_reference"].kwargs
+    # the executable ros2 run / launch finds: installed by setup.py into lib/crane_reference
+    setup = (ROOT / "setup.py").read_text()
+    assert node["executable"] == "node" and '(f"lib/{PACKAGE}", ["scripts/node"])' in setup
+    assert node["name"] == messages.NODE_NAME
+    params_file, overrides = node["parameters"]
+    assert Path(params_file).is_file() and overrides == {"model": "flexible", "config_file": ""}
+    rsp = nodes["robot_state_publisher"].kwargs
+    assert rsp["executable"] == "robot_state_publisher"
+    # the URDF of the same model as the node's, fed by the node's own joint states
+    assert rsp["parameters"] == [{"robot_description": model_to_urdf(build_model(load_config(), "flexible"))}]
+    assert rsp["remappings"] == [("joint_states", messages.JOINT_STATES_TOPIC.replace("~", NODE))]
+    rviz = nodes["rviz2"].kwargs
+    assert rviz["executable"] == "rviz2" and rviz["arguments"][0] == "-d" and Path(rviz["arguments"][1]).is_file()
+    assert rviz["condition"].args[0].args == ("rviz",)
+    # setup.py installs the launch file and the RViz config where the launch file looks for them
+    assert '(f"share/{PACKAGE}/launch", glob("launch/*.launch.py"))' in setup
+    assert '(f"share/{PACKAGE}/rviz", glob("rviz/*.rviz"))' in setup
+    assert Path(rviz["arguments"][1]).relative_to(share) == Path("rviz/crane_reference.rviz")
+
+
+def test_rviz_config_shows_the_node_topics_in_the_urdf_frame():
+    config = yaml.safe_load(RVIZ.read_text())
+    manager = config["Visualization Manager"]
+    fixed_frame = manager["Global Options"]["Fixed Frame"]
+    urdf = ET.fromstring(model_to_urdf(build_model(load_config(), "flexible")))
+    links = {link.get("name") for link in urdf.iter("link")}
+    children = {joint.find("child").get("link") for joint in urdf.iter("joint")}
+    assert fixed_frame in links and fixed_frame not in children  # the root link
+    displays = {d["Class"]: d for d in manager["Displays"]}
+    node_topics = {topic.replace("~", NODE) for topic in (messages.MARKERS_TOPIC, messages.END_EFFECTOR_POSE_TOPIC)}
+    shown = {d["Topic"]["Value"] for d in displays.values() if "Topic" in d}
+    assert shown == node_topics
+    assert displays["rviz_default_plugins/RobotModel"]["Description Topic"]["Value"] == "/robot_description"
+    assert displays["rviz_default_plugins/RobotModel"]["Description Topic"]["Durability Policy"] == "Transient Local"
+    assert all(re.fullmatch(r"rviz_(default_plugins|common)/\w+", d["Class"]) for d in manager["Displays"])
