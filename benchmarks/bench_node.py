@@ -14,14 +14,24 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
   real-time factor it reports;
 * latency from a parameter change (``ellipse.a``, through the parameter service) to the reception of
   the first sample that uses it (the node reports that sample's stamp in /diagnostics as
-  ``retarget_stamp_s``), over ``--changes`` changes.
+  ``retarget_stamp_s``), over ``--changes`` changes;
+* smoothness of the commands: the largest change of the column's velocity between two received samples
+  (rad/s) in normal running and after ~/pause, resume, a speed_scaling change to 0.5 and a re-target
+  (each window: the ramp time plus 0.5 s; the flexible boom's 70 Hz bending makes the column's velocity
+  oscillate between samples in normal running too);
+* with ``--flood N``: N random parameter requests at 50 Hz through the parameter services (valid and
+  invalid values of ellipse.*, z.*, speed_scaling and unknown names; single and atomic requests), then
+  stamp gaps longer than two periods, non-finite positions or velocities, requests without a response
+  and whether a valid change still takes effect afterwards.
 
-Run: ``.venv/bin/python benchmarks/bench_node.py [--duration 30] [--rates 100 500 1000] [--model flexible]``.
+Run: ``.venv/bin/python benchmarks/bench_node.py [--duration 30] [--rates 100 500 1000] [--model flexible]
+[--flood 300]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import signal
 import subprocess
@@ -38,6 +48,7 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from report import print_table
 from sensor_msgs.msg import JointState
+from std_srvs.srv import SetBool
 
 NS = 10**9
 NODE = "crane_reference"
@@ -52,12 +63,16 @@ class Recorder:
     monotonic: list[int] = field(default_factory=list)
     system: list[int] = field(default_factory=list)
     stamps: list[int] = field(default_factory=list)
+    slew_velocity: list[float] = field(default_factory=list)
+    finite: list[bool] = field(default_factory=list)
     diagnostics: dict[str, str] = field(default_factory=dict)
 
     def joint_state(self, msg: JointState) -> None:
         self.monotonic.append(time.monotonic_ns())
         self.system.append(time.time_ns())
         self.stamps.append(msg.header.stamp.sec * NS + msg.header.stamp.nanosec)
+        self.slew_velocity.append(msg.velocity[list(msg.name).index("column_slew")])
+        self.finite.append(bool(np.all(np.isfinite(msg.position)) and np.all(np.isfinite(msg.velocity))))
 
     def diagnostic(self, msg: DiagnosticArray) -> None:
         for status in msg.status:
@@ -108,7 +123,77 @@ def measure_latency(executor: SingleThreadedExecutor, client: AsyncParameterClie
     return latencies
 
 
-def run(rate: int, duration: float, model: str, changes: int, domain: int) -> dict[str, float]:
+def call(executor: SingleThreadedExecutor, client, request, timeout: float = 10.0):
+    future = client.call_async(request)
+    if not spin_until(executor, future.done, timeout):
+        raise RuntimeError(f"no response to {request}")
+    return future.result()
+
+
+def command_smoothness(executor: SingleThreadedExecutor, subscriber: Node, client: AsyncParameterClient,
+                       recorder: Recorder, ramp: float) -> dict[str, float]:
+    """Largest per-sample change of the column's velocity in normal running and after each command."""
+    pause = subscriber.create_client(SetBool, f"/{NODE}/pause")
+    windows = {}
+
+    def window(name: str, command) -> None:
+        start = len(recorder.stamps)
+        command()
+        spin_for(executor, ramp + 0.5)
+        windows[name] = (start, len(recorder.stamps))
+
+    windows["normal"] = (len(recorder.stamps), len(recorder.stamps))
+    spin_for(executor, ramp + 0.5)
+    windows["normal"] = (windows["normal"][0], len(recorder.stamps))
+    window("pause", lambda: call(executor, pause, SetBool.Request(data=True)))
+    spin_for(executor, 1.0)
+    window("resume", lambda: call(executor, pause, SetBool.Request(data=False)))
+    def set_parameter(name: str, value: float) -> None:
+        spin_until(executor, client.set_parameters([Parameter(name, value=value)]).done, 10.0)
+
+    window("speed_0.5", lambda: set_parameter("speed_scaling", 0.5))
+    window("retarget", lambda: set_parameter("ellipse.a", 3.05))
+    set_parameter("speed_scaling", 1.0)
+    velocity = np.array(recorder.slew_velocity)
+    return {f"dv_{name}_rad_s": float(np.max(np.abs(np.diff(velocity[a:b])))) for name, (a, b) in windows.items()}
+
+
+def flood(executor: SingleThreadedExecutor, client: AsyncParameterClient, recorder: Recorder, requests: int,
+          rate: int) -> dict[str, float]:
+    """``requests`` random parameter requests at 50 Hz; then gaps, NaN, unanswered and a valid change."""
+    rng = np.random.default_rng(7)
+    values = {"ellipse.a": (2.5, 3.5, 40.0), "ellipse.b": (1.6, 2.4, -1.0), "z.increment": (0.0, 0.4, 9.0),
+              "z.rise_time": (2.0, 8.0, 0.0), "speed_scaling": (0.3, 1.0, 2.0)}
+    first = len(recorder.stamps)
+    futures = []
+    for i in range(requests):
+        if rng.random() < 0.1:
+            parameters = [Parameter("no_such_parameter", value=1.0)]
+        else:
+            names = rng.choice(list(values), size=rng.integers(1, 3), replace=False)
+            parameters = []
+            for name in names:
+                low, high, invalid = values[name]
+                value = invalid if rng.random() < 0.3 else float(rng.uniform(low, high))
+                parameters.append(Parameter(str(name), value=float(value) if rng.random() < 0.8 else math.nan))
+        futures.append(client.set_parameters_atomically(parameters) if i % 2 else client.set_parameters(parameters))
+        spin_for(executor, 1.0 / 50.0)
+    spin_until(executor, lambda: all(f.done() for f in futures), 120.0)
+    unanswered = sum(not f.done() for f in futures)
+    spin_for(executor, 2.0)
+    check = client.set_parameters([Parameter("ellipse.a", value=3.0), Parameter("ellipse.b", value=2.0),
+                                   Parameter("speed_scaling", value=1.0)])
+    spin_until(executor, check.done, 30.0)
+    spin_until(executor, lambda: recorder.diagnostics.get("target_ellipse_a_m") == "3", 10.0)
+    stamps = np.array(recorder.stamps[first:])
+    gaps = np.diff(stamps) > 2 * NS // rate
+    return {"flood_requests": requests, "flood_unanswered": unanswered, "flood_gaps": int(gaps.sum()),
+            "flood_non_finite": int(len(stamps) - sum(recorder.finite[first:])),
+            "flood_valid_change_after": bool(check.done() and all(r.successful for r in check.result().results)
+                                              and recorder.diagnostics.get("target_ellipse_a_m") == "3")}
+
+
+def run(rate: int, duration: float, model: str, changes: int, domain: int, flood_requests: int) -> dict[str, float]:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     node = subprocess.Popen([sys.executable, "-m", "crane_reference.ros.node", "--ros-args", "-p",
                              f"publish_rate:={rate}", "-p", f"model:={model}", "-p", "status_period:=3600.0"],
@@ -136,6 +221,8 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int) -> di
         late = {k: float(recorder.diagnostics.get(k, 0)) - before[k] for k in before}
         factor = recorder.diagnostics.get("real_time_factor", "nan")
         latencies = measure_latency(executor, client, recorder, changes) if changes else [float("nan")]
+        smoothness = command_smoothness(executor, subscriber, client, recorder, 1.0)
+        flooded = flood(executor, client, recorder, flood_requests, rate) if flood_requests else {}
     finally:
         node.send_signal(signal.SIGINT)
         _, stderr = node.communicate(timeout=30)
@@ -155,7 +242,7 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int) -> di
         "missed": int(expected - len(stamps)), "held_late": int(late["held_late"]), "skipped": int(late["skipped"]),
         "cpu_percent": 100.0 * cpu / wall, "real_time_factor": float(factor),
         "latency_median_ms": 1e3 * float(np.median(latencies)), "latency_max_ms": 1e3 * float(np.max(latencies)),
-        "exit_code": node.returncode, "traceback": "Traceback" in stderr,
+        **smoothness, **flooded, "exit_code": node.returncode, "traceback": "Traceback" in stderr,
     }
 
 
@@ -166,8 +253,9 @@ def main() -> int:
     parser.add_argument("--model", choices=("flexible", "rigid"), default="flexible")
     parser.add_argument("--changes", type=int, default=5, help="parameter changes for the latency (default 5)")
     parser.add_argument("--domain-id", type=int, default=os.getpid() % 100 + 1)
+    parser.add_argument("--flood", type=int, default=0, metavar="N", help="N random parameter requests at 50 Hz")
     args = parser.parse_args()
-    rows = [run(rate, args.duration, args.model, args.changes, args.domain_id) for rate in args.rates]
+    rows = [run(rate, args.duration, args.model, args.changes, args.domain_id, args.flood) for rate in args.rates]
     print_table(f"crane_reference node, {args.model} model, {args.duration:g} s per rate, {os.cpu_count()} CPUs", rows)
     return 0
 
