@@ -323,6 +323,8 @@ def test_preview_markers_diagnostics_and_robot_description(ros: Harness) -> None
     assert status.level == rclpy_types().byte(messages.OK), status.message
     assert values["state"] == "RUNNING" and float(values["constraint_residual_m"]) < 1e-9
     assert float(values["real_time_factor"]) > 0 and float(values["achieved_rate_hz"]) > 0
+    numbers = {key: float(value) for key, value in values.items() if key not in ("state", "last_error")}
+    assert numbers["target_ellipse_a_m"] == 3.0 and numbers["speed_scaling"] == 1.0
 
     latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     descriptions: list[String] = []

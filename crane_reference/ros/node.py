@@ -31,18 +31,20 @@ Computing ahead
     published: the last valid one is held instead.
 
 Commands
-    A re-target (``ellipse.*``, ``z.*`` parameters), ``~/pause`` and ``~/restart`` take effect at the
-    frame :data:`COMMAND_LEAD` s after the next one to be published (the frames computed beyond it are
-    dropped and computed again), so a change reaches the published samples about COMMAND_LEAD after it
-    is accepted.  Parameter values are validated in the on-set callback (table of
+    A re-target (``ellipse.*``, ``z.*`` parameters), a speed change (``speed_scaling``), ``~/pause`` and
+    ``~/restart`` take effect at the frame :data:`COMMAND_LEAD` s after the next one to be published (the
+    frames computed beyond it are dropped and computed again), so a change reaches the published samples
+    about COMMAND_LEAD after it is accepted.  Speed changes and pauses are C2 ramps of the stream's time
+    warp; ``~/restart`` of a moving reference pauses first and restarts at the first sample at rest.  Parameter values are validated in the on-set callback (table of
     :mod:`~crane_reference.ros.parameters`, then ``ReferenceStream.check_targets`` for the targets) and
     applied in the post-set callback, so ``set_parameters_atomically`` of ellipse.a and ellipse.b is one
     re-target, and a rejected change leaves the stream untouched.
 
-Topics: ``joint_states`` (sensor_msgs/JointState), ``~/end_effector_pose`` (geometry_msgs/PoseStamped),
-``~/reference_preview`` (trajectory_msgs/JointTrajectory, at ``preview.rate``), ``/diagnostics``
-(diagnostic_msgs/DiagnosticArray, 1 Hz), ``~/markers`` (visualization_msgs/MarkerArray, 10 Hz: target
-ellipse and E's trail), ``robot_description`` (std_msgs/String, transient local).
+Topics (all in the node's namespace but /diagnostics): ``~/joint_states`` (sensor_msgs/JointState),
+``~/end_effector_pose`` (geometry_msgs/PoseStamped), ``~/reference_preview`` (trajectory_msgs/JointTrajectory
+of ``preview.joints``, at ``preview.rate``), ``/diagnostics`` (diagnostic_msgs/DiagnosticArray, 1 Hz),
+``~/markers`` (visualization_msgs/MarkerArray, 10 Hz: target ellipse and E's trail), ``~/robot_description``
+(std_msgs/String, transient local); subscribed: ``~/speed_scaling`` (std_msgs/Float64).
 Services: ``~/restart`` (std_srvs/Trigger), ``~/pause`` (std_srvs/SetBool).
 """
 
