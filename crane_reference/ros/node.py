@@ -35,7 +35,8 @@ Commands
     ``~/restart`` take effect at the frame :data:`COMMAND_LEAD` s after the next one to be published (the
     frames computed beyond it are dropped and computed again), so a change reaches the published samples
     about COMMAND_LEAD after it is accepted.  Speed changes and pauses are C2 ramps of the stream's time
-    warp; ``~/restart`` of a moving reference pauses first and restarts at the first sample at rest.  Parameter values are validated in the on-set callback (table of
+    warp; ``~/restart`` of a moving reference pauses first and restarts at the first sample at rest.
+    Parameter values are validated in the on-set callback (table of
     :mod:`~crane_reference.ros.parameters`, then ``ReferenceStream.check_targets`` for the targets) and
     applied in the post-set callback, so ``set_parameters_atomically`` of ellipse.a and ellipse.b is one
     re-target, and a rejected change leaves the stream untouched.
