@@ -55,6 +55,8 @@ set +u
 source install/setup.bash
 set -u
 PACKAGE_DIR=$(cd /tmp && python3 -c "import crane_reference, os; print(os.path.dirname(crane_reference.__file__))")
+# The README's step after colcon build: compile the kernels of the installed package (a new source path).
+install/crane_reference/lib/crane_reference/crane-reference compile || fail "crane-reference compile failed in the install space"
 case "$PACKAGE_DIR" in
   "$WORKSPACE"/install/*) ;;
   *) fail "python imports crane_reference from $PACKAGE_DIR, not from the colcon install space" ;;

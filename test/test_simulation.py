@@ -158,3 +158,4 @@ def test_cli_reports_config_errors_by_field(tmp_path):
     result = run_cli("urdf", "--config", str(bad))
     assert result.returncode == 2
     assert "boom.rfe_count" in result.stderr
+

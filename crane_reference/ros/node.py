@@ -54,6 +54,7 @@ from __future__ import annotations
 import math
 import sys
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 
@@ -120,7 +121,11 @@ class CraneReferenceNode(Node):
         self._values = {spec.name: declare(self, spec, config) for spec in PARAMETERS if spec.name != "config_file"}
         self._check_overrides()
         self._rate = int(self._values["publish_rate"])
+        self.get_logger().info("preparing the solver (with an empty kernel cache this compiles for a minute or two; "
+                               "`crane-reference compile` after installing does it ahead)")
+        ready = time.perf_counter()
         self._stream = self._make_stream(config)
+        self.get_logger().info(f"solver ready in {time.perf_counter() - ready:.1f} s")
         self._schedule = FrameSchedule(self._rate, max(2, math.ceil(LOOKAHEAD * self._rate)), COMMAND_LEAD,
                                        MAX_CATCH_UP, self._stream.sample(0.0))
         self._types = rclpy_types()
