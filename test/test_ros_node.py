@@ -31,7 +31,7 @@ from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import JointState
-from std_msgs.msg import String
+from std_msgs.msg import Float64, String
 from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
@@ -634,3 +634,30 @@ def test_rclpy_and_rosbags_messages_agree() -> None:
     with pytest.raises(ValueError, match="increase strictly"):
         messages.reference_preview(messages.rosbags_types(typestore), stamp, "world", names, indices,
                                    [0, 2, 2, 3, 4], [sample, *preview])
+
+
+def test_speed_scaling_topic_sets_the_parameter_and_slows_the_reference(ros: Harness) -> None:
+    """~/speed_scaling (std_msgs/Float64) goes through the parameter's checks: 0.5 halves the speed after
+    the ramp (checked against an independent stream sampled at the warped time), 1.5 is rejected."""
+    node = ros.start(publish_rate=100, model="rigid", speed_scaling__ramp_time=0.2)
+    times = record_stream_times(node)
+    publisher = ros.probe.create_publisher(Float64, f"/{NODE}/speed_scaling", 10)
+    ros.wait_for(lambda: publisher.get_subscription_count() > 0, "the node's ~/speed_scaling subscription")
+    scaling = spy(node._stream, "set_speed_scaling")
+    publisher.publish(Float64(data=0.5))
+    ros.wait_for(lambda: scaling, "the speed change")
+    assert node.get_parameter("speed_scaling").value == 0.5
+    changed = stamp_of(ros, times, scaling[0][0])
+    ros.wait_until_stamp(changed + NS)
+    publisher.publish(Float64(data=1.5))  # out of range: rejected, the speed stays
+    time.sleep(0.3)
+    assert node.get_parameter("speed_scaling").value == 0.5 and len(scaling) == 1
+    data = ros.samples(after_ns=changed + 3 * NS // 10)  # after the 0.2 s ramp
+    index, tau = streamed(data, times)
+    reference = ReferenceStream(load_config(), "rigid")
+    reference.compute(scaling[0][0] + 0.1 + 0.5 * (tau[-1] - scaling[0][0]))
+    # motion time: up to the change at rate 1, then the ramp (mean rate 0.75 over 0.2 s), then 0.5
+    t = scaling[0][0] + 0.2 * 0.75 + 0.5 * (tau - scaling[0][0] - 0.2)
+    expected = [reference.sample(ti) for ti in t]
+    np.testing.assert_allclose(data["q"][index], [e.q for e in expected], atol=1e-9)
+    np.testing.assert_allclose(data["qd"][index], [0.5 * e.qd for e in expected], atol=1e-9)
