@@ -4,6 +4,7 @@
                                     [--only eval speed first-order newton accuracy] [--check-reference]
 
 1. [eval] Time of M(q) with h, gravity and E's kinematics, and of one full qdd from (8), at 24 DOF.
+   [profile] The compiled cost of the parts of one Newton iteration (timed in compiled loops).
 2. [speed] Wall time per step and real-time factor (best of ``--repeats``) of the default motion
    (rigid; flexible with n_rfe = 6, 12, 24) with generalized-alpha at h = 1 and 2 ms, the mean number
    of Newton iterations and the largest constraint residual.
@@ -36,10 +37,12 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 from scipy.integrate import quad
 from scipy.signal import butter, sosfiltfilt, welch
 
-from crane_reference.dynamics.terms import chain_terms
+from crane_reference.dynamics import kernels
+from crane_reference.dynamics.terms import chain_terms, end_effector_jacobian, position_terms
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import CraneParameters, Damping
 from crane_reference.model.profiles import Constant, QuinticRise
@@ -208,7 +211,76 @@ def first_order(params: CraneParameters, duration: float = 2.0) -> None:
               f"{np.max(np.abs(tr.energy_balance_error)) / work:.1e} of the constraint work {work:.0f} J")
 
 
-SECTIONS = ("eval", "speed", "first-order", "newton", "accuracy")
+@njit
+def _repeat_position_terms(q, chain, n):
+    total = 0.0
+    for _ in range(n):
+        total += position_terms(q, chain)[3][0, 0]
+    return total
+
+
+@njit
+def _repeat_end_effector(q, chain, n):
+    total = 0.0
+    for _ in range(n):
+        total += end_effector_jacobian(q, chain)[0][0]
+    return total
+
+
+@njit
+def _repeat_projection(q, k, holonomic_dependent, chain, n):
+    total = 0.0
+    for _ in range(n):
+        total += kernels.project_positions(q, k, holonomic_dependent, chain, 1e-9, 25)[0][0]
+    return total
+
+
+@njit
+def _repeat_accelerations(q, qd, k, drive, partition, chain, n):
+    total = 0.0
+    for _ in range(n):
+        total += kernels.accelerations_at(q, qd, k, drive, partition, chain, True)[1].qdd[0]
+    return total
+
+
+@njit
+def _repeat_evaluation(q, qd, k, drive, partition, chain, n):
+    total = 0.0
+    for _ in range(n):
+        total += kernels.evaluate(q, qd, k, drive, partition, chain).accounts[0]
+    return total
+
+
+def component_times(params: CraneParameters, repeat: int = 3000) -> None:
+    """[profile] Compiled cost of the parts of one Newton iteration of a step (flexible, n_rfe = 6),
+    each timed in a compiled loop (no Python call overhead), best of 5."""
+    scenario = Scenario(params, "flexible")
+    motion = scenario.motion
+    q, chain, partition = scenario.equilibrium.q, motion.dynamics.chain, motion.partition
+    qd = np.full_like(q, 0.01)
+    k, drive = motion.constraints.coefficients(0.5), motion.dynamics.drive.kernel_parameters(0.5)
+    off = q.copy()
+    off[motion.holonomic_dependent] += 1e-6  # a predictor 1e-6 rad off the constraints
+    parts = (("M, gravity, E's Jacobian (position_terms)", _repeat_position_terms, (q, chain)),
+             ("E's position and Jacobian (kinematics only)", _repeat_end_effector, (q, chain)),
+             ("projection on the position constraints", _repeat_projection,
+              (off, k, motion.holonomic_dependent, chain)),
+             ("qdd from (8) with qd_dc (accelerations_at)", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
+             ("full evaluation (+ residuals, reactions, accounts)", _repeat_evaluation,
+              (q, qd, k, drive, partition, chain)))
+    for name, function, arguments in parts:
+        function(*arguments, 10)
+        best = min(_timed(function, arguments, repeat) for _ in range(5))
+        print(f"[profile] {name:<52} {best / repeat * 1e6:7.2f} us")
+
+
+def _timed(function, arguments, repeat: int) -> float:
+    start = time.perf_counter()
+    function(*arguments, repeat)
+    return time.perf_counter() - start
+
+
+SECTIONS = ("eval", "profile", "speed", "first-order", "newton", "accuracy")
 
 
 def main() -> None:
@@ -222,6 +294,8 @@ def main() -> None:
     params = load_config()
     if "eval" in args.only:
         evaluation_times(params)
+    if "profile" in args.only:
+        component_times(params)
     if "speed" in args.only:
         speed(params, args.duration, args.repeats)
     if "first-order" in args.only:
