@@ -35,6 +35,9 @@ setup(
         "matplotlib>=3.6",
         "rosbags>=0.10",
         "tqdm>=4.60",
+        "pandas>=2",
+        "pyarrow>=14",
+        "dask[distributed]>=2024.1",
     ],
     extras_require={
         "ros": [

@@ -1,4 +1,4 @@
-"""Command line: ``crane-reference simulate | compile | urdf | node | record | modes | analyze``."""
+"""Command line: ``crane-reference simulate | compile | study | urdf | node | record | modes | analyze``."""
 
 from __future__ import annotations
 
@@ -98,6 +98,31 @@ def export_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def study_command(args: argparse.Namespace) -> int:
+    from .analysis.study.report import write_report
+    from .analysis.study.runner import run_study
+    from .analysis.study.spec import StudyError, load_spec
+
+    if args.workers < 1:
+        print(f"crane-reference study: --workers {args.workers}: must be >= 1", file=sys.stderr)
+        return 2
+    try:
+        spec = load_spec(args.spec)
+    except StudyError as error:
+        print(f"crane-reference study: {error}", file=sys.stderr)
+        return 2
+    try:
+        table = run_study(spec, args.out, workers=args.workers, scheduler=args.scheduler,
+                          progress=sys.stderr.isatty())
+    except KeyboardInterrupt:
+        print(f"crane-reference study: interrupted; the finished cases are in {args.out}/results.csv "
+              "(run the same command again to go on)", file=sys.stderr)
+        return 130
+    files = write_report(spec, table, args.out)
+    print(f"{len(table)} cases ({int(table['feasible'].sum())} feasible): {', '.join(str(f) for f in files)}")
+    return 0
+
+
 def compile_command(args: argparse.Namespace) -> int:
     from .stream.warmup import compile_kernels
 
@@ -165,6 +190,11 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--bag-storage", choices=["mcap", "sqlite3"], default="mcap", help="--bag: storage (default mcap)")
     s.add_argument("--bag-version", type=int, choices=[9, 8], default=9,
                    help="--bag: metadata version, 9 (Jazzy, default) or 8 (Humble)")
+    st = sub.add_parser("study", help="sweep the programmed constraints and crane settings of a study spec (YAML)")
+    st.add_argument("spec", help="study spec YAML (see crane_reference/analysis/study/spec.py)")
+    st.add_argument("--out", default="results/study", help="output directory (default ./results/study)")
+    st.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
+    st.add_argument("--scheduler", metavar="ADDRESS", help="run the cases on this Dask distributed scheduler")
     sub.add_parser("compile", help="compile the numba kernels ahead of the first run (fills the cache; run it "
                    "after installing, e.g. after colcon build)")
     u = sub.add_parser("urdf", help="print the URDF of a model variant")
@@ -208,7 +238,7 @@ def main(argv: list[str] | None = None) -> int:
         parser().error(f"--duration {args.duration}: must be a finite number of seconds > 0")
     try:
         return {"simulate": simulate_command, "urdf": urdf_command, "record": record_command, "modes": modes_command,
-                "analyze": analyze_command, "compile": compile_command}[args.command](args)
+                "analyze": analyze_command, "compile": compile_command, "study": study_command}[args.command](args)
     except ConfigError as error:
         print(f"crane-reference: {error}", file=sys.stderr)
         return 2
