@@ -24,7 +24,6 @@ import math
 import time
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
 from ...model.chain import VARIANTS
 from ...model.config import load_config
@@ -36,10 +35,11 @@ from ...motion.programmed_motion import ProgrammedMotion
 from ...motion.simulation import SOLVER_FAILURES, Scenario, simulate
 from ...motion.trajectory import Trajectory
 from ...stream.targets import UnreachableTargetError, check_task
+from ..bands import CONTROLLER_BAND, controller_band
 from ..vibration import boom_tip_deflection
 from .spec import PATH_SPEED_RISE, Case, StudySpec
 
-BAND = 10.0  # [Hz], the controller band
+BAND = CONTROLLER_BAND  # [Hz]
 SINGULARITY_MARGIN = 0.1  # smallest sigma_min(K_dc) accepted by the reachability check (the node's)
 COMPARED = ("column_slew", "boom_luff", "knuckle")
 METRICS = ("feasible", "reason", "kdc_min_singular_value", "tip_deflection_m", "vibration_rms_m", "constraint_force_n",
@@ -91,11 +91,6 @@ def _motion(scenario: Scenario, values: dict[str, float], realisation: str) -> t
     return ProgrammedMotion(scenario.dynamics, constraints, dependent, realisation=realisation), start
 
 
-def _band(signal: np.ndarray, step: float, kind: str) -> np.ndarray:
-    sos = butter(4, BAND, btype=kind, fs=1.0 / step, output="sos")
-    return sosfiltfilt(sos, signal, axis=0)
-
-
 def _metrics(scenario: Scenario, motion: ProgrammedMotion, trajectory: Trajectory, step: float) -> dict[str, float]:
     model = scenario.model
     out = {"kdc_min_singular_value": float(trajectory.kdc_min_singular_value.min()),
@@ -110,7 +105,7 @@ def _metrics(scenario: Scenario, motion: ProgrammedMotion, trajectory: Trajector
         w = boom_tip_deflection(model, motion.dynamics.chain, trajectory.q)
         out["tip_deflection_m"] = float(np.linalg.norm(w, axis=1).max())
         late = trajectory.t >= 0.5 * trajectory.t[-1]
-        vibration = w - _band(w, step, "lowpass")
+        vibration = w - controller_band(w, step)
         out["vibration_rms_m"] = float(np.sqrt(np.mean(np.sum(vibration[late] ** 2, axis=1))))
     return out
 
@@ -141,6 +136,6 @@ def run_case(spec: StudySpec, case: Case) -> dict[str, object]:
             flexible, rigid = runs["flexible"], runs["rigid"]
             for joint in COMPARED:
                 difference = flexible.coordinate(joint) - rigid.coordinate(joint)
-                row[f"diff_{joint}_rad"] = float(np.abs(_band(difference, spec.step, "lowpass")).max())
+                row[f"diff_{joint}_rad"] = float(np.abs(controller_band(difference, spec.step)).max())
     row["wall_s"] = time.perf_counter() - started
     return row

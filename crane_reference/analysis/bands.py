@@ -1,0 +1,18 @@
+"""Frequency bands of signals sampled at a fixed step: the controller band and the vibration above it.
+
+A 4th-order Butterworth filter applied forward and backward (zero phase, ``scipy.signal.sosfiltfilt``):
+``controller_band`` keeps what a controller follows, below :data:`CONTROLLER_BAND` Hz.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import butter, sosfiltfilt
+
+CONTROLLER_BAND = 10.0  # [Hz]
+
+
+def controller_band(signal: np.ndarray, step: float, cutoff: float = CONTROLLER_BAND) -> np.ndarray:
+    """``signal`` (first axis: samples ``step`` seconds apart) low-passed below ``cutoff`` Hz, zero phase."""
+    sos = butter(4, cutoff, btype="lowpass", fs=1.0 / step, output="sos")
+    return sosfiltfilt(sos, signal, axis=0)
