@@ -120,6 +120,14 @@ def summary(spec: StudySpec, table: pd.DataFrame) -> str:
                 lines.append(f"- {metric} <= {limit:g}: " + (
                     f"every feasible case with {name} <= {best:g} stays within it" if best is not None
                     else f"already exceeded at the smallest {name}"))
+            if len(spec.varied) == 2:
+                first, second = spec.varied
+                lines += ["", f"  Largest {first} within {metric} <= {limit:g}, for each {second}:", "",
+                          f"  | {second} | largest {first} |", "  |---|---|"]
+                for value in np.unique(table[second]):
+                    best = largest_within(table[table[second] == value], first, metric, limit)
+                    lines.append(f"  | {value:g} | {'none' if best is None else f'{best:g}'} |")
+                lines.append("")
         lines.append("")
     lines += ["## Ranges of the metrics (feasible cases)", "", "| metric | min | max |", "|---|---|---|"]
     for metric in PLOTTED:
