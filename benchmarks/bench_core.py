@@ -24,6 +24,8 @@
    1 s; the column slew becomes dependent), rigid crane, 2 s: the largest error of E's parametric angle
    against the integral of omega at h = 2, 1, 0.5 ms, the largest velocity-constraint residual and the
    energy-balance error relative to the work of the constraint forces.
+7. [iterations] Speed and accuracy against the DOP853 reference of looser Newton stopping rules, down to
+   one correction per step (two evaluations).
 6. [newton] Largest difference of psi2, psi(3,0), psi4 over the run between Newton tolerances (on the
    accepted velocity correction, m/s or rad/s) of 1e-8, 1e-9 (the default) and 1e-10 and a run at
    1e-12, at h = 1 ms: the Newton error must stay far below the discretisation error.
@@ -32,6 +34,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -75,10 +78,10 @@ def evaluation_times(params: CraneParameters) -> None:
           f"full qdd from (8) incl. constraints and Python wrapper {t_qdd * 1e6:.1f} us")
 
 
-def newton_iterations(scenario: Scenario, step: float, duration: float = 1.0) -> float:
+def newton_iterations(scenario: Scenario, step: float, duration: float = 1.0, tolerance: float = 1e-9) -> float:
     """Mean Newton iterations per step over the first ``duration`` seconds (one step at a time)."""
     q0 = scenario.equilibrium.q
-    stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), step)
+    stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), step, tolerance=tolerance)
     counts = []
     while stepper.state.t < duration:
         stepper.advance()
@@ -188,6 +191,25 @@ def newton_tolerance(params: CraneParameters, duration: float, step: float = 1e-
               + "/".join(f"{x:.1e}" for x in difference) + " rad")
 
 
+def iteration_rules(params: CraneParameters, duration: float, cache: Path) -> None:
+    """[iterations] Speed and accuracy (against the DOP853 reference) of the Newton stopping rule at
+    h = 1 ms: tolerances 1e-9 (the default), 1e-7, 1e-5 on the accepted velocity correction, and an
+    infinite one (every step accepts after its first correction: two evaluations per step)."""
+    reference = reference_run(params, duration, cache, "undamped")
+    scenario = Scenario(params, "flexible")
+    q0 = scenario.equilibrium.q
+    simulate(scenario.motion, q0, 0.01)  # compile / load the kernels
+    for tolerance in (1e-9, 1e-7, 1e-5, math.inf):
+        start = time.perf_counter()
+        tr = simulate(scenario.motion, q0, duration, step=1e-3, tolerance=tolerance)
+        wall = time.perf_counter() - start
+        raw, slow, _, ee_slow = errors(reference, tr)
+        print(f"[iterations] tolerance {tolerance:g}: {wall / tr.t.size * 1e6:6.1f} us/step, Newton evaluations "
+              f"{newton_iterations(scenario, 1e-3, tolerance=tolerance):.2f}/step; max |error| psi2/psi30/psi4 "
+              f"{raw[0]:.1e}/{raw[1]:.1e}/{raw[2]:.1e} rad, below 10 Hz {slow[0]:.1e}/{slow[1]:.1e}/{slow[2]:.1e} "
+              f"rad, E {ee_slow:.1e} m")
+
+
 def first_order(params: CraneParameters, duration: float = 2.0) -> None:
     omega = QuinticRise(0.0, 0.8, 0.0, 1.0)
     a, b = params.task.ellipse_a, params.task.ellipse_b
@@ -280,7 +302,7 @@ def _timed(function, arguments, repeat: int) -> float:
     return time.perf_counter() - start
 
 
-SECTIONS = ("eval", "profile", "speed", "first-order", "newton", "accuracy")
+SECTIONS = ("eval", "profile", "speed", "first-order", "newton", "iterations", "accuracy")
 
 
 def main() -> None:
@@ -302,6 +324,8 @@ def main() -> None:
         first_order(params)
     if "newton" in args.only:
         newton_tolerance(params, args.duration)
+    if "iterations" in args.only:
+        iteration_rules(params, args.duration, args.cache)
     if args.check_reference:
         reference_check(params, args.duration, args.cache)
     if "accuracy" in args.only:

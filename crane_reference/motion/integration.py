@@ -97,12 +97,15 @@ class GeneralizedAlpha:
         self.coefficients = GeneralizedAlphaParameters.from_spectral_radius(rho_inf)
         self.tolerance = tolerance
         self.max_iterations = max_iterations
-        c = self.coefficients
-        self.settings = AlphaSettings(c.alpha_m, c.alpha_f, c.gamma, c.beta, tolerance, max_iterations,
-                                      PROJECTION_TOLERANCE)
-        """The method in the layout of the compiled kernels."""
         self.last_iterations = 0
         """Newton iterations of the last step (a diagnostic)."""
+
+    @property
+    def settings(self) -> AlphaSettings:
+        """The method and its stopping rules in the layout of the compiled kernels."""
+        c = self.coefficients
+        return AlphaSettings(c.alpha_m, c.alpha_f, c.gamma, c.beta, self.tolerance, self.max_iterations,
+                             PROJECTION_TOLERANCE)
 
     def start(self, t: float, q: np.ndarray, qd: np.ndarray) -> StepState:
         """Consistent start: q_dc from the position constraints, qd_dc from (7), qdd from (8)."""
