@@ -28,32 +28,17 @@ PRISMATIC = 0
 
 
 @njit(cache=True)
-def matmul4(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """4x4 product without BLAS call overhead."""
-    out = np.zeros((4, 4))
+def matmul4_into(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """out = a b for 4x4 matrices (out distinct from a and b), without BLAS call overhead or allocation."""
+    for i in range(4):
+        for j in range(4):
+            out[i, j] = 0.0
     for i in range(4):
         for k in range(4):
             aik = a[i, k]
             if aik != 0.0:
                 for j in range(4):
                     out[i, j] += aik * b[k, j]
-    return out
-
-
-@njit(cache=True)
-def joint_motion(kind: int, axis: int, value: float) -> np.ndarray:
-    """Homogeneous transform of one joint: translation along or rotation about local ``axis``."""
-    M = np.eye(4)
-    if kind == PRISMATIC:
-        M[axis, 3] = value
-        return M
-    c, s = np.cos(value), np.sin(value)
-    i, j = (axis + 1) % 3, (axis + 2) % 3
-    M[i, i] = c
-    M[j, j] = c
-    M[i, j] = -s
-    M[j, i] = s
-    return M
 
 
 @njit(cache=True)
@@ -66,16 +51,21 @@ def forward_kinematics(q: np.ndarray, kinds: np.ndarray, axes: np.ndarray, origi
     n = q.size
     T = np.empty((n, 4, 4))
     S = np.zeros((n, 4, 4))
-    frame = np.eye(4)
+    product = np.empty((4, 4))
     for k in range(n):
         origin = origins[k]
+        frame = T[k]  # built in place from the frame before the joint
         if k > 0:
-            frame = T[k - 1].copy()
+            frame[:, :] = T[k - 1]
+        else:
+            for r in range(4):
+                for c in range(4):
+                    frame[r, c] = 1.0 if r == c else 0.0
         if not (origin[0, 0] == 1.0 and origin[1, 1] == 1.0 and origin[2, 2] == 1.0
                 and origin[0, 3] == 0.0 and origin[1, 3] == 0.0 and origin[2, 3] == 0.0):
-            frame = matmul4(frame, origin)
+            matmul4_into(frame, origin, product)
+            frame[:, :] = product
         a = axes[k]
-        T[k] = frame
         if kinds[k] == PRISMATIC:
             for r in range(3):
                 S[k, r, 3] = frame[r, a]
