@@ -159,3 +159,21 @@ def test_cli_reports_config_errors_by_field(tmp_path):
     assert result.returncode == 2
     assert "boom.rfe_count" in result.stderr
 
+
+
+def test_cubic_hermite_equals_scipys_spline():
+    """The one Hermite helper (Trajectory.interpolate and the online sampler) against scipy's
+    CubicHermiteSpline on random data, vector-valued, at many points and at the knots."""
+    from scipy.interpolate import CubicHermiteSpline
+
+    from crane_reference.motion.trajectory import cubic_hermite
+
+    rng = np.random.default_rng(5)
+    times = np.sort(rng.uniform(0.0, 2.0, 30))
+    values, rates = rng.normal(size=(30, 4)), rng.normal(size=(30, 4))
+    at = np.concatenate([np.linspace(times[0], times[-1], 997), times])
+    expected = CubicHermiteSpline(times, values, rates, axis=0)(at)
+    np.testing.assert_allclose(cubic_hermite(at, times, values, rates), expected, rtol=0, atol=1e-13)
+    one = times[7] + 1e-3  # a scalar time gives one row
+    np.testing.assert_allclose(cubic_hermite(one, times, values, rates),
+                               CubicHermiteSpline(times, values, rates, axis=0)(one), rtol=0, atol=1e-13)
