@@ -12,7 +12,11 @@ terms are
     h_i = sum_{l after i} tr(T_i^(l) H^(l) (sum_mn T_mn^(l) qd_m qd_n)^T) = tr(S_i G_i),
     G_k = sum_{l after k} T^(l) H^(l) T^(l)T B^(l)T,
 
-with B = A + V V the velocity-product term of the body's frame.  Gravity: E_p,g = sum_l m^(l) g
+with B = A + V V the velocity-product term of the body's frame.  With the accelerations added to it,
+B + W_k, W_k = sum_{j<=k} S_j qdd_j (so that d2T = (W + B) T), the same suffix sums give the whole
+inertia force M qdd + h in O(n) (inverse dynamics, the Newton residual of the integrator).
+
+Gravity: E_p,g = sum_l m^(l) g
 J_3 T^(l) r_C^(l) (eq. (4)); its generalized force -dE_p,g/dq_i = -g J_3 S_i Hc_i e_4, because the
 last column of Hc_i is sum_l m^(l) [c^(l); 1] in world coordinates.
 """
@@ -64,6 +68,20 @@ def composite_velocity_products(Hw, B, body_joint, n):
     for k in range(n - 2, -1, -1):
         G[k] += G[k + 1]
     return G
+
+
+@njit(cache=True)
+def add_joint_accelerations(B, S, qdd):
+    """B_k + W_k with W_k = sum_{j<=k} S_j qdd_j: the frames' whole acceleration term (d2T_k = (W_k + B_k) T_k)."""
+    out = np.empty_like(B)
+    W = np.zeros((4, 4))
+    for k in range(qdd.size):
+        for a in range(3):
+            for b in range(4):
+                W[a, b] += S[k, a, b] * qdd[k]
+                out[k, a, b] = B[k, a, b] + W[a, b]
+        out[k, 3] = B[k, 3]
+    return out
 
 
 @njit(cache=True)

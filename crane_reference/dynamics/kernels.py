@@ -15,7 +15,18 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .linalg import cholesky_solve, map_columns, project_rows, smallest_singular_value, solve_small, solve_small_vector
+from .kinematics import forward_kinematics, point_bias, point_jacobian, velocity_terms
+from .linalg import (
+    cholesky,
+    cholesky_solve,
+    map_columns,
+    matmul,
+    matvec,
+    project_rows,
+    smallest_singular_value,
+    solve_small,
+    solve_small_vector,
+)
 from .quadrics import acceleration_terms, constraint_values, holonomic_values, velocity_residual
 from .structures import (
     Accelerations,
@@ -28,20 +39,25 @@ from .structures import (
     Step,
     StepRows,
 )
-from .terms import end_effector_jacobian, energy_accounts, generalized_forces, position_terms, velocity_products
+from .terms import energy_accounts, frame_terms, generalized_forces, gravity_terms, inertia_forces, velocity_products
 
 
 @njit(cache=True, nogil=True)
-def velocity_map(A, independent, dependent):
-    """B = d qd / d qd_ic (n, n_ic): identity rows on ic, Gamma = -K_dc^-1 K_ic rows on dc (eq. (7))."""
+def constraint_map(A, c_acc, independent, dependent):
+    """The solution set of the acceleration constraints A qdd = c (eq. (7)): qdd = B qdd_ic + e with the
+    velocity map B = d qd / d qd_ic (n, n_ic) (identity rows on ic, Gamma = -K_dc^-1 K_ic rows on dc)
+    and the particular solution e (e_ic = 0, K_dc e_dc = c); returns B and e_dc."""
     n_ic = independent.size
+    right = np.empty((dependent.size, n_ic + 1))
+    right[:, :n_ic] = A[:, independent]
+    right[:, n_ic] = c_acc
+    solution = solve_small(np.ascontiguousarray(A[:, dependent]), right)
     B = np.zeros((A.shape[1], n_ic))
     for col in range(n_ic):
         B[independent[col], col] = 1.0
-    gamma = -solve_small(np.ascontiguousarray(A[:, dependent]), np.ascontiguousarray(A[:, independent]))
     for row in range(dependent.size):
-        B[dependent[row]] = gamma[row]
-    return B
+        B[dependent[row]] = -solution[row, :n_ic]
+    return B, solution[:, n_ic]
 
 
 @njit(cache=True, nogil=True)
@@ -59,19 +75,21 @@ def projection_matrix(B, independent, servo):
 @njit(cache=True, nogil=True)
 def project_positions(q, k: Coefficients, holonomic_dependent, chain: ChainData, tolerance, max_iterations):
     """q with the holonomically dependent coordinates solved from Phi(q) = 0 by Newton (Jacobian
-    Phi_p C[:, hd]); also (p, C) of the last iterate and whether it converged."""
+    Phi_p C[:, hd]) until a correction of at most ``tolerance``; also the frames T, twists S, E's position
+    p and Jacobian C at that q itself, and whether it converged."""
     q = q.copy()
-    for _ in range(max_iterations):
-        p, C = end_effector_jacobian(q, chain)
-        if holonomic_dependent.size == 0:
-            return q, p, C, True
+    converged = holonomic_dependent.size == 0
+    for _ in range(max_iterations + 1):
+        T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
+        p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
+        if converged:
+            break
         residual, grads = holonomic_values(p, k)
-        step = solve_small_vector(grads @ np.ascontiguousarray(C[:, holonomic_dependent]), residual)
+        step = solve_small_vector(matmul(grads, C, holonomic_dependent), residual)
         for i in range(holonomic_dependent.size):
             q[holonomic_dependent[i]] -= step[i]
-        if np.max(np.abs(step)) <= tolerance:
-            return q, p, C, True
-    return q, p, C, False
+        converged = np.max(np.abs(step)) <= tolerance
+    return q, T, S, p, C, converged
 
 
 @njit(cache=True, nogil=True)
@@ -85,8 +103,8 @@ def dependent_velocities(qd, p, C, k: Coefficients, dependent):
             linear = False
     qd = qd.copy()
     for _ in range(1 if linear else 30):
-        residual, grads = velocity_residual(p, C @ qd, k)
-        step = solve_small_vector(grads @ np.ascontiguousarray(C[:, dependent]), residual)
+        residual, grads = velocity_residual(p, matvec(C, qd), k)
+        step = solve_small_vector(matmul(grads, C, dependent), residual)
         for i in range(dependent.size):
             qd[dependent[i]] -= step[i]
         if linear or np.max(np.abs(step)) <= 1e-14:
@@ -95,10 +113,19 @@ def dependent_velocities(qd, p, C, k: Coefficients, dependent):
 
 
 @njit(cache=True, nogil=True)
-def _solve_accelerations(M, f, A, c_acc, B, partition: Partition):
+def _accelerations_from(qdd_independent, B, e_dc, dependent):
+    """qdd = B qdd_ic + e (the acceleration constraints of (7) for given independent accelerations)."""
+    qdd = matvec(B, qdd_independent)
+    for r in range(dependent.size):
+        qdd[dependent[r]] += e_dc[r]
+    return qdd
+
+
+@njit(cache=True, nogil=True)
+def _solve_accelerations(M, f, A, B, e_dc, c_acc, partition: Partition):
     """qdd from (8), [P^T M; A] qdd = [P^T f; c] with f = Q - h.  Ideal constraints (P = B): qdd = B a + e
-    with e the particular solution (e_ic = 0, K_dc e_dc = c) and the reduced, symmetric positive definite
-    system B^T M B a = B^T (f - M e) (Cholesky).  Servo-constraints: the square system by LU."""
+    (:func:`constraint_map`) with the reduced, symmetric positive definite system B^T M B a = B^T (f - M e)
+    (Cholesky).  Servo-constraints: the square system by LU."""
     independent, dependent = partition.independent, partition.dependent
     n = f.size
     if partition.servo:
@@ -109,46 +136,45 @@ def _solve_accelerations(M, f, A, c_acc, B, partition: Partition):
         rhs[:independent.size] = f[independent]
         rhs[independent.size:] = c_acc
         return np.linalg.solve(lhs, rhs)
-    e_dc = solve_small_vector(np.ascontiguousarray(A[:, dependent]), c_acc)
     load = f.copy()
     for r in range(dependent.size):
         load -= M[:, dependent[r]] * e_dc[r]
     reduced = map_columns(project_rows(M, B, independent, dependent, False), B, independent, dependent)
-    a = cholesky_solve(np.linalg.cholesky(reduced), project_rows(load.reshape((n, 1)), B, independent, dependent,
+    a = cholesky_solve(cholesky(reduced), project_rows(load.reshape((n, 1)), B, independent, dependent,
                                                                  False)[:, 0])
-    qdd = B @ a
-    for r in range(dependent.size):
-        qdd[dependent[r]] += e_dc[r]
-    return qdd
+    return _accelerations_from(a, B, e_dc, dependent)
 
 
 @njit(cache=True, nogil=True)
-def accelerations_at(q, qd, k: Coefficients, drive, partition: Partition, chain: ChainData, project_velocities):
-    """What a Newton iteration needs at (q, qd): qdd from (8), optionally after solving qd_dc from the
-    velocity-level constraints (with E's Jacobian at q itself, between the position and the velocity
-    parts of the dynamics).  Returns qd, the :class:`Accelerations` and whether the velocity
-    constraints were solved."""
-    T, S, Hw, M, Qg, Vg, p, R, C = position_terms(q, chain)
-    solved = True
-    if project_velocities:
-        qd, solved = dependent_velocities(qd, p, C, k, partition.dependent)
-    h, d = velocity_products(qd, T, S, Hw, chain, p)
+def _terms_at(q, qd, T, S, k: Coefficients, drive, partition: Partition, chain: ChainData):
+    """The position and velocity terms of (7)-(8) at (q, qd) from the frames there: Hw, M, h, the forces,
+    the gravity potential, p, R, C, d, A, c, B and e_dc."""
+    Hw, M, Qg, Vg, p, R, C = frame_terms(T, S, chain)
+    h, d = velocity_products(qd, S, Hw, chain, p)
     forces = generalized_forces(q, qd, Qg, chain, drive)
-    A, c_acc = acceleration_terms(p, C @ qd, C, d, k)
-    B = velocity_map(A, partition.independent, partition.dependent)
-    qdd = _solve_accelerations(M, forces - h, A, c_acc, B, partition)
-    return qd, Accelerations(M, h, forces, Vg, p, R, C, d, A, c_acc, B, qdd), solved
+    A, c_acc = acceleration_terms(p, matvec(C, qd), C, d, k)
+    B, e_dc = constraint_map(A, c_acc, partition.independent, partition.dependent)
+    return M, h, forces, Vg, p, R, C, d, A, c_acc, B, e_dc
+
+
+@njit(cache=True, nogil=True)
+def accelerations_at(q, qd, k: Coefficients, drive, partition: Partition, chain: ChainData):
+    """qdd from (8) at (q, qd) with everything it needs (:class:`Accelerations`)."""
+    T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
+    M, h, forces, Vg, p, R, C, d, A, c_acc, B, e_dc = _terms_at(q, qd, T, S, k, drive, partition, chain)
+    qdd = _solve_accelerations(M, forces - h, A, B, e_dc, c_acc, partition)
+    return Accelerations(M, h, forces, Vg, p, R, C, d, A, c_acc, B, qdd)
 
 
 @njit(cache=True, nogil=True)
 def complete(q, qd, acc: Accelerations, k: Coefficients, drive, partition: Partition, chain: ChainData):
-    """The full :class:`Evaluation` from :func:`accelerations_at`: adds the constraint residuals,
+    """The full :class:`Evaluation` from :class:`Accelerations`: adds the constraint residuals,
     gradients, distances and velocity residuals, the reactions, their generalized force and the accounts."""
     dependent = partition.dependent
-    residual, grads, distance, rate = constraint_values(acc.ee_position, acc.ee_jacobian @ qd, k)
-    reaction_force = acc.M @ acc.qdd + acc.h - acc.forces
+    residual, grads, distance, rate = constraint_values(acc.ee_position, matvec(acc.ee_jacobian, qd), k)
+    reaction_force = matvec(acc.M, acc.qdd) + acc.h - acc.forces
     reactions = (reaction_force[dependent] if partition.servo
-                 else solve_small_vector(acc.A @ acc.A.T, acc.A @ reaction_force))
+                 else solve_small_vector(matmul(acc.A, acc.A.T), matvec(acc.A, reaction_force)))
     energy = energy_accounts(q, qd, acc.M, acc.gravity_potential, chain, drive)
     accounts = np.array([energy[0], energy[1], energy[2], energy[3], reaction_force @ qd, energy[4],
                          smallest_singular_value(np.ascontiguousarray(acc.A[:, dependent]))])
@@ -161,8 +187,56 @@ def evaluate(q, qd, k: Coefficients, drive, partition: Partition, chain: ChainDa
     B, qdd, the reactions (lambda for ideal constraints, the dependent joints' torques tau for
     servo-constraints), the generalized force they exert, M qdd + h - Q (= A^T lambda, or E_dc tau), and
     the accounts (powers: what each source feeds in)."""
-    qd, acc, _ = accelerations_at(q, qd, k, drive, partition, chain, False)
-    return complete(q, qd, acc, k, drive, partition, chain)
+    return complete(q, qd, accelerations_at(q, qd, k, drive, partition, chain), k, drive, partition, chain)
+
+
+@njit(cache=True, nogil=True)
+def iteration_factor(M, B, beta_p, gamma_p, partition: Partition, chain: ChainData):
+    """The factor of the Newton iteration matrix P^T (M + beta' K + gamma' D) B: its Cholesky factor for
+    ideal constraints (P = B, symmetric positive definite), its inverse for servo-constraints (P = E_ic)."""
+    independent, dependent, servo = partition.independent, partition.dependent, partition.servo
+    matrix = M + beta_p * chain.stiffness
+    if np.any(chain.damping != 0.0):
+        matrix += gamma_p * chain.damping
+    reduced = map_columns(project_rows(matrix, B, independent, dependent, servo), B, independent, dependent)
+    return cholesky(reduced) if not servo else np.linalg.inv(reduced)
+
+
+@njit(cache=True, nogil=True)
+def _state_at(a1, x0, v0, a0, at0, q_guess, qd_size, h, k: Coefficients, partition: Partition, chain: ChainData,
+              settings: AlphaSettings):
+    """The generalized-alpha state for the accelerations a1 of the integrated coordinates: the pseudo-
+    acceleration, q with q_hd from the position constraints (starting from ``q_guess``), qd with qd_dc
+    from the velocity constraints, the frames and E's terms there, and whether the constraints were met."""
+    alpha_m, alpha_f, gamma, beta = settings.alpha_m, settings.alpha_f, settings.gamma, settings.beta
+    integrated = partition.integrated
+    at1 = ((1.0 - alpha_f) * a1 + alpha_f * a0 - alpha_m * at0) / (1.0 - alpha_m)
+    q1 = q_guess.copy()
+    q1[integrated] = x0 + h * v0 + h * h * ((0.5 - beta) * at0 + beta * at1)
+    q1, T, S, p, C, solved = project_positions(q1, k, partition.holonomic_dependent, chain,
+                                               settings.projection_tolerance, 25)
+    qd1 = np.zeros(qd_size)
+    qd1[integrated] = v0 + h * ((1.0 - gamma) * at0 + gamma * at1)
+    if solved:
+        qd1, solved = dependent_velocities(qd1, p, C, k, partition.dependent)
+    return at1, q1, qd1, T, S, p, C, solved
+
+
+@njit(cache=True, nogil=True)
+def newton_residual(q, qd, a1, T, S, p, C, k: Coefficients, drive, partition: Partition, chain: ChainData):
+    """At an iterate (q, qd) that meets the constraints, with the integrator's accelerations a1 of the
+    integrated coordinates: the full qdd = B a1_ic + e (the acceleration constraints of (7); for q_vd this
+    is the fixed-point update) and the residual of (8), P^T (M qdd + h - Q), with M qdd + h from inverse
+    dynamics (O(n), no M)."""
+    independent, dependent = partition.independent, partition.dependent
+    Hw, Qg = gravity_terms(T, S, chain)
+    _, velocity_term = velocity_terms(qd, S)
+    d = point_bias(velocity_term, chain.ee_joint, p)
+    A, c_acc = acceleration_terms(p, matvec(C, qd), C, d, k)
+    B, e_dc = constraint_map(A, c_acc, independent, dependent)
+    qdd = _accelerations_from(a1[:independent.size], B, e_dc, dependent)
+    imbalance = inertia_forces(S, Hw, velocity_term, qdd, chain) - generalized_forces(q, qd, Qg, chain, drive)
+    return qdd, project_rows(imbalance.reshape((q.size, 1)), B, independent, dependent, partition.servo)[:, 0]
 
 
 @njit(cache=True, nogil=True)
@@ -170,57 +244,38 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, k: Coefficients, drive
                            chain: ChainData, settings: AlphaSettings):
     """One generalized-alpha step (see :mod:`crane_reference.motion.integration`) of the integrated
     coordinates x = q[integrated] = (q_ic, q_vd): the independent ones and those made dependent by
-    first-order constraints.  Newton (iteration matrix from M, K, D reduced with B) on the independent
-    accelerations, fixed point on the q_vd ones; q_hd from the position constraints and qd_dc from the
-    velocity-level constraints at every iterate.  Starts from q0, qd0, qdd0, the pseudo-acceleration at0
-    and M0, B0 at t0; h is the step."""
-    independent, dependent, integrated = partition.independent, partition.dependent, partition.integrated
-    servo = partition.servo
-    alpha_m, alpha_f, gamma, beta = settings.alpha_m, settings.alpha_f, settings.gamma, settings.beta
-    K, D = chain.stiffness, chain.damping
+    first-order constraints.  Newton (iteration matrix from M0, K, D reduced with B0, at t0) on the
+    independent accelerations with the residual of (8) from inverse dynamics, fixed point on the q_vd
+    ones; q_hd from the position constraints and qd_dc from the velocity-level constraints at every
+    iterate.  At least ``settings.evaluations`` evaluations, then until the last correction is below the
+    tolerance; the step ends at the state of the corrected accelerations.  Starts from q0, qd0, qdd0, the
+    pseudo-acceleration at0 at t0; h is the step."""
+    independent, integrated, servo = partition.independent, partition.integrated, partition.servo
     n_ic = independent.size
     x0, v0, a0 = q0[integrated], qd0[integrated], qdd0[integrated]
-    ratio = (1.0 - alpha_f) / (1.0 - alpha_m)
-    beta_p, gamma_p = h * h * beta * ratio, h * gamma * ratio
-    M_r = map_columns(project_rows(M0, B0, independent, dependent, servo), B0, independent, dependent)
-    iteration_matrix = M_r + beta_p * map_columns(project_rows(K, B0, independent, dependent, servo), B0,
-                                                    independent, dependent)
-    if np.any(D != 0.0):
-        iteration_matrix += gamma_p * map_columns(project_rows(D, B0, independent, dependent, servo), B0,
-                                                  independent, dependent)
-    # symmetric positive definite for ideal constraints (P = B): Cholesky; servo rows: a general inverse
-    factor = np.ascontiguousarray(np.linalg.cholesky(iteration_matrix) if not servo
-                                  else np.linalg.inv(iteration_matrix))
-    q_guess = q0 + h * qd0 + 0.5 * h * h * qdd0
+    ratio = (1.0 - settings.alpha_f) / (1.0 - settings.alpha_m)
+    gamma_p = h * settings.gamma * ratio
+    factor = iteration_factor(M0, B0, h * h * settings.beta * ratio, gamma_p, partition, chain)
+    q1 = q0 + h * qd0 + 0.5 * h * h * qdd0
     a1 = a0.copy()
     status = 1
     for iteration in range(settings.max_iterations):
-        at1 = ((1.0 - alpha_f) * a1 + alpha_f * a0 - alpha_m * at0) / (1.0 - alpha_m)
-        x1 = x0 + h * v0 + h * h * ((0.5 - beta) * at0 + beta * at1)
-        v1 = v0 + h * ((1.0 - gamma) * at0 + gamma * at1)
-        q1 = q_guess.copy()
-        q1[integrated] = x1
-        q1, _, _, solved = project_positions(q1, k, partition.holonomic_dependent, chain,
-                                             settings.projection_tolerance, 25)
-        qd1 = np.zeros_like(q1)
-        qd1[integrated] = v1
-        if solved:
-            qd1, acc, solved = accelerations_at(q1, qd1, k, drive, partition, chain, True)
+        _, q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain, settings)
         if not solved:
             return Step(q0, qd0, at0, evaluate(q0, qd0, k, drive, partition, chain), 2, iteration + 1)
-        q_guess = q1
-        qdd1 = acc.qdd[integrated]
-        correction = qdd1 - a1
-        residual = M_r @ (a1[:n_ic] - qdd1[:n_ic])
-        correction[:n_ic] = -(cholesky_solve(factor, residual) if not servo else factor @ residual)
+        qdd, residual = newton_residual(q1, qd1, a1, T, S, p, C, k, drive, partition, chain)
+        correction = qdd[integrated] - a1
+        correction[:n_ic] = -(cholesky_solve(factor, residual) if not servo else matvec(factor, residual))
         a1 = a1 + correction
-        # The accepted iterate is off by the correction not applied: bound it in velocities (see the module
-        # docstring of crane_reference.motion.integration).  Accept only an iterate that already includes a
-        # Newton correction: stopping at the predictor (possible near rest, where every correction is tiny)
-        # would make the step explicit.
-        if iteration > 0 and gamma_p * np.max(np.abs(correction)) <= settings.tolerance:
+        if iteration + 1 >= settings.evaluations and gamma_p * np.max(np.abs(correction)) <= settings.tolerance:
             status = 0
             break
+    at1, q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain, settings)
+    if not solved:
+        return Step(q0, qd0, at0, evaluate(q0, qd0, k, drive, partition, chain), 2, iteration + 1)
+    M, h_terms, forces, Vg, p, R, C, d, A, c_acc, B, e_dc = _terms_at(q1, qd1, T, S, k, drive, partition, chain)
+    qdd1 = _accelerations_from(a1[:n_ic], B, e_dc, partition.dependent)
+    acc = Accelerations(M, h_terms, forces, Vg, p, R, C, d, A, c_acc, B, qdd1)
     return Step(q1, qd1, at1, complete(q1, qd1, acc, k, drive, partition, chain), status, iteration + 1)
 
 
@@ -249,7 +304,7 @@ def generalized_alpha_run(q, qd, qdd, at, M, B, t0, times, k: Coefficients, driv
         rows.q[completed], rows.qd[completed], rows.qdd[completed] = step.q, step.qd, acc.qdd
         rows.reactions[completed], rows.constraint_forces[completed] = e.reactions, e.constraint_forces
         rows.ee_position[completed], rows.ee_rotation[completed] = acc.ee_position, acc.ee_rotation
-        rows.ee_velocity[completed] = acc.ee_jacobian @ step.qd
+        rows.ee_velocity[completed] = matvec(acc.ee_jacobian, step.qd)
         rows.residual[completed], rows.residual_distance[completed] = e.residual, e.distance
         rows.accounts[completed], rows.iterations[completed] = e.accounts, step.iterations
         completed += 1

@@ -1,10 +1,58 @@
 """Small dense linear algebra for the kernels, without LAPACK/BLAS call overhead where the matrices are
-tiny (K_dc is 2 x 2 or 3 x 3), and the products with the velocity map B of eq. (7) without forming it."""
+small (K_dc is 2 x 2 or 3 x 3, C is 3 x n, the chain has tens of coordinates), and the products with the
+velocity map B of eq. (7) without forming it."""
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def matvec(A, x):
+    """A x for a 2-D A (loops: no BLAS call)."""
+    out = np.zeros(A.shape[0])
+    for i in range(A.shape[0]):
+        total = 0.0
+        for j in range(A.shape[1]):
+            total += A[i, j] * x[j]
+        out[i] = total
+    return out
+
+
+@njit(cache=True, nogil=True)
+def matmul(A, B, columns=None):
+    """A B (or A B[:, columns]) for small 2-D arrays (loops: no BLAS call, no copy of the columns)."""
+    count = B.shape[1] if columns is None else columns.size
+    out = np.zeros((A.shape[0], count))
+    for j in range(count):
+        column = j if columns is None else columns[j]
+        for i in range(A.shape[0]):
+            total = 0.0
+            for k in range(A.shape[1]):
+                total += A[i, k] * B[k, column]
+            out[i, j] = total
+    return out
+
+
+@njit(cache=True, nogil=True)
+def cholesky(A):
+    """Lower-triangular L with L L^T = A for a symmetric positive definite A (raises otherwise)."""
+    n = A.shape[0]
+    L = np.zeros((n, n))
+    for j in range(n):
+        total = A[j, j]
+        for k in range(j):
+            total -= L[j, k] * L[j, k]
+        if not total > 0.0:
+            raise np.linalg.LinAlgError("matrix is not positive definite")
+        L[j, j] = np.sqrt(total)
+        for i in range(j + 1, n):
+            total = A[i, j]
+            for k in range(j):
+                total -= L[i, k] * L[j, k]
+            L[i, j] = total / L[j, j]
+    return L
 
 
 @njit(cache=True, nogil=True)

@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .linalg import matmul
 from .structures import Coefficients
 
 
@@ -126,7 +127,7 @@ def acceleration_terms(p, v, C, d, k: Coefficients):
             grads[i], c_acc[i] = holonomic_acceleration(k.Q[i], k.g[i], k.c[i], p, v, d)
         else:
             grads[i], c_acc[i] = rate_acceleration(k.Q[i], k.g[i], k.c[i], p, v, d)
-    return grads @ C, c_acc
+    return matmul(grads, C), c_acc
 
 
 @njit(cache=True, nogil=True)

@@ -62,13 +62,15 @@ class Partition(NamedTuple):
 
 class AlphaSettings(NamedTuple):
     """Generalized-alpha coefficients and the Newton stopping rules (see
-    :mod:`crane_reference.motion.integration`): ``tolerance`` on the accepted velocity correction,
-    ``max_iterations`` per step, ``projection_tolerance`` [rad] of Newton on the position constraints."""
+    :mod:`crane_reference.motion.integration`): at least ``evaluations`` Newton evaluations per step, then
+    until the last velocity correction is at most ``tolerance``, at most ``max_iterations``;
+    ``projection_tolerance`` [rad] of Newton on the position constraints."""
 
     alpha_m: float
     alpha_f: float
     gamma: float
     beta: float
+    evaluations: int
     tolerance: float
     max_iterations: int
     projection_tolerance: float

@@ -16,6 +16,7 @@ import numpy as np
 from numba import njit
 
 from .inertia import (
+    add_joint_accelerations,
     composite_inertias,
     composite_velocity_products,
     gravity_forces,
@@ -24,24 +25,38 @@ from .inertia import (
     world_pseudo_inertias,
 )
 from .kinematics import forward_kinematics, point_bias, point_jacobian, velocity_terms
+from .linalg import matvec
 from .structures import ChainData
 
 
 @njit(cache=True)
 def position_terms(q, chain: ChainData):
-    """What depends on q alone: frames T, twists S, world pseudo-inertias Hw, M, gravity forces, the
-    total gravity potential, E's position p, the rotation R of its frame and its Jacobian C."""
+    """What depends on q alone: frames T, twists S and the terms of :func:`frame_terms`."""
     T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
-    Hw = world_pseudo_inertias(T, chain.body_joint, chain.body_H)
-    Hc = composite_inertias(Hw, chain.body_joint, q.size)
-    M = mass_matrix(S, Hc)
-    Qg = gravity_forces(S, Hc, chain.gravity)
-    p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
-    return T, S, Hw, M, Qg, chain.gravity * Hc[0, 2, 3], p, T[chain.ee_joint, :3, :3].copy(), C
+    return (T, S, *frame_terms(T, S, chain))
 
 
 @njit(cache=True)
-def velocity_products(qd, T, S, Hw, chain: ChainData, p):
+def frame_terms(T, S, chain: ChainData):
+    """From the frames T and twists S at q: world pseudo-inertias Hw, M, gravity forces, the total
+    gravity potential, E's position p, the rotation R of its frame and its Jacobian C."""
+    Hw = world_pseudo_inertias(T, chain.body_joint, chain.body_H)
+    Hc = composite_inertias(Hw, chain.body_joint, S.shape[0])
+    M = mass_matrix(S, Hc)
+    Qg = gravity_forces(S, Hc, chain.gravity)
+    p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
+    return Hw, M, Qg, chain.gravity * Hc[0, 2, 3], p, T[chain.ee_joint, :3, :3].copy(), C
+
+
+@njit(cache=True)
+def gravity_terms(T, S, chain: ChainData):
+    """World pseudo-inertias Hw and the gravity forces, without M (for the Newton residual)."""
+    Hw = world_pseudo_inertias(T, chain.body_joint, chain.body_H)
+    return Hw, gravity_forces(S, composite_inertias(Hw, chain.body_joint, S.shape[0]), chain.gravity)
+
+
+@njit(cache=True)
+def velocity_products(qd, S, Hw, chain: ChainData, p):
     """What is quadratic in qd: the velocity terms h of (8) and E's d (C qdd + d is E's acceleration)."""
     _, B = velocity_terms(qd, S)
     h = velocity_forces(S, composite_velocity_products(Hw, B, chain.body_joint, qd.size))
@@ -49,10 +64,18 @@ def velocity_products(qd, T, S, Hw, chain: ChainData, p):
 
 
 @njit(cache=True)
+def inertia_forces(S, Hw, velocity_term, qdd, chain: ChainData):
+    """M qdd + h in O(n), without forming M (see :mod:`.inertia`); ``velocity_term`` is B of
+    :func:`.kinematics.velocity_terms` at qd."""
+    total = add_joint_accelerations(velocity_term, S, qdd)
+    return velocity_forces(S, composite_velocity_products(Hw, total, chain.body_joint, qdd.size))
+
+
+@njit(cache=True)
 def chain_terms(q, qd, chain: ChainData):
     """M, h, gravity forces, total gravity potential, E's position, rotation, Jacobian C and d."""
-    T, S, Hw, M, Qg, Vg, p, R, C = position_terms(q, chain)
-    h, d = velocity_products(qd, T, S, Hw, chain, p)
+    _, S, Hw, M, Qg, Vg, p, R, C = position_terms(q, chain)
+    h, d = velocity_products(qd, S, Hw, chain, p)
     return M, h, Qg, Vg, p, R, C, d
 
 
@@ -81,9 +104,9 @@ def drive_torque(drive, psi2):
 @njit(cache=True)
 def generalized_forces(q, qd, gravity, chain: ChainData, drive):
     """Q = Q_g - K q - D qd + t_dr e_psi2 with the gravity forces Q_g (the sign convention above)."""
-    forces = gravity - chain.stiffness @ q
+    forces = gravity - matvec(chain.stiffness, q)
     if np.any(chain.damping != 0.0):
-        forces -= chain.damping @ qd
+        forces -= matvec(chain.damping, qd)
     forces[chain.drive_joint] += drive_torque(drive, q[chain.drive_joint])
     return forces
 
@@ -101,6 +124,7 @@ def energy_accounts(q, qd, M, gravity_potential, chain: ChainData, drive):
     j = chain.drive_joint
     K, D = chain.stiffness, chain.damping
     stretch = drive[2] - q[j]
-    return np.array([0.5 * (qd @ (M @ qd)), gravity_potential + 0.5 * (q @ (K @ q)) + 0.5 * drive[1] * stretch**2,
+    return np.array([0.5 * (qd @ matvec(M, qd)),
+                     gravity_potential + 0.5 * (q @ matvec(K, q)) + 0.5 * drive[1] * stretch**2,
                      drive_torque(drive, q[j]), drive[0] * qd[j] + drive[1] * stretch * drive[3],
-                     -(qd @ (D @ qd))])
+                     -(qd @ matvec(D, qd))])

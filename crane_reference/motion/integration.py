@@ -92,9 +92,10 @@ class GeneralizedAlpha:
     """Generalized-alpha stepper for a :class:`ProgrammedMotion` (one compiled call per step)."""
 
     def __init__(self, motion: ProgrammedMotion, rho_inf: float = 0.8, tolerance: float = 1e-9,
-                 max_iterations: int = 30):
+                 max_iterations: int = 30, evaluations: int = 2):
         self.motion = motion
         self.coefficients = GeneralizedAlphaParameters.from_spectral_radius(rho_inf)
+        self.evaluations = evaluations
         self.tolerance = tolerance
         self.max_iterations = max_iterations
         self.last_iterations = 0
@@ -104,8 +105,8 @@ class GeneralizedAlpha:
     def settings(self) -> AlphaSettings:
         """The method and its stopping rules in the layout of the compiled kernels."""
         c = self.coefficients
-        return AlphaSettings(c.alpha_m, c.alpha_f, c.gamma, c.beta, self.tolerance, self.max_iterations,
-                             PROJECTION_TOLERANCE)
+        return AlphaSettings(c.alpha_m, c.alpha_f, c.gamma, c.beta, self.evaluations, self.tolerance,
+                             self.max_iterations, PROJECTION_TOLERANCE)
 
     def start(self, t: float, q: np.ndarray, qd: np.ndarray) -> StepState:
         """Consistent start: q_dc from the position constraints, qd_dc from (7), qdd from (8)."""

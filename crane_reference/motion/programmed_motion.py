@@ -131,8 +131,8 @@ class ProgrammedMotion:
     def project_positions(self, t: float, q: np.ndarray, tolerance: float = 1e-13,
                           max_iterations: int = 25) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """q with q_hd solved from Phi(q, t) = 0 (Newton, Jacobian Phi_p C[:, hd]; the paper's K_dc), and
-        (p_E, C) from the last Newton iterate (within ``tolerance`` of the returned q)."""
-        q, p, C, converged = kernels.project_positions(np.ascontiguousarray(q, dtype=float),
+        (p_E, C) at the returned q; Newton stops after a correction of at most ``tolerance`` [rad or m]."""
+        q, _, _, p, C, converged = kernels.project_positions(np.ascontiguousarray(q, dtype=float),
                                                        self.constraints.coefficients(t), self.holonomic_dependent,
                                                        self.dynamics.chain, tolerance, max_iterations)
         if not converged:
