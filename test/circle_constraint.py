@@ -15,6 +15,6 @@ class CircleXZ(EndEffectorConstraint):
 
     radius: float
 
-    def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
-        Q[0] = np.diag([1.0, 0.0, 1.0])
-        c[0] = -self.radius**2
+    def write(self, t: float | np.ndarray, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
+        Q[..., 0, :, :] = np.diag([1.0, 0.0, 1.0])
+        c[..., 0] = -self.radius**2

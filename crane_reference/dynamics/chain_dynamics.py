@@ -40,7 +40,8 @@ def chain_data(model: ChainModel, damping_matrix: np.ndarray) -> ChainData:
         gravity=float(model.gravity), ee_joint=int(model.end_effector_joint),
         ee_point=np.asarray(model.end_effector_point, dtype=float),
         stiffness=np.ascontiguousarray(model.stiffness, dtype=float),
-        damping=np.ascontiguousarray(damping_matrix, dtype=float), drive_joint=int(model.drive_joint))
+        damping=np.ascontiguousarray(damping_matrix, dtype=float), damped=bool(np.any(damping_matrix != 0.0)),
+        drive_joint=int(model.drive_joint))
 
 
 class CraneDynamics:

@@ -45,13 +45,24 @@ def world_pseudo_inertias(T, body_joint, body_H):
 
 
 @njit(cache=True)
+def _suffix_sums(X):
+    """X[k] += X[k + 1] from the last joint back, in place (X of shape (n, 4, 4))."""
+    for k in range(X.shape[0] - 2, -1, -1):
+        for a in range(4):
+            for b in range(4):
+                X[k, a, b] += X[k + 1, a, b]
+
+
+@njit(cache=True)
 def composite_inertias(Hw, body_joint, n):
     """Suffix sums Hc_k of the world pseudo-inertias over the bodies beyond joint k."""
     Hc = np.zeros((n, 4, 4))
     for body in range(body_joint.size):
-        Hc[body_joint[body]] += Hw[body]
-    for k in range(n - 2, -1, -1):
-        Hc[k] += Hc[k + 1]
+        k = body_joint[body]
+        for a in range(4):
+            for b in range(4):
+                Hc[k, a, b] += Hw[body, a, b]
+    _suffix_sums(Hc)
     return Hc
 
 
@@ -65,8 +76,7 @@ def composite_velocity_products(Hw, B, body_joint, n):
         for a in range(4):
             for b in range(4):
                 G[k, a, b] += H[a, 0] * Bk[b, 0] + H[a, 1] * Bk[b, 1] + H[a, 2] * Bk[b, 2] + H[a, 3] * Bk[b, 3]
-    for k in range(n - 2, -1, -1):
-        G[k] += G[k + 1]
+    _suffix_sums(G)
     return G
 
 

@@ -113,11 +113,17 @@ def dependent_velocities(qd, p, C, k: Coefficients, dependent):
 
 
 @njit(cache=True, nogil=True)
-def _accelerations_from(qdd_independent, B, e_dc, dependent):
-    """qdd = B qdd_ic + e (the acceleration constraints of (7) for given independent accelerations)."""
-    qdd = matvec(B, qdd_independent)
+def _accelerations_from(qdd_independent, B, e_dc, independent, dependent):
+    """qdd = B qdd_ic + e (the acceleration constraints of (7) for given independent accelerations): qdd_ic
+    itself, qdd_dc = Gamma qdd_ic + e_dc."""
+    qdd = np.empty(B.shape[0])
+    for j in range(independent.size):
+        qdd[independent[j]] = qdd_independent[j]
     for r in range(dependent.size):
-        qdd[dependent[r]] += e_dc[r]
+        total = e_dc[r]
+        for j in range(independent.size):
+            total += B[dependent[r], j] * qdd_independent[j]
+        qdd[dependent[r]] = total
     return qdd
 
 
@@ -142,7 +148,7 @@ def _solve_accelerations(M, f, A, B, e_dc, c_acc, partition: Partition):
     reduced = map_columns(project_rows(M, B, independent, dependent, False), B, independent, dependent)
     a = cholesky_solve(cholesky(reduced), project_rows(load.reshape((n, 1)), B, independent, dependent,
                                                                  False)[:, 0])
-    return _accelerations_from(a, B, e_dc, dependent)
+    return _accelerations_from(a, B, e_dc, independent, dependent)
 
 
 @njit(cache=True, nogil=True)
@@ -167,12 +173,12 @@ def accelerations_at(q, qd, k: Coefficients, drive, partition: Partition, chain:
 
 
 @njit(cache=True, nogil=True)
-def complete(q, qd, acc: Accelerations, k: Coefficients, drive, partition: Partition, chain: ChainData):
-    """The full :class:`Evaluation` from :class:`Accelerations`: adds the constraint residuals,
-    gradients, distances and velocity residuals, the reactions, their generalized force and the accounts."""
+def _evaluation(q, qd, acc: Accelerations, k: Coefficients, drive, partition: Partition, chain: ChainData):
+    """The full :class:`Evaluation` from :class:`Accelerations`: adds the constraint residuals, gradients,
+    distances and velocity residuals, the reactions, their generalized force M qdd + h - Q and the accounts."""
     dependent = partition.dependent
-    residual, grads, distance, rate = constraint_values(acc.ee_position, matvec(acc.ee_jacobian, qd), k)
     reaction_force = matvec(acc.M, acc.qdd) + acc.h - acc.forces
+    residual, grads, distance, rate = constraint_values(acc.ee_position, matvec(acc.ee_jacobian, qd), k)
     reactions = (reaction_force[dependent] if partition.servo
                  else solve_small_vector(matmul(acc.A, acc.A.T), matvec(acc.A, reaction_force)))
     energy = energy_accounts(q, qd, acc.M, acc.gravity_potential, chain, drive)
@@ -187,16 +193,20 @@ def evaluate(q, qd, k: Coefficients, drive, partition: Partition, chain: ChainDa
     B, qdd, the reactions (lambda for ideal constraints, the dependent joints' torques tau for
     servo-constraints), the generalized force they exert, M qdd + h - Q (= A^T lambda, or E_dc tau), and
     the accounts (powers: what each source feeds in)."""
-    return complete(q, qd, accelerations_at(q, qd, k, drive, partition, chain), k, drive, partition, chain)
+    return _evaluation(q, qd, accelerations_at(q, qd, k, drive, partition, chain), k, drive, partition, chain)
 
 
 @njit(cache=True, nogil=True)
-def iteration_factor(M, B, beta_p, gamma_p, partition: Partition, chain: ChainData):
-    """The factor of the Newton iteration matrix P^T (M + beta' K + gamma' D) B: its Cholesky factor for
-    ideal constraints (P = B, symmetric positive definite), its inverse for servo-constraints (P = E_ic)."""
+def iteration_factor(M, B, h, partition: Partition, chain: ChainData, settings: AlphaSettings):
+    """The factor of the Newton iteration matrix P^T (M + beta' K + gamma' D) B for the step h
+    (beta' = h^2 beta (1 - alpha_f)/(1 - alpha_m), gamma' = h gamma (1 - alpha_f)/(1 - alpha_m)): its
+    Cholesky factor for ideal constraints (P = B, symmetric positive definite), its inverse for
+    servo-constraints (P = E_ic)."""
     independent, dependent, servo = partition.independent, partition.dependent, partition.servo
+    ratio = (1.0 - settings.alpha_f) / (1.0 - settings.alpha_m)
+    beta_p, gamma_p = h * h * settings.beta * ratio, h * settings.gamma * ratio
     matrix = M + beta_p * chain.stiffness
-    if np.any(chain.damping != 0.0):
+    if chain.damped:
         matrix += gamma_p * chain.damping
     reduced = map_columns(project_rows(matrix, B, independent, dependent, servo), B, independent, dependent)
     return cholesky(reduced) if not servo else np.linalg.inv(reduced)
@@ -234,7 +244,7 @@ def newton_residual(q, qd, a1, T, S, p, C, k: Coefficients, drive, partition: Pa
     d = point_bias(velocity_term, chain.ee_joint, p)
     A, c_acc = acceleration_terms(p, matvec(C, qd), C, d, k)
     B, e_dc = constraint_map(A, c_acc, independent, dependent)
-    qdd = _accelerations_from(a1[:independent.size], B, e_dc, dependent)
+    qdd = _accelerations_from(a1[:independent.size], B, e_dc, independent, dependent)
     imbalance = inertia_forces(S, Hw, velocity_term, qdd, chain) - generalized_forces(q, qd, Qg, chain, drive)
     return qdd, project_rows(imbalance.reshape((q.size, 1)), B, independent, dependent, partition.servo)[:, 0]
 
@@ -244,18 +254,18 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, k: Coefficients, drive
                            chain: ChainData, settings: AlphaSettings):
     """One generalized-alpha step (see :mod:`crane_reference.motion.integration`) of the integrated
     coordinates x = q[integrated] = (q_ic, q_vd): the independent ones and those made dependent by
-    first-order constraints.  Newton (iteration matrix from M0, K, D reduced with B0, at t0) on the
+    first-order constraints.  Newton (iteration matrix :func:`iteration_factor` from M0, B0 at t0) on the
     independent accelerations with the residual of (8) from inverse dynamics, fixed point on the q_vd
     ones; q_hd from the position constraints and qd_dc from the velocity-level constraints at every
     iterate.  At least ``settings.evaluations`` evaluations, then until the last correction is below the
-    tolerance; the step ends at the state of the corrected accelerations.  Starts from q0, qd0, qdd0, the
-    pseudo-acceleration at0 at t0; h is the step."""
+    tolerance; the step ends at the state of the corrected accelerations, evaluated there with
+    qdd = B a_ic + e.  Starts from q0, qd0, qdd0, the pseudo-acceleration at0 at t0; h is the step."""
     independent, integrated, servo = partition.independent, partition.integrated, partition.servo
     n_ic = independent.size
     x0, v0, a0 = q0[integrated], qd0[integrated], qdd0[integrated]
     ratio = (1.0 - settings.alpha_f) / (1.0 - settings.alpha_m)
     gamma_p = h * settings.gamma * ratio
-    factor = iteration_factor(M0, B0, h * h * settings.beta * ratio, gamma_p, partition, chain)
+    factor = iteration_factor(M0, B0, h, partition, chain, settings)
     q1 = q0 + h * qd0 + 0.5 * h * h * qdd0
     a1 = a0.copy()
     status = 1
@@ -274,9 +284,9 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, k: Coefficients, drive
     if not solved:
         return Step(q0, qd0, at0, evaluate(q0, qd0, k, drive, partition, chain), 2, iteration + 1)
     M, h_terms, forces, Vg, p, R, C, d, A, c_acc, B, e_dc = _terms_at(q1, qd1, T, S, k, drive, partition, chain)
-    qdd1 = _accelerations_from(a1[:n_ic], B, e_dc, partition.dependent)
+    qdd1 = _accelerations_from(a1[:n_ic], B, e_dc, independent, partition.dependent)
     acc = Accelerations(M, h_terms, forces, Vg, p, R, C, d, A, c_acc, B, qdd1)
-    return Step(q1, qd1, at1, complete(q1, qd1, acc, k, drive, partition, chain), status, iteration + 1)
+    return Step(q1, qd1, at1, _evaluation(q1, qd1, acc, k, drive, partition, chain), status, iteration + 1)
 
 
 @njit(cache=True, nogil=True)
@@ -289,8 +299,8 @@ def _at_step(k: Coefficients, i):
 def generalized_alpha_run(q, qd, qdd, at, M, B, t0, times, k: Coefficients, drives, partition: Partition,
                           chain: ChainData, settings: AlphaSettings):
     """:func:`generalized_alpha_step` from t0 through ``times`` (N,) in one call, with the constraint
-    coefficients ``k`` (stacked per step) and drive parameters ``drives`` (N, 4) of each step's end.
-    Stops at the first step that fails; returns a :class:`Run`."""
+    coefficients ``k`` (stacked per step) and drive parameters ``drives`` (N, 4) of each step's end; M, B
+    at t0.  Stops at the first step that fails; returns a :class:`Run`."""
     N, n, m = times.size, q.size, k.order.size
     rows = StepRows(np.empty((N, n)), np.empty((N, n)), np.empty((N, n)), np.empty((N, m)), np.empty((N, n)),
                     np.empty((N, 3)), np.empty((N, 3, 3)), np.empty((N, 3)), np.empty((N, m)), np.empty((N, m)),

@@ -20,7 +20,8 @@ class ChainData(NamedTuple):
     (n, 4, 4) constant offsets; ``body_joint`` (b,) the joint each body moves with, ``body_H`` (b, 4, 4)
     their pseudo-inertia matrices in the joint frame; ``gravity`` [m/s^2] (along -z);
     ``ee_joint`` and ``ee_point`` (3,): E's frame and position in it; ``stiffness`` K and ``damping``
-    D (n, n); ``drive_joint``: the coordinate the column drive acts on (psi2)."""
+    D (n, n), ``damped`` whether D has a non-zero entry; ``drive_joint``: the coordinate the column drive
+    acts on (psi2)."""
 
     kinds: np.ndarray
     axes: np.ndarray
@@ -32,6 +33,7 @@ class ChainData(NamedTuple):
     ee_point: np.ndarray
     stiffness: np.ndarray
     damping: np.ndarray
+    damped: bool
     drive_joint: int
 
 
@@ -77,9 +79,9 @@ class AlphaSettings(NamedTuple):
 
 
 class Accelerations(NamedTuple):
-    """What (8) needs and gives at (q, qd): mass matrix M, velocity terms h, generalized forces
-    (gravity, springs, dampers, drive), total gravity potential, E's position, frame rotation,
-    Jacobian C (3, n) and bias d (p'' = C qdd + d), the constraint rows A (m, n) and right-hand side
+    """What (8) needs and gives at (q, qd): mass matrix M, velocity terms h, generalized forces (gravity,
+    springs, dampers, drive), total gravity potential, E's position, frame rotation, Jacobian C (3, n) and
+    bias d (p'' = C qdd + d), the constraint rows A (m, n) and right-hand side
     c of A qdd = c, the velocity map B (n, n_ic) and qdd."""
 
     M: np.ndarray

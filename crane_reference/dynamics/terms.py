@@ -105,7 +105,7 @@ def drive_torque(drive, psi2):
 def generalized_forces(q, qd, gravity, chain: ChainData, drive):
     """Q = Q_g - K q - D qd + t_dr e_psi2 with the gravity forces Q_g (the sign convention above)."""
     forces = gravity - matvec(chain.stiffness, q)
-    if np.any(chain.damping != 0.0):
+    if chain.damped:
         forces -= matvec(chain.damping, qd)
     forces[chain.drive_joint] += drive_torque(drive, q[chain.drive_joint])
     return forces

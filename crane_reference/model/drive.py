@@ -31,11 +31,12 @@ class TorqueSource:
         """Times where the torque jumps (an integrator should step onto them)."""
         return (self.start, self.end)
 
-    def kernel_parameters(self, t: float, left_limit: bool = False) -> np.ndarray:
-        """(tau0, s_dr, psi_a, dpsi_a/dt) = (t_dr(t), 0, 0, 0), for the compiled solver; with ``left_limit``
-        the limit from below, t_dr(t-) (for a step ending on a jump)."""
-        on = self.start < t <= self.end if left_limit else self.start <= t < self.end
-        return np.array([self.torque_value if on else 0.0, 0.0, 0.0, 0.0])
+    def kernel_parameters(self, t: float | np.ndarray, left_limit: bool = False) -> np.ndarray:
+        """(tau0, s_dr, psi_a, dpsi_a/dt) = (t_dr(t), 0, 0, 0), for the compiled solver (shape (4,), or
+        (N, 4) for N times); with ``left_limit`` the limit from below, t_dr(t-) (for a step ending on a jump)."""
+        on = ((self.start < t) & (t <= self.end)) if left_limit else ((self.start <= t) & (t < self.end))
+        zero = np.zeros_like(t, dtype=float)
+        return np.stack((np.where(on, self.torque_value, 0.0), zero, zero, zero), axis=-1)
 
 
 @dataclass(frozen=True)
@@ -47,11 +48,12 @@ class SpringDrive:
     def breakpoints(self) -> tuple[float, ...]:
         return ()
 
-    def kernel_parameters(self, t: float, left_limit: bool = False) -> np.ndarray:
-        """(tau0, s_dr, psi_a, dpsi_a/dt) = (0, s_dr, psi_a(t), dpsi_a/dt), for the compiled solver (continuous
-        in t, so ``left_limit`` changes nothing)."""
+    def kernel_parameters(self, t: float | np.ndarray, left_limit: bool = False) -> np.ndarray:
+        """(tau0, s_dr, psi_a, dpsi_a/dt) = (0, s_dr, psi_a(t), dpsi_a/dt), for the compiled solver (shape (4,),
+        or (N, 4) for N times; continuous in t, so ``left_limit`` changes nothing)."""
         angle, rate, _ = self.motor_angle(t)
-        return np.array([0.0, self.stiffness, angle, rate])
+        zero = np.zeros_like(t, dtype=float)
+        return np.stack((zero, self.stiffness + zero, angle + zero, rate + zero), axis=-1)
 
 
 Drive = TorqueSource | SpringDrive

@@ -96,9 +96,10 @@ class EndEffectorConstraint(ABC):
     order = 0
 
     @abstractmethod
-    def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
+    def write(self, t: float | np.ndarray, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
         """Write the coefficients of Phi at time t with their first and second time derivatives into
-        zeroed arrays Q (3, 3, 3), g (3, 3), c (3,) (layout of :class:`Quadric`)."""
+        zeroed arrays Q (..., 3, 3, 3), g (..., 3, 3), c (..., 3) (layout of :class:`Quadric`; the leading
+        axes, if any, are those of an array of times t)."""
 
     def quadric(self, t: float) -> Quadric:
         Q, g, c = np.zeros((3, 3, 3)), np.zeros((3, 3)), np.zeros(3)
@@ -112,9 +113,10 @@ class EndEffectorRateConstraint(ABC):
     order = 1
 
     @abstractmethod
-    def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
+    def write(self, t: float | np.ndarray, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
         """Write the coefficients of Psi at time t with their first time derivative into zeroed arrays
-        Q (2, 6, 6), g (2, 6), c (2,) (layout of :class:`RateQuadric`)."""
+        Q (..., 2, 6, 6), g (..., 2, 6), c (..., 2) (layout of :class:`RateQuadric`; leading axes as in
+        :meth:`EndEffectorConstraint.write`)."""
 
     def quadric(self, t: float) -> RateQuadric:
         Q, g, c = np.zeros((2, 6, 6)), np.zeros((2, 6)), np.zeros(2)
@@ -131,15 +133,15 @@ class EllipseXY(EndEffectorConstraint):
     b: Profile
 
     @staticmethod
-    def _inverse_square(profile: Profile, t: float) -> tuple[float, float, float]:
+    def _inverse_square(profile: Profile, t: float | np.ndarray) -> tuple:
         """1/a^2 and its first two time derivatives."""
         a, da, dda = profile(t)
         return a**-2, -2.0 * da / a**3, -2.0 * dda / a**3 + 6.0 * da**2 / a**4
 
-    def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
-        Q[0, 0, 0], Q[1, 0, 0], Q[2, 0, 0] = self._inverse_square(self.a, t)
-        Q[0, 1, 1], Q[1, 1, 1], Q[2, 1, 1] = self._inverse_square(self.b, t)
-        c[0] = -1.0
+    def write(self, t: float | np.ndarray, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
+        Q[..., 0, 0, 0], Q[..., 1, 0, 0], Q[..., 2, 0, 0] = self._inverse_square(self.a, t)
+        Q[..., 0, 1, 1], Q[..., 1, 1, 1], Q[..., 2, 1, 1] = self._inverse_square(self.b, t)
+        c[..., 0] = -1.0
 
 
 @dataclass(frozen=True)
@@ -148,10 +150,10 @@ class HeightZ(EndEffectorConstraint):
 
     z: Profile
 
-    def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
-        g[0, 2] = 1.0
+    def write(self, t: float | np.ndarray, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
+        g[..., 0, 2] = 1.0
         z, dz, ddz = self.z(t)
-        c[0], c[1], c[2] = -z, -dz, -ddz
+        c[..., 0], c[..., 1], c[..., 2] = -z, -dz, -ddz
 
 
 @dataclass(frozen=True)
@@ -163,11 +165,11 @@ class ArealRate(EndEffectorRateConstraint):
 
     rate: Profile
 
-    def write(self, t: float, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
-        Q[0, 0, 4] = Q[0, 4, 0] = 0.5  # x y'
-        Q[0, 1, 3] = Q[0, 3, 1] = -0.5  # -y x'
+    def write(self, t: float | np.ndarray, Q: np.ndarray, g: np.ndarray, c: np.ndarray) -> None:
+        Q[..., 0, 0, 4] = Q[..., 0, 4, 0] = 0.5  # x y'
+        Q[..., 0, 1, 3] = Q[..., 0, 3, 1] = -0.5  # -y x'
         r, dr, _ = self.rate(t)
-        c[0], c[1] = -r, -dr
+        c[..., 0], c[..., 1] = -r, -dr
 
 
 @dataclass(frozen=True)
@@ -205,14 +207,14 @@ class ConstraintSet:
     def coefficients_at(self, times: np.ndarray) -> Coefficients:
         """The coefficients (:class:`~crane_reference.dynamics.structures.Coefficients`) at each of ``times``,
         stacked on a leading axis: Q (N, m, 3, 6, 6) etc."""
-        n, m = len(times), self.size
+        times = np.asarray(times, dtype=float)
+        n, m = times.size, self.size
         Q, g, c = np.zeros((n, m, 3, 6, 6)), np.zeros((n, m, 3, 6)), np.zeros((n, m, 3))
-        for k, t in enumerate(times):
-            for i, constraint in enumerate(self.constraints):
-                if constraint.order == 0:
-                    constraint.write(t, Q[k, i, :, :3, :3], g[k, i, :, :3], c[k, i])
-                else:
-                    constraint.write(t, Q[k, i, :2], g[k, i, :2], c[k, i, :2])
+        for i, constraint in enumerate(self.constraints):
+            if constraint.order == 0:
+                constraint.write(times, Q[:, i, :, :3, :3], g[:, i, :, :3], c[:, i])
+            else:
+                constraint.write(times, Q[:, i, :2], g[:, i, :2], c[:, i, :2])
         return Coefficients(Q, g, c, self.orders)
 
     def coefficients(self, t: float) -> Coefficients:

@@ -21,16 +21,22 @@ constraints hold to the Newton tolerance at every step, with no drift.  A coordi
 by a first-order constraint (q_vd) has no position constraint: its position is integrated with the
 formulas above (x = (q_ic, q_vd)), its velocity comes from the constraints.
 
-The nonlinear step equation for a_{n+1} is solved by a modified Newton method whose iteration matrix
-is M_r + beta' K_r + gamma' D_r (B^T M B, B^T K B, B^T D B: reduced mass, spring stiffness and
-damping; beta' = h^2 beta (1 - alpha_f)/(1 - alpha_m), gamma' = h gamma (1 - alpha_f)/(1 - alpha_m)):
-exact for the stiff linear springs, approximate for gravity, velocity and constraint-curvature terms
-(the iterations per step are printed by benchmarks/bench_core.py, [speed]); the q_vd accelerations are
-iterated as a fixed point.  The iterate is accepted once the last correction, in velocities
-(gamma' |da|), is below ``tolerance`` [rad/s or m/s]: that correction is the error of the accepted
-iterate.  The bound is on velocities, not positions (beta' |da|, smaller by h beta / gamma): a
-velocity error persists and makes the positions drift, for ever on the undamped crane.  How far the
-tolerance moves the motion is printed by benchmarks/bench_core.py, [newton].
+The nonlinear step equation for a_{n+1} is solved by a modified Newton method on the residual of (8),
+P^T (M qdd + h - Q) with qdd = B a_ic + e (from inverse dynamics, without forming M), whose iteration
+matrix is M_r + beta' K_r + gamma' D_r (B^T M B, B^T K B, B^T D B at the start of the step: reduced
+mass, spring stiffness and damping; beta' = h^2 beta (1 - alpha_f)/(1 - alpha_m), gamma' = h gamma
+(1 - alpha_f)/(1 - alpha_m)): exact for the stiff linear springs, approximate for gravity, velocity and
+constraint-curvature terms, so each correction shrinks the next by a factor of about 1e-3; the q_vd
+accelerations are iterated as a fixed point.  Each evaluation's correction is applied, and the step
+ends at the state of the corrected accelerations: after at least ``evaluations`` evaluations, once the
+last correction in velocities (gamma' |da|) is at most ``tolerance`` [rad/s or m/s] (the error left
+is then about 1e-3 of it).  The bound is on velocities, not positions: a velocity error persists and
+makes the positions drift, for ever on the undamped crane.
+
+Two uses (printed by benchmarks/bench_core.py, [iterations]): the online default,
+:data:`EVALUATIONS` evaluations with the loose :data:`ONLINE_TOLERANCE` (a fixed cost per step, the
+controller-band accuracy of the converged iteration), and a converged iteration (``tolerance`` 1e-9 or
+below, ``evaluations`` 2) for offline studies of the discrete method itself.
 """
 
 from __future__ import annotations
@@ -42,6 +48,15 @@ import numpy as np
 from ..dynamics import kernels
 from ..dynamics.structures import AlphaSettings, StepRows
 from .programmed_motion import MotionSolution, ProgrammedMotion, ProjectionError
+
+EVALUATIONS = 3
+"""Newton evaluations per step of the online default: with two, the velocity error left per step
+(~1e-3 of the second correction) drifts psi2 by about 1e-4 rad over 10 s; with three it is at the
+level of the converged iteration (benchmarks/bench_core.py, [iterations])."""
+
+ONLINE_TOLERANCE = 1e-4
+"""[rad/s or m/s]: after :data:`EVALUATIONS` evaluations, a step goes on only while its last velocity
+correction is larger than this (rare: sudden target changes, drive jumps)."""
 
 PROJECTION_TOLERANCE = 1e-9
 """Newton on the position constraints inside a step stops after a correction of at most this [rad]:
@@ -91,8 +106,8 @@ class StepState:
 class GeneralizedAlpha:
     """Generalized-alpha stepper for a :class:`ProgrammedMotion` (one compiled call per step)."""
 
-    def __init__(self, motion: ProgrammedMotion, rho_inf: float = 0.8, tolerance: float = 1e-9,
-                 max_iterations: int = 30, evaluations: int = 2):
+    def __init__(self, motion: ProgrammedMotion, rho_inf: float = 0.8, tolerance: float = ONLINE_TOLERANCE,
+                 max_iterations: int = 30, evaluations: int = EVALUATIONS):
         self.motion = motion
         self.coefficients = GeneralizedAlphaParameters.from_spectral_radius(rho_inf)
         self.evaluations = evaluations
@@ -132,12 +147,14 @@ class GeneralizedAlpha:
         and the per-step rows."""
         motion = self.motion
         drive = motion.dynamics.drive
-        drives = np.array([drive.kernel_parameters(t, ends_on_jump and i == len(times) - 1)
-                           for i, t in enumerate(times)])
+        times = np.asarray(times, dtype=float)
+        drives = drive.kernel_parameters(times)
+        if ends_on_jump:
+            drives[-1] = drive.kernel_parameters(times[-1], left_limit=True)
         previous = state.solution
         run = kernels.generalized_alpha_run(
             state.q, state.qd, previous.qdd, state.pseudo_acceleration, previous.dynamics.M, previous.velocity_map,
-            state.t, np.asarray(times, dtype=float), motion.constraints.coefficients_at(times), drives,
+            state.t, times, motion.constraints.coefficients_at(times), drives,
             motion.partition, motion.dynamics.chain, self.settings)
         self._check(run.status, times[run.completed - 1] if run.completed else state.t,
                     times[min(run.completed, len(times) - 1)])

@@ -25,7 +25,7 @@ from ..model.parameters import CraneParameters, Task
 from ..model.profiles import Constant, QuinticRise
 from .constraints import ConstraintSet, paper_constraints
 from .equilibrium import Equilibrium, EquilibriumError, static_equilibrium
-from .integration import GeneralizedAlpha, IntegrationError, StepState
+from .integration import EVALUATIONS, ONLINE_TOLERANCE, GeneralizedAlpha, IntegrationError, StepState
 from .programmed_motion import ConstraintSingularityError, ProgrammedMotion, ProjectionError
 from .trajectory import Sample, Trajectory, make_sample, stack_samples
 
@@ -82,11 +82,12 @@ class MotionStepper:
     """Online generalized-alpha integration of a :class:`ProgrammedMotion` with work bookkeeping."""
 
     def __init__(self, motion: ProgrammedMotion, t0: float, q0: np.ndarray, qd0: np.ndarray,
-                 step: float = 1e-3, rho_inf: float = 0.8, tolerance: float = 1e-9):
+                 step: float = 1e-3, rho_inf: float = 0.8, tolerance: float = ONLINE_TOLERANCE,
+                 evaluations: int = EVALUATIONS):
         if not step > 0.0:
             raise ValueError(f"step = {step}: must be > 0 s")
         self.step_size = step
-        self.integrator = GeneralizedAlpha(motion, rho_inf=rho_inf, tolerance=tolerance)
+        self.integrator = GeneralizedAlpha(motion, rho_inf=rho_inf, tolerance=tolerance, evaluations=evaluations)
         self._t0 = t0
         self._k = 0
         self.state: StepState = self.integrator.start(t0, q0, qd0)
@@ -171,12 +172,13 @@ class MotionStepper:
 
 def simulate(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, step: float = 1e-3, rho_inf: float = 0.8,
              t0: float = 0.0, qd0: np.ndarray | None = None, progress: Progress | None = None,
-             chunk: float = 0.25, tolerance: float = 1e-9) -> Trajectory:
-    """Programmed motion from (t0, q0, qd0) to t_end with generalized-alpha (Newton ``tolerance`` on the
-    accepted velocity correction, see :mod:`.integration`); one sample per step, computed in compiled runs
+             chunk: float = 0.25, tolerance: float = ONLINE_TOLERANCE,
+             evaluations: int = EVALUATIONS) -> Trajectory:
+    """Programmed motion from (t0, q0, qd0) to t_end with generalized-alpha (Newton ``evaluations`` and
+    ``tolerance``, see :mod:`.integration`); one sample per step, computed in compiled runs
     of ``chunk`` seconds (``progress`` is called after each)."""
     qd0 = np.zeros_like(q0) if qd0 is None else qd0
-    stepper = MotionStepper(motion, t0, q0, qd0, step, rho_inf, tolerance)
+    stepper = MotionStepper(motion, t0, q0, qd0, step, rho_inf, tolerance, evaluations)
     parts = [stack_samples([stepper.sample])]
     while stepper.state.t < t_end - 1e-9 * step:
         parts.append(stepper.advance_until(min(stepper.state.t + chunk, t_end)))

@@ -89,7 +89,7 @@ from .parameters import PARAMETERS, SPECS, TARGET_PARAMETERS, ParameterError, ch
 
 NODE_NAME = messages.NODE_NAME
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
-COMMAND_LEAD = 0.25  # [s] from the next sample to publish to the one a command takes effect at
+COMMAND_LEAD = 0.02  # [s] from the next sample to publish to the one a command takes effect at
 COMPUTE_SLICE = 0.005  # [s] of wall time the worker holds the stream per compute call
 FRAME_BATCH = 20  # frames sampled per hold of the stream lock
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to compute (for commands)
