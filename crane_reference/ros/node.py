@@ -32,10 +32,12 @@ Computing ahead
 
 Commands
     A re-target (``ellipse.*``, ``z.*`` parameters), a speed change (``speed_scaling``), ``~/pause`` and
-    ``~/restart`` take effect at the frame :data:`COMMAND_LEAD` s after the next one to be published (the
-    frames computed beyond it are dropped and computed again), so a change reaches the published samples
-    about COMMAND_LEAD after it is accepted.  Speed changes and pauses are C2 ramps of the stream's time
-    warp; ``~/restart`` of a moving reference pauses first and restarts at the first sample at rest.
+    ``~/restart`` take effect at the frame :data:`COMMAND_LEAD` (:data:`RESTART_LEAD` for ``~/restart``,
+    which computes the motion to rest within the command) s after the next one to be published (the
+    frames computed beyond it are dropped and computed again; none from it on goes out while the command
+    is applied), so a change reaches the published samples about COMMAND_LEAD after it is accepted.
+    Speed changes and pauses are C2 ramps of the stream's time warp; ``~/restart`` of a moving reference
+    pauses first and restarts at the first sample at rest.
     Parameter values are validated in the on-set callback (table of
     :mod:`~crane_reference.ros.parameters`, then ``ReferenceStream.check_targets`` for the targets) and
     applied in the post-set callback, so ``set_parameters_atomically`` of ellipse.a and ellipse.b is one
@@ -90,6 +92,7 @@ from .parameters import PARAMETERS, SPECS, TARGET_PARAMETERS, ParameterError, ch
 NODE_NAME = messages.NODE_NAME
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
 COMMAND_LEAD = 0.02  # [s] from the next sample to publish to the one a command takes effect at
+RESTART_LEAD = 0.25  # [s], the same for ~/restart, which computes the motion to rest within the command
 COMPUTE_SLICE = 0.005  # [s] of wall time the worker holds the stream per compute call
 FRAME_BATCH = 20  # frames sampled per hold of the stream lock
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to compute (for commands)
@@ -270,7 +273,12 @@ class CraneReferenceNode(Node):
         with self._stream_lock:
             with self._lock:
                 k, tau = self._schedule.command_point()
-            action(tau)
+            try:
+                action(tau)
+            except BaseException:
+                with self._lock:
+                    self._schedule.cancel_command()
+                raise
             with self._lock:
                 self._schedule.after_command(k, tau)
         return k
@@ -297,7 +305,7 @@ class CraneReferenceNode(Node):
         try:
             with self._stream_lock:
                 with self._lock:
-                    k, tau = self._schedule.command_point()
+                    k, tau = self._schedule.command_point(RESTART_LEAD)
                 stream = self._stream
                 if stream.state == ERROR or (stream.rate == 0.0 and stream.settled_at() <= tau):
                     rest_k, last_tau = k, tau
@@ -316,6 +324,8 @@ class CraneReferenceNode(Node):
                 with self._lock:
                     self._schedule.after_command(k, tau)
         except SOLVER_FAILURES as error:
+            with self._lock:
+                self._schedule.cancel_command()
             response.success, response.message = False, f"restart failed, stream unchanged: {error}"
         else:
             jump = np.abs(after - before)
