@@ -72,24 +72,37 @@ def projection_matrix(B, independent, servo):
     return P
 
 
+ROUND_OFF_STEP = 1e-15
+"""[rad or m]: a Newton correction of the position constraints this small is at the round-off of q."""
+
+
 @njit(cache=True, nogil=True)
-def project_positions(q, k: Coefficients, holonomic_dependent, chain: ChainData, tolerance, max_iterations):
+def project_positions(q, k: Coefficients, holonomic_dependent, chain: ChainData, tolerance, max_iterations,
+                      exact_frames=True):
     """q with the holonomically dependent coordinates solved from Phi(q) = 0 by Newton (Jacobian
     Phi_p C[:, hd]) until a correction of at most ``tolerance``; also the frames T, twists S, E's position
-    p and Jacobian C at that q itself, and whether it converged."""
+    p and Jacobian C, and whether it converged.  The frames are those at the returned q itself, or with
+    ``exact_frames`` False those before the last correction (off by at most ``tolerance``, one forward
+    kinematics less: enough for the Newton iterates of a step)."""
     q = q.copy()
-    converged = holonomic_dependent.size == 0
-    for _ in range(max_iterations + 1):
+    for _ in range(max_iterations):
         T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
         p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
-        if converged:
-            break
+        if holonomic_dependent.size == 0:
+            return q, T, S, p, C, True
         residual, grads = holonomic_values(p, k)
         step = solve_small_vector(matmul(grads, C, holonomic_dependent), residual)
+        size = np.max(np.abs(step))
+        if size <= ROUND_OFF_STEP:
+            return q, T, S, p, C, True
         for i in range(holonomic_dependent.size):
             q[holonomic_dependent[i]] -= step[i]
-        converged = np.max(np.abs(step)) <= tolerance
-    return q, T, S, p, C, converged
+        if size <= tolerance:
+            if exact_frames:
+                T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
+                p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
+            return q, T, S, p, C, True
+    return q, T, S, p, C, False
 
 
 @njit(cache=True, nogil=True)
@@ -214,17 +227,18 @@ def iteration_factor(M, B, h, partition: Partition, chain: ChainData, settings: 
 
 @njit(cache=True, nogil=True)
 def _state_at(a1, x0, v0, a0, at0, q_guess, qd_size, h, k: Coefficients, partition: Partition, chain: ChainData,
-              settings: AlphaSettings):
+              settings: AlphaSettings, exact_frames):
     """The generalized-alpha state for the accelerations a1 of the integrated coordinates: the pseudo-
-    acceleration, q with q_hd from the position constraints (starting from ``q_guess``), qd with qd_dc
-    from the velocity constraints, the frames and E's terms there, and whether the constraints were met."""
+    acceleration, q with q_hd from the position constraints (starting from ``q_guess``; frames as in
+    :func:`project_positions`), qd with qd_dc from the velocity constraints, the frames and E's terms
+    there, and whether the constraints were met."""
     alpha_m, alpha_f, gamma, beta = settings.alpha_m, settings.alpha_f, settings.gamma, settings.beta
     integrated = partition.integrated
     at1 = ((1.0 - alpha_f) * a1 + alpha_f * a0 - alpha_m * at0) / (1.0 - alpha_m)
     q1 = q_guess.copy()
     q1[integrated] = x0 + h * v0 + h * h * ((0.5 - beta) * at0 + beta * at1)
     q1, T, S, p, C, solved = project_positions(q1, k, partition.holonomic_dependent, chain,
-                                               settings.projection_tolerance, 25)
+                                               settings.projection_tolerance, 25, exact_frames)
     qd1 = np.zeros(qd_size)
     qd1[integrated] = v0 + h * ((1.0 - gamma) * at0 + gamma * at1)
     if solved:
@@ -270,7 +284,8 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, k: Coefficients, drive
     a1 = a0.copy()
     status = 1
     for iteration in range(settings.max_iterations):
-        _, q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain, settings)
+        _, q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain, settings,
+                                                   False)
         if not solved:
             return Step(q0, qd0, at0, evaluate(q0, qd0, k, drive, partition, chain), 2, iteration + 1)
         qdd, residual = newton_residual(q1, qd1, a1, T, S, p, C, k, drive, partition, chain)
@@ -280,7 +295,8 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, k: Coefficients, drive
         if iteration + 1 >= settings.evaluations and gamma_p * np.max(np.abs(correction)) <= settings.tolerance:
             status = 0
             break
-    at1, q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain, settings)
+    at1, q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain, settings,
+                                                 True)
     if not solved:
         return Step(q0, qd0, at0, evaluate(q0, qd0, k, drive, partition, chain), 2, iteration + 1)
     M, h_terms, forces, Vg, p, R, C, d, A, c_acc, B, e_dc = _terms_at(q1, qd1, T, S, k, drive, partition, chain)
