@@ -71,23 +71,6 @@ def test_commands_take_effect_lead_seconds_ahead_and_replace_the_frames(stream_f
     assert short.command_point() == (10, pytest.approx(0.1))
 
 
-def test_a_command_in_progress_holds_its_frames_back(stream_factory):
-    """A command slower than the lead: the frames from its point on are not published (held instead)
-    until it is applied, so the old motion never goes out past the point; a cancelled one releases them."""
-    sample = stream_factory().sample(0.0)
-    schedule = schedule_with(sample, frames=80)
-    schedule.outgoing(*schedule.due(0, 0)[0])  # sample 0 published
-    k, tau = schedule.command_point()
-    batch = schedule.due((k + 3) * NANOSECONDS // RATE, 0)  # the command takes longer than the lead
-    assert [f is None for _, f in batch] == [False] * (k - 1) + [True] * 4  # 1..k-1 ready, k..k+3 held back
-    schedule.after_command(k, tau)
-    assert schedule.command_k is None
-    cancelled = schedule_with(sample, frames=80)
-    k, _ = cancelled.command_point()
-    cancelled.cancel_command()
-    assert all(f is not None for _, f in cancelled.due((k + 3) * NANOSECONDS // RATE, 0))
-
-
 def test_frames_are_the_stream_sampled_at_the_rate_with_decimated_previews(stream_factory):
     stream, truth = stream_factory(), stream_factory()
     schedule = FrameSchedule(RATE, 100, LEAD, 1.0, stream.sample(0.0))

@@ -34,8 +34,8 @@ Commands
     A re-target (``ellipse.*``, ``z.*`` parameters), a speed change (``speed_scaling``), ``~/pause`` and
     ``~/restart`` take effect at the frame :data:`COMMAND_LEAD` (:data:`RESTART_LEAD` for ``~/restart``,
     which computes the motion to rest within the command) s after the next one to be published (the
-    frames computed beyond it are dropped and computed again; none from it on goes out while the command
-    is applied), so a change reaches the published samples about COMMAND_LEAD after it is accepted.
+    frames computed beyond it are dropped and computed again), so a change reaches the published samples
+    about COMMAND_LEAD after it is accepted.
     Speed changes and pauses are C2 ramps of the stream's time warp; ``~/restart`` of a moving reference
     pauses first and restarts at the first sample at rest.
     Parameter values are validated in the on-set callback (table of
@@ -273,14 +273,10 @@ class CraneReferenceNode(Node):
         with self._stream_lock:
             with self._lock:
                 k, tau = self._schedule.command_point()
-            try:
-                action(tau)
-            except BaseException:
-                with self._lock:
-                    self._schedule.cancel_command()
-                raise
+            action(tau)
             with self._lock:
                 self._schedule.after_command(k, tau)
+                self._lock.notify()  # the worker makes the frames from k again now, not at the next publish
         return k
 
     def _stamp_s(self, k: int) -> float:
@@ -323,9 +319,8 @@ class CraneReferenceNode(Node):
                     self._pending_restart = rest_k
                 with self._lock:
                     self._schedule.after_command(k, tau)
+                    self._lock.notify()
         except SOLVER_FAILURES as error:
-            with self._lock:
-                self._schedule.cancel_command()
             response.success, response.message = False, f"restart failed, stream unchanged: {error}"
         else:
             jump = np.abs(after - before)

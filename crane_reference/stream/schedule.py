@@ -9,11 +9,11 @@ and no ROS types, so every rule here is tested without rclpy:
 * making frames (:meth:`FrameSchedule.plan`, :meth:`FrameSchedule.make_frames`, :meth:`FrameSchedule.accept`):
   up to the look-ahead, after one slice of computing ahead, with a preview every ``decimation`` frames;
   a frame that is not finite is replaced by the last valid sample held;
-* commands (:meth:`FrameSchedule.command_point`, :meth:`FrameSchedule.after_command`,
-  :meth:`FrameSchedule.cancel_command`): a command takes effect at the frame ``lead`` seconds after the
-  next one to publish (or at the next one to make, if earlier); frames from there on are dropped and made
-  again; while a command is being applied, no frame from its point on goes out (a command that takes
-  longer than the lead holds publishing rather than letting the old motion past its point);
+* commands (:meth:`FrameSchedule.command_point`, :meth:`FrameSchedule.after_command`): a command takes
+  effect at the frame ``lead`` seconds after the next one to publish (or at the next one to make, if
+  earlier); frames from there on are dropped and made again (if publishing passed that frame while the
+  command was applied, the new motion goes out from the next sample due: the blends and ramps a command
+  starts are C2 at its point, so the samples in between differ from the new motion by next to nothing);
 * publishing (:meth:`FrameSchedule.due`, :meth:`FrameSchedule.outgoing`): every sample due by now,
   skipping those more than ``max_catch_up`` seconds late; a sample whose frame is not ready is the last
   one published, held (zero velocity).
@@ -93,7 +93,6 @@ class FrameSchedule:
     fault: str = ""
     compute_wall: float = 0.0
     compute_motion: float = 0.0
-    command_k: int | None = None  # the point of the command being applied: frames from it are held
 
     # -- making frames (worker) ------------------------------------------------------------------------
 
@@ -163,12 +162,10 @@ class FrameSchedule:
 
     def command_point(self, lead: float | None = None) -> tuple[int, float]:
         """The frame a command takes effect at (``lead`` seconds after the next one to publish, by default
-        the schedule's), and its stream time; until :meth:`after_command` or :meth:`cancel_command`,
-        frames from it on are not published."""
+        the schedule's), and its stream time."""
         free = max(self.made_k, self.next_k)  # the next frame the worker makes
         k = min(self.next_k + math.ceil((self.lead if lead is None else lead) * self.rate), free)
         tau = self.made_tau if k == free else next(f.tau for f in self.frames if f.k == k)
-        self.command_k = k
         return k, tau
 
     def after_command(self, k: int, tau: float) -> None:
@@ -177,11 +174,6 @@ class FrameSchedule:
         self.made_k, self.made_tau = k, tau
         self.generation += 1
         self.next_preview_k = k
-        self.command_k = None
-
-    def cancel_command(self) -> None:
-        """The command was not applied: its frames may go out again."""
-        self.command_k = None
 
     # -- publishing -----------------------------------------------------------------------------------
 
@@ -197,8 +189,7 @@ class FrameSchedule:
         while self.next_k <= due:
             while self.frames and self.frames[0].k < self.next_k:
                 self.frames.popleft()
-            ready = (self.frames and self.frames[0].k == self.next_k
-                     and (self.command_k is None or self.next_k < self.command_k))
+            ready = self.frames and self.frames[0].k == self.next_k
             batch.append((self.next_k, self.frames.popleft() if ready else None))
             self.next_k += 1
         return batch
