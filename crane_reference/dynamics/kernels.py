@@ -247,6 +247,39 @@ def _state_at(a1, x0, v0, a0, at0, q_guess, qd_size, h, k: Coefficients, partiti
 
 
 @njit(cache=True, nogil=True)
+def _iterate_state(a1, x0, v0, a0, at0, q_guess, qd_size, h, k: Coefficients, partition: Partition,
+                   chain: ChainData, settings: AlphaSettings):
+    """A Newton iterate's state for the accelerations a1: q = ``q_guess`` with x from a1 (q_hd as guessed:
+    the caller predicts it to second order in the change of x, so the position constraints hold to about
+    the square of the last correction's effect on x), qd with qd_dc from the velocity constraints, the
+    frames and E's terms there, and whether the velocity constraints were solved."""
+    alpha_m, alpha_f, gamma, beta = settings.alpha_m, settings.alpha_f, settings.gamma, settings.beta
+    integrated = partition.integrated
+    at1 = ((1.0 - alpha_f) * a1 + alpha_f * a0 - alpha_m * at0) / (1.0 - alpha_m)
+    q1 = q_guess.copy()
+    q1[integrated] = x0 + h * v0 + h * h * ((0.5 - beta) * at0 + beta * at1)
+    T, S = forward_kinematics(q1, chain.kinds, chain.axes, chain.origins)
+    p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
+    qd1 = np.zeros(qd_size)
+    qd1[integrated] = v0 + h * ((1.0 - gamma) * at0 + gamma * at1)
+    qd1, solved = dependent_velocities(qd1, p, C, k, partition.dependent)
+    return q1, qd1, T, S, p, C, solved
+
+
+@njit(cache=True, nogil=True)
+def _predict_dependent(q, B, dx, holonomic_dependent):
+    """q with q_hd moved by B[hd] dx (dx the change of the independent coordinates; B = d q / d q_ic)."""
+    out = q.copy()
+    for i in range(holonomic_dependent.size):
+        row = holonomic_dependent[i]
+        total = 0.0
+        for j in range(dx.size):
+            total += B[row, j] * dx[j]
+        out[row] += total
+    return out
+
+
+@njit(cache=True, nogil=True)
 def newton_residual(q, qd, a1, T, S, p, C, k: Coefficients, drive, partition: Partition, chain: ChainData):
     """At an iterate (q, qd) that meets the constraints, with the integrator's accelerations a1 of the
     integrated coordinates: the full qdd = B a1_ic + e (the acceleration constraints of (7); for q_vd this
@@ -260,7 +293,7 @@ def newton_residual(q, qd, a1, T, S, p, C, k: Coefficients, drive, partition: Pa
     B, e_dc = constraint_map(A, c_acc, independent, dependent)
     qdd = _accelerations_from(a1[:independent.size], B, e_dc, independent, dependent)
     imbalance = inertia_forces(S, Hw, velocity_term, qdd, chain) - generalized_forces(q, qd, Qg, chain, drive)
-    return qdd, project_rows(imbalance.reshape((q.size, 1)), B, independent, dependent, partition.servo)[:, 0]
+    return qdd, project_rows(imbalance.reshape((q.size, 1)), B, independent, dependent, partition.servo)[:, 0], B
 
 
 @njit(cache=True, nogil=True)
@@ -284,14 +317,21 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, k: Coefficients, drive
     a1 = a0.copy()
     status = 1
     for iteration in range(settings.max_iterations):
-        _, q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain, settings,
-                                                   False)
+        if iteration == 0:  # from the predictor: q_hd by Newton on the position constraints
+            _, q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain,
+                                                       settings, False)
+        else:  # q_hd as predicted from the previous iterate (below)
+            q1, qd1, T, S, p, C, solved = _iterate_state(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain,
+                                                         settings)
         if not solved:
             return Step(q0, qd0, at0, evaluate(q0, qd0, k, drive, partition, chain), 2, iteration + 1)
-        qdd, residual = newton_residual(q1, qd1, a1, T, S, p, C, k, drive, partition, chain)
+        qdd, residual, B = newton_residual(q1, qd1, a1, T, S, p, C, k, drive, partition, chain)
         correction = qdd[integrated] - a1
         correction[:n_ic] = -(cholesky_solve(factor, residual) if not servo else matvec(factor, residual))
         a1 = a1 + correction
+        # q_hd of the next iterate to second order in the change of x: dx = beta' da
+        q1 = _predict_dependent(q1, B, h * h * settings.beta * ratio * correction[:n_ic],
+                                partition.holonomic_dependent)
         if iteration + 1 >= settings.evaluations and gamma_p * np.max(np.abs(correction)) <= settings.tolerance:
             status = 0
             break
