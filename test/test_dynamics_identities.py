@@ -1,6 +1,9 @@
 """Physical identities of :class:`CraneDynamics`, checked against independent truths.
 
 * M(q) is symmetric positive definite (eigenvalues, Cholesky).
+* The O(n) inverse dynamics of the integrator's Newton residual (gravity as an upward acceleration of the
+  world frame) equals M qdd + h - Q_g assembled from M, h and Q (a second formulation; those three are
+  checked against Pinocchio in test_dynamics_pinocchio.py).
 * The conservative forces (gravity + springs) are minus the gradient of the potential energy: Q at
   qd = 0 with the drive off against central finite differences of the potential energy.
 * Energy conservation of the free, undamped crane: M qdd = Q - h integrated with scipy's DOP853
@@ -24,6 +27,9 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
+from crane_reference.dynamics.inertia import world_pseudo_inertias
+from crane_reference.dynamics.kinematics import forward_kinematics, velocity_terms
+from crane_reference.dynamics.terms import inverse_dynamics
 from crane_reference.model.chain import VARIANTS, ChainModel, build_model
 from crane_reference.model.drive import TorqueSource
 from crane_reference.model.parameters import Damping
@@ -76,6 +82,23 @@ def test_mass_matrix_symmetric_positive_definite(models, variant):
         eigenvalues = np.linalg.eigvalsh(0.5 * (M + M.T))
         assert eigenvalues[0] > 1e-10 * eigenvalues[-1], f"M not positive definite: {eigenvalues[:3]}"
         np.linalg.cholesky(M)  # raises LinAlgError unless positive definite
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_inverse_dynamics_equals_the_assembled_equations(models, variant):
+    model = models[variant]
+    dynamics = CraneDynamics(model, NO_DRIVE)
+    chain = dynamics.chain
+    rng = np.random.default_rng(SEED + 2)
+    for _ in range(SAMPLES):
+        q, qd, qdd = random_configuration(model, rng), rng.normal(size=model.dof), rng.normal(size=model.dof)
+        terms = dynamics.terms(DRIVE_OFF, q, qd)
+        gravity = terms.Q + model.stiffness @ q  # Q = Q_g - K q with the drive off and no damping
+        expected = terms.M @ qdd + terms.h - gravity
+        T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
+        Hw = world_pseudo_inertias(T, chain.body_joint, chain.body_H)
+        ours = inverse_dynamics(S, Hw, velocity_terms(qd, S), qdd, chain)
+        assert np.max(np.abs(ours - expected)) <= 1e-12 * np.max(np.abs(expected))
 
 
 @pytest.mark.parametrize("variant", VARIANTS)

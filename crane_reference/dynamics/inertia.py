@@ -14,7 +14,8 @@ terms are
 
 with B = A + V V the velocity-product term of the body's frame.  With the accelerations added to it,
 B + W_k, W_k = sum_{j<=k} S_j qdd_j (so that d2T = (W + B) T), the same suffix sums give the whole
-inertia force M qdd + h in O(n) (inverse dynamics, the Newton residual of the integrator).
+inertia force M qdd + h in O(n), and with the gravity acceleration added, M qdd + h - Q_g (inverse
+dynamics, the Newton residual of the integrator).
 
 Gravity: E_p,g = sum_l m^(l) g
 J_3 T^(l) r_C^(l) (eq. (4)); its generalized force -dE_p,g/dq_i = -g J_3 S_i Hc_i e_4, because the
@@ -81,8 +82,10 @@ def composite_velocity_products(Hw, B, body_joint, n):
 
 
 @njit(cache=True)
-def add_joint_accelerations(B, S, qdd):
-    """B_k + W_k with W_k = sum_{j<=k} S_j qdd_j: the frames' whole acceleration term (d2T_k = (W_k + B_k) T_k)."""
+def add_joint_accelerations(B, S, qdd, gravity):
+    """B_k + W_k + G with W_k = sum_{j<=k} S_j qdd_j: the frames' whole acceleration term (d2T_k = (W_k + B_k)
+    T_k), plus G = g e_3 e_4^T, an upward acceleration g of the world frame (d'Alembert: the suffix sums of
+    Hw G^T give -Q_g, the gravity forces of the module docstring with their sign reversed)."""
     out = np.empty_like(B)
     W = np.zeros((4, 4))
     for k in range(qdd.size):
@@ -90,6 +93,7 @@ def add_joint_accelerations(B, S, qdd):
             for b in range(4):
                 W[a, b] += S[k, a, b] * qdd[k]
                 out[k, a, b] = B[k, a, b] + W[a, b]
+        out[k, 2, 3] += gravity
         out[k, 3] = B[k, 3]
     return out
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .inertia import world_pseudo_inertias
 from .kinematics import forward_kinematics, point_bias, point_jacobian, velocity_terms
 from .linalg import (
     cholesky,
@@ -39,7 +40,7 @@ from .structures import (
     Step,
     StepRows,
 )
-from .terms import energy_accounts, frame_terms, generalized_forces, gravity_terms, inertia_forces, velocity_products
+from .terms import energy_accounts, frame_terms, generalized_forces, inverse_dynamics, velocity_products
 
 
 @njit(cache=True, nogil=True)
@@ -283,16 +284,17 @@ def _predict_dependent(q, B, dx, holonomic_dependent):
 def newton_residual(q, qd, a1, T, S, p, C, k: Coefficients, drive, partition: Partition, chain: ChainData):
     """At an iterate (q, qd) that meets the constraints, with the integrator's accelerations a1 of the
     integrated coordinates: the full qdd = B a1_ic + e (the acceleration constraints of (7); for q_vd this
-    is the fixed-point update) and the residual of (8), P^T (M qdd + h - Q), with M qdd + h from inverse
-    dynamics (O(n), no M)."""
+    is the fixed-point update), the residual of (8), P^T (M qdd + h - Q), with M qdd + h - Q_g from
+    inverse dynamics (O(n), no M), and B."""
     independent, dependent = partition.independent, partition.dependent
-    Hw, Qg = gravity_terms(T, S, chain)
-    _, velocity_term = velocity_terms(qd, S)
+    Hw = world_pseudo_inertias(T, chain.body_joint, chain.body_H)
+    velocity_term = velocity_terms(qd, S)
     d = point_bias(velocity_term, chain.ee_joint, p)
     A, c_acc = acceleration_terms(p, matvec(C, qd), C, d, k)
     B, e_dc = constraint_map(A, c_acc, independent, dependent)
     qdd = _accelerations_from(a1[:independent.size], B, e_dc, independent, dependent)
-    imbalance = inertia_forces(S, Hw, velocity_term, qdd, chain) - generalized_forces(q, qd, Qg, chain, drive)
+    imbalance = inverse_dynamics(S, Hw, velocity_term, qdd, chain) - generalized_forces(q, qd, np.zeros(q.size), chain,
+                                                                                         drive)
     return qdd, project_rows(imbalance.reshape((q.size, 1)), B, independent, dependent, partition.servo)[:, 0], B
 
 

@@ -94,13 +94,12 @@ def forward_kinematics(q: np.ndarray, kinds: np.ndarray, axes: np.ndarray, origi
 
 @njit(cache=True)
 def velocity_terms(qd: np.ndarray, S: np.ndarray):
-    """Frame velocity twists V_k and the velocity-product acceleration terms B_k = A_k + V_k V_k.
+    """The velocity-product acceleration terms B_k = A_k + V_k V_k of the frames (V_k their velocity twists).
 
     Twists are handled as 6-vectors (w, v) with X = [[w^, v], [0, 0]]; the matrix commutator is
     [X1, X2] = (w1 x w2, w1 x v2 - w2 x v1), and V V = [[w^ w^, w x v], [0, 0]].
     """
     n = qd.size
-    V = np.zeros((n, 4, 4))
     B = np.zeros((n, 4, 4))
     wx = wy = wz = vx = vy = vz = 0.0
     awx = awy = awz = avx = avy = avz = 0.0
@@ -121,9 +120,6 @@ def velocity_terms(qd: np.ndarray, S: np.ndarray):
         vx += tx * u
         vy += ty * u
         vz += tz * u
-        V[k, 0, 1], V[k, 0, 2], V[k, 1, 2] = -wz, wy, -wx
-        V[k, 1, 0], V[k, 2, 0], V[k, 2, 1] = wz, -wy, wx
-        V[k, 0, 3], V[k, 1, 3], V[k, 2, 3] = vx, vy, vz
         ww = wx * wx + wy * wy + wz * wz
         B[k, 0, 0], B[k, 1, 1], B[k, 2, 2] = wx * wx - ww, wy * wy - ww, wz * wz - ww
         B[k, 0, 1], B[k, 0, 2] = wx * wy - awz, wx * wz + awy
@@ -132,7 +128,7 @@ def velocity_terms(qd: np.ndarray, S: np.ndarray):
         B[k, 0, 3] = avx + wy * vz - wz * vy
         B[k, 1, 3] = avy + wz * vx - wx * vz
         B[k, 2, 3] = avz + wx * vy - wy * vx
-    return V, B
+    return B
 
 
 @njit(cache=True)

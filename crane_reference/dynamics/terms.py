@@ -49,25 +49,18 @@ def frame_terms(T, S, chain: ChainData):
 
 
 @njit(cache=True)
-def gravity_terms(T, S, chain: ChainData):
-    """World pseudo-inertias Hw and the gravity forces, without M (for the Newton residual)."""
-    Hw = world_pseudo_inertias(T, chain.body_joint, chain.body_H)
-    return Hw, gravity_forces(S, composite_inertias(Hw, chain.body_joint, S.shape[0]), chain.gravity)
-
-
-@njit(cache=True)
 def velocity_products(qd, S, Hw, chain: ChainData, p):
     """What is quadratic in qd: the velocity terms h of (8) and E's d (C qdd + d is E's acceleration)."""
-    _, B = velocity_terms(qd, S)
+    B = velocity_terms(qd, S)
     h = velocity_forces(S, composite_velocity_products(Hw, B, chain.body_joint, qd.size))
     return h, point_bias(B, chain.ee_joint, p)
 
 
 @njit(cache=True)
-def inertia_forces(S, Hw, velocity_term, qdd, chain: ChainData):
-    """M qdd + h in O(n), without forming M (see :mod:`.inertia`); ``velocity_term`` is B of
-    :func:`.kinematics.velocity_terms` at qd."""
-    total = add_joint_accelerations(velocity_term, S, qdd)
+def inverse_dynamics(S, Hw, velocity_term, qdd, chain: ChainData):
+    """M qdd + h - Q_g (inertia minus gravity forces) in O(n), without forming M (see :mod:`.inertia`);
+    ``velocity_term`` is B of :func:`.kinematics.velocity_terms` at qd."""
+    total = add_joint_accelerations(velocity_term, S, qdd, chain.gravity)
     return velocity_forces(S, composite_velocity_products(Hw, total, chain.body_joint, qdd.size))
 
 
