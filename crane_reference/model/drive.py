@@ -35,8 +35,9 @@ class TorqueSource:
         """(tau0, s_dr, psi_a, dpsi_a/dt) = (t_dr(t), 0, 0, 0), for the compiled solver (shape (4,), or
         (N, 4) for N times); with ``left_limit`` the limit from below, t_dr(t-) (for a step ending on a jump)."""
         on = ((self.start < t) & (t <= self.end)) if left_limit else ((self.start <= t) & (t < self.end))
-        zero = np.zeros_like(t, dtype=float)
-        return np.stack((np.where(on, self.torque_value, 0.0), zero, zero, zero), axis=-1)
+        parameters = np.zeros((*np.shape(t), 4))
+        parameters[..., 0] = np.where(on, self.torque_value, 0.0)
+        return parameters
 
 
 @dataclass(frozen=True)
@@ -52,8 +53,9 @@ class SpringDrive:
         """(tau0, s_dr, psi_a, dpsi_a/dt) = (0, s_dr, psi_a(t), dpsi_a/dt), for the compiled solver (shape (4,),
         or (N, 4) for N times; continuous in t, so ``left_limit`` changes nothing)."""
         angle, rate, _ = self.motor_angle(t)
-        zero = np.zeros_like(t, dtype=float)
-        return np.stack((zero, self.stiffness + zero, angle + zero, rate + zero), axis=-1)
+        parameters = np.zeros((*np.shape(t), 4))
+        parameters[..., 1], parameters[..., 2], parameters[..., 3] = self.stiffness, angle, rate
+        return parameters
 
 
 Drive = TorqueSource | SpringDrive

@@ -208,18 +208,21 @@ class ConstraintSet:
         """The coefficients (:class:`~crane_reference.dynamics.structures.Coefficients`) at each of ``times``,
         stacked on a leading axis: Q (N, m, 3, 6, 6) etc."""
         times = np.asarray(times, dtype=float)
-        n, m = times.size, self.size
-        Q, g, c = np.zeros((n, m, 3, 6, 6)), np.zeros((n, m, 3, 6)), np.zeros((n, m, 3))
-        for i, constraint in enumerate(self.constraints):
-            if constraint.order == 0:
-                constraint.write(times, Q[:, i, :, :3, :3], g[:, i, :, :3], c[:, i])
-            else:
-                constraint.write(times, Q[:, i, :2], g[:, i, :2], c[:, i, :2])
-        return Coefficients(Q, g, c, self.orders)
+        return self._coefficients(times, (times.size,))
 
     def coefficients(self, t: float) -> Coefficients:
-        stacked = self.coefficients_at([t])
-        return Coefficients(stacked.Q[0], stacked.g[0], stacked.c[0], stacked.order)
+        """The coefficients at time t (Q (m, 3, 6, 6) etc.)."""
+        return self._coefficients(t, ())
+
+    def _coefficients(self, t: float | np.ndarray, leading: tuple[int, ...]) -> Coefficients:
+        m = self.size
+        Q, g, c = np.zeros((*leading, m, 3, 6, 6)), np.zeros((*leading, m, 3, 6)), np.zeros((*leading, m, 3))
+        for i, constraint in enumerate(self.constraints):
+            if constraint.order == 0:
+                constraint.write(t, Q[..., i, :, :3, :3], g[..., i, :, :3], c[..., i, :])
+            else:
+                constraint.write(t, Q[..., i, :2, :, :], g[..., i, :2, :], c[..., i, :2])
+        return Coefficients(Q, g, c, self.orders)
 
     def _holonomic(self) -> tuple[EndEffectorConstraint, ...]:
         if any(c.order != 0 for c in self.constraints):
