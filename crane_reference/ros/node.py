@@ -91,7 +91,7 @@ from .parameters import PARAMETERS, SPECS, TARGET_PARAMETERS, ParameterError, ch
 
 NODE_NAME = messages.NODE_NAME
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
-COMMAND_LEAD = 0.02  # [s] from the next sample to publish to the one a command takes effect at
+COMMAND_LEAD = 0.1  # [s] from the next sample to publish to the one a command takes effect at
 RESTART_LEAD = 0.25  # [s], the same for ~/restart, which computes the motion to rest within the command
 COMPUTE_SLICE = 0.005  # [s] of wall time the worker holds the stream per compute call
 FRAME_BATCH = 20  # frames sampled per hold of the stream lock
