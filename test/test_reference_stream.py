@@ -19,7 +19,7 @@ from crane_reference.motion.constraints import ArealRate, ConstraintSet, Ellipse
 from crane_reference.stream.reference_stream import CHUNK_STEPS, ReferenceStream
 
 STEP = 1e-3  # [s]
-RETARGET_AT = 0.2037  # [s], inside the eleventh run of CHUNK_STEPS steps
+RETARGET_AT = 0.2037  # [s], inside a run of CHUNK_STEPS steps
 END = 0.8  # [s], after the 0.5 s blend
 
 

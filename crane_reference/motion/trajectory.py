@@ -89,9 +89,8 @@ def stack_samples(samples: list[Sample]) -> dict[str, np.ndarray]:
 
 def unstack_samples(arrays: dict[str, np.ndarray]) -> list[Sample]:
     """The samples whose fields :func:`stack_samples` stacked."""
-    names = [f.name for f in fields(Sample)]
-    columns = [arrays[name] for name in names]
-    return [Sample(*(float(c[i]) if c.ndim == 1 else c[i] for c in columns)) for i in range(len(arrays["t"]))]
+    columns = [arrays[f.name] for f in fields(Sample)]
+    return [Sample(*row) for row in zip(*(c.tolist() if c.ndim == 1 else list(c) for c in columns), strict=True)]
 
 
 @dataclass(frozen=True)

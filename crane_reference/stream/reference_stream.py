@@ -44,7 +44,7 @@ from .targets import blend_constraints, check_task
 from .time_warp import TimeWarp, check_rate
 
 RUNNING, PAUSED, ERROR = "RUNNING", "PAUSED", "ERROR"
-CHUNK_STEPS = 20
+CHUNK_STEPS = 50
 """Steps computed per compiled run; the wall budget of :meth:`ReferenceStream.compute` is checked between runs."""
 MIN_SINGULAR_VALUE = 1e-3
 """sigma_min(K_dc) below which the computed motion stops with an error (a singular task)."""
