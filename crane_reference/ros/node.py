@@ -32,10 +32,11 @@ Computing ahead
 
 Commands
     A re-target (``ellipse.*``, ``z.*`` parameters), a speed change (``speed_scaling``), ``~/pause`` and
-    ``~/restart`` take effect at the frame :data:`COMMAND_LEAD` (:data:`RESTART_LEAD` for ``~/restart``,
-    which computes the motion to rest within the command) s after the next one to be published (the
+    ``~/restart`` take effect at the frame :data:`COMMAND_LEAD` s after the next one to be published (the
     frames computed beyond it are dropped and computed again), so a change reaches the published samples
-    about COMMAND_LEAD after it is accepted.
+    about COMMAND_LEAD after it is accepted.  A shorter lead (20, 50 and 100 ms were tried) lets the
+    command, or the frames made again after it, come too late on a loaded machine: the frame worker
+    shares the interpreter with the publisher and the executor.
     Speed changes and pauses are C2 ramps of the stream's time warp; ``~/restart`` of a moving reference
     pauses first and restarts at the first sample at rest.
     Parameter values are validated in the on-set callback (table of
@@ -91,8 +92,7 @@ from .parameters import PARAMETERS, SPECS, TARGET_PARAMETERS, ParameterError, ch
 
 NODE_NAME = messages.NODE_NAME
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
-COMMAND_LEAD = 0.1  # [s] from the next sample to publish to the one a command takes effect at
-RESTART_LEAD = 0.25  # [s], the same for ~/restart, which computes the motion to rest within the command
+COMMAND_LEAD = 0.25  # [s] from the next sample to publish to the one a command takes effect at
 COMPUTE_SLICE = 0.005  # [s] of wall time the worker holds the stream per compute call
 FRAME_BATCH = 20  # frames sampled per hold of the stream lock
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to compute (for commands)
@@ -301,7 +301,7 @@ class CraneReferenceNode(Node):
         try:
             with self._stream_lock:
                 with self._lock:
-                    k, tau = self._schedule.command_point(RESTART_LEAD)
+                    k, tau = self._schedule.command_point()
                 stream = self._stream
                 if stream.state == ERROR or (stream.rate == 0.0 and stream.settled_at() <= tau):
                     rest_k, last_tau = k, tau

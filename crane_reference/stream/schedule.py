@@ -11,9 +11,7 @@ and no ROS types, so every rule here is tested without rclpy:
   a frame that is not finite is replaced by the last valid sample held;
 * commands (:meth:`FrameSchedule.command_point`, :meth:`FrameSchedule.after_command`): a command takes
   effect at the frame ``lead`` seconds after the next one to publish (or at the next one to make, if
-  earlier); frames from there on are dropped and made again (if publishing passed that frame while the
-  command was applied, the new motion goes out from the next sample due: the blends and ramps a command
-  starts are C2 at its point, so the samples in between differ from the new motion by next to nothing);
+  earlier); frames from there on are dropped and made again;
 * publishing (:meth:`FrameSchedule.due`, :meth:`FrameSchedule.outgoing`): every sample due by now,
   skipping those more than ``max_catch_up`` seconds late; a sample whose frame is not ready is the last
   one published, held (zero velocity).
@@ -160,11 +158,10 @@ class FrameSchedule:
 
     # -- commands -------------------------------------------------------------------------------------
 
-    def command_point(self, lead: float | None = None) -> tuple[int, float]:
-        """The frame a command takes effect at (``lead`` seconds after the next one to publish, by default
-        the schedule's), and its stream time."""
+    def command_point(self) -> tuple[int, float]:
+        """The frame a command takes effect at, and its stream time."""
         free = max(self.made_k, self.next_k)  # the next frame the worker makes
-        k = min(self.next_k + math.ceil((self.lead if lead is None else lead) * self.rate), free)
+        k = min(self.next_k + math.ceil(self.lead * self.rate), free)
         tau = self.made_tau if k == free else next(f.tau for f in self.frames if f.k == k)
         return k, tau
 
