@@ -217,8 +217,7 @@ def iteration_factor(M, B, h, partition: Partition, chain: ChainData, settings: 
     Cholesky factor for ideal constraints (P = B, symmetric positive definite), its inverse for
     servo-constraints (P = E_ic)."""
     independent, dependent, servo = partition.independent, partition.dependent, partition.servo
-    ratio = (1.0 - settings.alpha_f) / (1.0 - settings.alpha_m)
-    beta_p, gamma_p = h * h * settings.beta * ratio, h * settings.gamma * ratio
+    beta_p, gamma_p = _alpha_scales(h, settings)
     matrix = M + beta_p * chain.stiffness
     if chain.damped:
         matrix += gamma_p * chain.damping
@@ -227,44 +226,38 @@ def iteration_factor(M, B, h, partition: Partition, chain: ChainData, settings: 
 
 
 @njit(cache=True, nogil=True)
+def _alpha_scales(h, settings: AlphaSettings):
+    """beta' = h^2 beta (1 - alpha_f)/(1 - alpha_m) and gamma' = h gamma (1 - alpha_f)/(1 - alpha_m): the
+    change of x and of its velocity per change of the accelerations a_{n+1}."""
+    ratio = (1.0 - settings.alpha_f) / (1.0 - settings.alpha_m)
+    return h * h * settings.beta * ratio, h * settings.gamma * ratio
+
+
+@njit(cache=True, nogil=True)
 def _state_at(a1, x0, v0, a0, at0, q_guess, qd_size, h, k: Coefficients, partition: Partition, chain: ChainData,
-              settings: AlphaSettings, exact_frames):
+              settings: AlphaSettings, project, exact_frames):
     """The generalized-alpha state for the accelerations a1 of the integrated coordinates: the pseudo-
-    acceleration, q with q_hd from the position constraints (starting from ``q_guess``; frames as in
-    :func:`project_positions`), qd with qd_dc from the velocity constraints, the frames and E's terms
-    there, and whether the constraints were met."""
+    acceleration, q = ``q_guess`` with x from a1 and q_hd from the position constraints (``project``;
+    frames as in :func:`project_positions`) or as guessed (the caller predicts it to second order in the
+    change of x), qd with qd_dc from the velocity constraints, the frames and E's terms there, and
+    whether the constraints were met."""
     alpha_m, alpha_f, gamma, beta = settings.alpha_m, settings.alpha_f, settings.gamma, settings.beta
     integrated = partition.integrated
     at1 = ((1.0 - alpha_f) * a1 + alpha_f * a0 - alpha_m * at0) / (1.0 - alpha_m)
     q1 = q_guess.copy()
     q1[integrated] = x0 + h * v0 + h * h * ((0.5 - beta) * at0 + beta * at1)
-    q1, T, S, p, C, solved = project_positions(q1, k, partition.holonomic_dependent, chain,
-                                               settings.projection_tolerance, 25, exact_frames)
+    if project:
+        q1, T, S, p, C, solved = project_positions(q1, k, partition.holonomic_dependent, chain,
+                                                   settings.projection_tolerance, 25, exact_frames)
+    else:
+        T, S = forward_kinematics(q1, chain.kinds, chain.axes, chain.origins)
+        p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
+        solved = True
     qd1 = np.zeros(qd_size)
     qd1[integrated] = v0 + h * ((1.0 - gamma) * at0 + gamma * at1)
     if solved:
         qd1, solved = dependent_velocities(qd1, p, C, k, partition.dependent)
     return at1, q1, qd1, T, S, p, C, solved
-
-
-@njit(cache=True, nogil=True)
-def _iterate_state(a1, x0, v0, a0, at0, q_guess, qd_size, h, k: Coefficients, partition: Partition,
-                   chain: ChainData, settings: AlphaSettings):
-    """A Newton iterate's state for the accelerations a1: q = ``q_guess`` with x from a1 (q_hd as guessed:
-    the caller predicts it to second order in the change of x, so the position constraints hold to about
-    the square of the last correction's effect on x), qd with qd_dc from the velocity constraints, the
-    frames and E's terms there, and whether the velocity constraints were solved."""
-    alpha_m, alpha_f, gamma, beta = settings.alpha_m, settings.alpha_f, settings.gamma, settings.beta
-    integrated = partition.integrated
-    at1 = ((1.0 - alpha_f) * a1 + alpha_f * a0 - alpha_m * at0) / (1.0 - alpha_m)
-    q1 = q_guess.copy()
-    q1[integrated] = x0 + h * v0 + h * h * ((0.5 - beta) * at0 + beta * at1)
-    T, S = forward_kinematics(q1, chain.kinds, chain.axes, chain.origins)
-    p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
-    qd1 = np.zeros(qd_size)
-    qd1[integrated] = v0 + h * ((1.0 - gamma) * at0 + gamma * at1)
-    qd1, solved = dependent_velocities(qd1, p, C, k, partition.dependent)
-    return q1, qd1, T, S, p, C, solved
 
 
 @njit(cache=True, nogil=True)
@@ -312,19 +305,15 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, k: Coefficients, drive
     independent, integrated, servo = partition.independent, partition.integrated, partition.servo
     n_ic = independent.size
     x0, v0, a0 = q0[integrated], qd0[integrated], qdd0[integrated]
-    ratio = (1.0 - settings.alpha_f) / (1.0 - settings.alpha_m)
-    gamma_p = h * settings.gamma * ratio
+    beta_p, gamma_p = _alpha_scales(h, settings)
     factor = iteration_factor(M0, B0, h, partition, chain, settings)
     q1 = q0 + h * qd0 + 0.5 * h * h * qdd0
     a1 = a0.copy()
     status = 1
     for iteration in range(settings.max_iterations):
-        if iteration == 0:  # from the predictor: q_hd by Newton on the position constraints
-            _, q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain,
-                                                       settings, False)
-        else:  # q_hd as predicted from the previous iterate (below)
-            q1, qd1, T, S, p, C, solved = _iterate_state(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain,
-                                                         settings)
+        # the first iterate (from the predictor) solves q_hd by Newton; the later ones take it as predicted below
+        _, q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain,
+                                                   settings, iteration == 0, False)
         if not solved:
             return Step(q0, qd0, at0, evaluate(q0, qd0, k, drive, partition, chain), 2, iteration + 1)
         qdd, residual, B = newton_residual(q1, qd1, a1, T, S, p, C, k, drive, partition, chain)
@@ -332,13 +321,12 @@ def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, k: Coefficients, drive
         correction[:n_ic] = -(cholesky_solve(factor, residual) if not servo else matvec(factor, residual))
         a1 = a1 + correction
         # q_hd of the next iterate to second order in the change of x: dx = beta' da
-        q1 = _predict_dependent(q1, B, h * h * settings.beta * ratio * correction[:n_ic],
-                                partition.holonomic_dependent)
+        q1 = _predict_dependent(q1, B, beta_p * correction[:n_ic], partition.holonomic_dependent)
         if iteration + 1 >= settings.evaluations and gamma_p * np.max(np.abs(correction)) <= settings.tolerance:
             status = 0
             break
     at1, q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain, settings,
-                                                 True)
+                                                 True, True)
     if not solved:
         return Step(q0, qd0, at0, evaluate(q0, qd0, k, drive, partition, chain), 2, iteration + 1)
     M, h_terms, forces, Vg, p, R, C, d, A, c_acc, B, e_dc = _terms_at(q1, qd1, T, S, k, drive, partition, chain)
