@@ -99,3 +99,29 @@ def test_streams_and_retargets_a_first_order_constraint_set():
     jumps = np.max(np.abs(np.diff(qd, axis=0)), axis=1)
     around = (taus[1:] > 0.45) & (taus[1:] < 0.55)
     assert np.max(jumps[around]) <= 2.0 * np.max(jumps[~around])  # no step in the velocity at the re-target
+
+
+def test_samples_between_steps_are_the_hermite_spline_and_the_kinematics_there():
+    """A batch of samples off the step grid: q and qd equal scipy's CubicHermiteSpline through the computed
+    steps (q with qd, qd with qdd), E's position and the orientation of its frame equal the kinematics at
+    the sampled q (from E's Jacobian routine and the dynamics terms)."""
+    from scipy.interpolate import CubicHermiteSpline
+    from scipy.spatial.transform import Rotation
+
+    stream = ReferenceStream(load_config(), "flexible", step=STEP)
+    stream.compute(0.1)
+    grid = stream.samples(np.arange(0.0, 0.1 + STEP / 2, STEP))
+    times = np.array([s.t for s in grid])
+    q, qd, qdd = (np.array([getattr(s, name) for s in grid]) for name in ("q", "qd", "qdd"))
+    at = np.sort(np.random.default_rng(3).uniform(0.0, 0.1, 37))
+    samples = stream.samples(at)
+    np.testing.assert_allclose([s.q for s in samples], CubicHermiteSpline(times, q, qd, axis=0)(at), rtol=0,
+                               atol=1e-12)
+    np.testing.assert_allclose([s.qd for s in samples], CubicHermiteSpline(times, qd, qdd, axis=0)(at), rtol=0,
+                               atol=1e-10)
+    dynamics = stream.scenario.dynamics
+    for s in samples:
+        np.testing.assert_allclose(s.ee_position, dynamics.end_effector(s.q)[0], rtol=0, atol=1e-12)
+        rotation = dynamics.terms(s.t, s.q, s.qd).ee_rotation
+        np.testing.assert_allclose(Rotation.from_quat(s.ee_quaternion).as_matrix(), rotation, rtol=0, atol=1e-12)
+    assert [s.t for s in samples] == at.tolist()

@@ -3,7 +3,7 @@
 The node runs in its own executor thread; a probe node (its own executor thread) subscribes to every
 topic and calls the services and the standard parameter services, as another process would.  The
 published motion is compared with an independent :class:`ReferenceStream` and E with the kinematics
-(:meth:`CraneDynamics.end_effector_pose`) of the published joint positions.
+(:meth:`CraneDynamics.end_effector_poses`) of the published joint positions.
 """
 
 from __future__ import annotations
@@ -238,7 +238,7 @@ def test_pose_is_the_end_effector_of_the_published_positions(ros: Harness) -> No
     assert len(poses) > 50
     for pose in poses:
         assert pose.header.frame_id == "world"
-        p, R = dynamics.end_effector_pose(positions[stamp_ns(pose)])
+        p, R = dynamics.end_effector_poses(positions[stamp_ns(pose)])
         position = pose.pose.position
         np.testing.assert_allclose([position.x, position.y, position.z], p, atol=1e-9)
         np.testing.assert_allclose(dynamics.end_effector(positions[stamp_ns(pose)])[0], p, atol=1e-12)

@@ -11,7 +11,7 @@ from ..model.chain import ChainModel
 from ..model.drive import Drive
 from ..model.parameters import Damping
 from .structures import ChainData
-from .terms import chain_terms, end_effector_jacobian, end_effector_pose, energy_accounts, generalized_forces
+from .terms import chain_terms, end_effector_jacobian, end_effector_poses, energy_accounts, generalized_forces
 
 
 @dataclass(frozen=True)
@@ -66,9 +66,12 @@ class CraneDynamics:
         """Position of E and its Jacobian C (3, n) at q."""
         return end_effector_jacobian(np.ascontiguousarray(q, dtype=float), self.chain)
 
-    def end_effector_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Position of E and the rotation matrix of link 4's frame (world) at q."""
-        return end_effector_pose(np.ascontiguousarray(q, dtype=float), self.chain)
+    def end_effector_poses(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions of E (N, 3) and the rotation matrices of link 4's frame (world, (N, 3, 3)) at the rows
+        of q (N, n); a single q (n,) gives one position (3,) and rotation (3, 3)."""
+        Q = np.ascontiguousarray(np.atleast_2d(q), dtype=float)
+        positions, rotations = end_effector_poses(Q, self.chain)
+        return (positions, rotations) if np.ndim(q) == 2 else (positions[0], rotations[0])
 
     def accounts(self, t: float, q: np.ndarray, qd: np.ndarray, terms: DynamicsTerms,
                  left_limit: bool = False) -> np.ndarray:

@@ -132,14 +132,20 @@ def velocity_terms(qd: np.ndarray, S: np.ndarray):
 
 
 @njit(cache=True)
+def point_position(F: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """World position F [point; 1] of a point given in the frame F (4x4)."""
+    p = np.empty(3)
+    for r in range(3):
+        p[r] = F[r, 0] * point[0] + F[r, 1] * point[1] + F[r, 2] * point[2] + F[r, 3]
+    return p
+
+
+@njit(cache=True)
 def point_jacobian(T: np.ndarray, S: np.ndarray, joint: int, point: np.ndarray):
     """World position p of a point fixed after ``joint`` and its Jacobian C = J [S_1 p ... S_n p] (3, n)
     (the paper's C = J [T_1 r ... T_n r])."""
     n = S.shape[0]
-    F = T[joint]
-    p = np.empty(3)
-    for r in range(3):
-        p[r] = F[r, 0] * point[0] + F[r, 1] * point[1] + F[r, 2] * point[2] + F[r, 3]
+    p = point_position(T[joint], point)
     C = np.zeros((3, n))
     for i in range(joint + 1):
         for r in range(3):

@@ -24,7 +24,7 @@ from .inertia import (
     velocity_forces,
     world_pseudo_inertias,
 )
-from .kinematics import forward_kinematics, point_bias, point_jacobian, velocity_terms
+from .kinematics import forward_kinematics, point_bias, point_jacobian, point_position, velocity_terms
 from .linalg import matvec
 from .structures import ChainData
 
@@ -80,11 +80,15 @@ def end_effector_jacobian(q, chain: ChainData):
 
 
 @njit(cache=True)
-def end_effector_pose(q, chain: ChainData):
-    """E's position and the rotation matrix of its frame (link 4) at q."""
-    T, _ = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
-    frame = T[chain.ee_joint]
-    return frame[:3, :3] @ chain.ee_point + frame[:3, 3], frame[:3, :3].copy()
+def end_effector_poses(Q, chain: ChainData):
+    """E's positions (N, 3) and the rotation matrices of its frame (link 4) (N, 3, 3) at the rows of Q (N, n)."""
+    positions, rotations = np.empty((Q.shape[0], 3)), np.empty((Q.shape[0], 3, 3))
+    for i in range(Q.shape[0]):
+        T, _ = forward_kinematics(np.ascontiguousarray(Q[i]), chain.kinds, chain.axes, chain.origins)
+        frame = T[chain.ee_joint]
+        positions[i] = point_position(frame, chain.ee_point)
+        rotations[i] = frame[:3, :3]
+    return positions, rotations
 
 
 @njit(cache=True)

@@ -68,9 +68,15 @@ def cubic_hermite(t: float | np.ndarray, times: np.ndarray, values: np.ndarray, 
     h = times[k + 1] - times[k]
     s = (t_array - times[k]) / h
     shape = (*s.shape, *(1,) * (values.ndim - 1))
-    s, h = s.reshape(shape), h.reshape(shape)
+    return hermite_segment(s.reshape(shape), h.reshape(shape), values[k], rates[k], values[k + 1], rates[k + 1])
+
+
+def hermite_segment(s: np.ndarray, h: np.ndarray, y0: np.ndarray, rate0: np.ndarray, y1: np.ndarray,
+                    rate1: np.ndarray) -> np.ndarray:
+    """The cubic of :func:`cubic_hermite` on one interval of length h at s = (t - t_k) / h, for values y0, y1
+    and derivatives rate0, rate1 at its ends (s and h broadcast against the values)."""
     h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
-    return h00 * values[k] + h10 * h * rates[k] + h01 * values[k + 1] + h11 * h * rates[k + 1]
+    return h00 * y0 + h10 * h * rate0 + h01 * y1 + h11 * h * rate1
 
 
 def generalized_effort(constraint_forces: np.ndarray, drive_torque: float | np.ndarray,

@@ -20,9 +20,11 @@ Clocks and stamps
 Computing ahead
     A worker thread advances the solver (``ReferenceStream.compute`` in slices of at most
     :data:`COMPUTE_SLICE` s of wall time) and samples it into a buffer of frames, :data:`LOOKAHEAD` s
-    ahead of publishing.  The publisher only takes frames from that buffer and never waits on the
-    solver's lock (both threads still share Python's GIL, which is what limits the timing at high rates).
-    The stream's own clock (its "publish time" tau) advances by 1 / publish_rate per frame.
+    ahead of publishing, refilled in batches of :data:`FRAME_BATCH` frames (a quarter of the look-ahead if
+    that is fewer), so the per-call costs of sampling are shared.  The publisher only takes frames from that
+    buffer and never waits on the solver's lock (both threads still share Python's GIL, which is what
+    limits the timing at high rates).  The stream's own clock (its "publish time" tau) advances by
+    1 / publish_rate per frame.
     Should the solver ever fall behind (real-time factor below 1), the publisher sends the last sample
     held (zero velocity) and the motion continues from there once frames are ready again (no position
     jump); diagnostics count these samples (held_late).  If the solver fails or the crane nears a
@@ -94,7 +96,7 @@ NODE_NAME = messages.NODE_NAME
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
 COMMAND_LEAD = 0.25  # [s] from the next sample to publish to the one a command takes effect at
 COMPUTE_SLICE = 0.005  # [s] of wall time the worker holds the stream per compute call
-FRAME_BATCH = 20  # frames sampled per hold of the stream lock
+FRAME_BATCH = 20  # frames sampled per hold of the stream lock, and the room the worker waits for to refill
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to compute (for commands)
 MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, older samples are skipped
 MARKER_RATE = 10.0  # [Hz]
@@ -131,6 +133,7 @@ class CraneReferenceNode(Node):
         self.get_logger().info(f"solver ready in {time.perf_counter() - ready:.1f} s")
         self._schedule = FrameSchedule(self._rate, max(2, math.ceil(LOOKAHEAD * self._rate)), COMMAND_LEAD,
                                        MAX_CATCH_UP, self._stream.sample(0.0))
+        self._refill = min(FRAME_BATCH, max(1, self._schedule.lookahead // 4))  # frames made per batch at least
         self._types = rclpy_types()
         self._joint_names = list(self._stream.joint_names)
         self._preview_indices = self._joint_indices(self._values["preview.joints"])
@@ -237,7 +240,7 @@ class CraneReferenceNode(Node):
                 with self._lock:
                     plan = schedule.plan()
                     fault = schedule.fault
-                    count = min(plan.room, FRAME_BATCH)
+                    count = min(plan.room, FRAME_BATCH) if plan.room >= self._refill else 0
                 with self._stream_lock:
                     if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
                         continue
@@ -443,7 +446,8 @@ class CraneReferenceNode(Node):
         """Publish every sample due by ``now`` [ns] (normally one), each stamped start + k / rate."""
         with self._lock:
             batch = self._schedule.due(now, self._start_ns)
-            self._lock.notify()
+            if self._schedule.room >= self._refill:
+                self._lock.notify()
         for k, frame in batch:
             self._send(k, frame)
 

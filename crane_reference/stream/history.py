@@ -7,17 +7,17 @@ from dataclasses import dataclass
 
 from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import StepperSnapshot
-from ..motion.trajectory import Sample
+from .sample import ReferenceSample
 
 TIME_SLACK = 1e-12  # [s], rounding slack when locating a motion time among the computed ones
 
 
 @dataclass(frozen=True)
 class Entry:
-    """One computed instant: its sample, the programmed motion in force and, at the end of a compiled
-    run, the stepper's snapshot to restart from (None inside a run)."""
+    """One computed instant: its reference sample, the programmed motion in force and, at the end of a
+    compiled run, the stepper's snapshot to restart from (None inside a run)."""
 
-    sample: Sample
+    sample: ReferenceSample
     motion: ProgrammedMotion
     snapshot: StepperSnapshot | None
 
@@ -25,25 +25,28 @@ class Entry:
 class History:
     """Computed instants in increasing motion time, the first one always restartable."""
 
-    def __init__(self, start: StepperSnapshot):
-        self.entries: list[Entry] = [Entry(start.sample, start.motion, start)]
-        self.times: list[float] = [start.sample.t]
+    def __init__(self, start: StepperSnapshot, sample: ReferenceSample):
+        self.entries: list[Entry] = [Entry(sample, start.motion, start)]
+        self.times: list[float] = [sample.t]
 
     @property
     def last(self) -> Entry:
         return self.entries[-1]
 
-    def extend(self, samples: list[Sample], motion: ProgrammedMotion, end: StepperSnapshot) -> None:
+    def extend(self, samples: list[ReferenceSample], motion: ProgrammedMotion, end: StepperSnapshot) -> None:
         """Append a compiled run: its samples (the last one restartable from ``end``)."""
         self.entries += [Entry(sample, motion, None) for sample in samples[:-1]]
-        self.entries.append(Entry(end.sample, end.motion, end))
+        self.entries.append(Entry(samples[-1], end.motion, end))
         self.times += [sample.t for sample in samples]
 
     def bracket(self, t: float) -> tuple[int, bool]:
         """Index k of the last instant at or before motion time t, and whether t is (within rounding)
-        that instant itself or beyond the last one."""
-        k = min(max(bisect.bisect_right(self.times, t) - 1, 0), len(self.times) - 1)
-        return k, k + 1 == len(self.times) or t <= self.times[k] + TIME_SLACK
+        that instant itself or beyond the last one; a t within rounding before an instant is that instant."""
+        times = self.times
+        k = min(max(bisect.bisect_right(times, t) - 1, 0), len(times) - 1)
+        if k + 1 < len(times) and t >= times[k + 1] - TIME_SLACK:
+            return k + 1, True
+        return k, k + 1 == len(times) or t <= times[k] + TIME_SLACK
 
     def first_at_or_after(self, t: float) -> int:
         """Index of the first instant at or after motion time t (the last one if none)."""
@@ -53,8 +56,9 @@ class History:
         """The last restartable instant at or before k."""
         return max(i for i in range(k + 1) if self.entries[i].snapshot is not None)
 
-    def set_snapshot(self, k: int, snapshot: StepperSnapshot) -> None:
-        self.entries[k] = Entry(snapshot.sample, snapshot.motion, snapshot)
+    def set_snapshot(self, k: int, snapshot: StepperSnapshot, sample: ReferenceSample | None = None) -> None:
+        """Make instant k restartable from ``snapshot``, with a new ``sample`` if given (else the same one)."""
+        self.entries[k] = Entry(sample or self.entries[k].sample, snapshot.motion, snapshot)
 
     def truncate(self, k: int) -> None:
         """Forget everything after instant k."""

@@ -37,9 +37,8 @@ from ..motion.constraints import ConstraintSet
 from ..motion.equilibrium import static_equilibrium
 from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import SOLVER_FAILURES, MotionStepper, Scenario, TaskConstraints, paper_task_constraints
-from ..motion.trajectory import unstack_samples
 from .history import History
-from .sample import ReferenceSample, between, reference_sample, warped
+from .sample import ReferenceSample, between, reference_sample, reference_samples, warped
 from .targets import blend_constraints, check_task
 from .time_warp import TimeWarp, check_rate
 
@@ -94,7 +93,8 @@ class ReferenceStream:
         start = self._static_start(constraints)
         self._stepper = MotionStepper(self._motion(constraints), 0.0, start, np.zeros_like(start), self.step,
                                       self.rho_inf)
-        self._history = History(self._stepper.snapshot())
+        self._history = History(self._stepper.snapshot(),
+                                reference_sample(self._stepper.sample, self.model.drive_joint))
         self._warp = TimeWarp(self._warp.ramp_time, 0.0 if at_rest else self.speed_scaling, tau)
         self._hold: ReferenceSample | None = None
         self.state = PAUSED if at_rest else RUNNING
@@ -175,7 +175,8 @@ class ReferenceStream:
             except SOLVER_FAILURES as failure:
                 self._fail(failure)
                 return
-            self._history.extend(unstack_samples(rows), self._stepper.motion, self._stepper.snapshot())
+            self._history.extend(reference_samples(rows, self.model.drive_joint), self._stepper.motion,
+                                 self._stepper.snapshot())
 
     def _rewind(self, k: int) -> None:
         """Forget the motion after the k-th computed instant and put the solver back there.  Instants
@@ -191,32 +192,43 @@ class ReferenceStream:
     def _fail(self, failure: Exception) -> None:
         last = self._history.last
         self._stepper.rewind(last.snapshot)
-        self._hold = self._reference(last.sample).hold()
+        self._hold = last.sample.hold()
         self.state = ERROR
         self.last_error = f"{type(failure).__name__}: {failure}"
 
-    def _reference(self, sample) -> ReferenceSample:
-        return reference_sample(sample, self.model.drive_joint)
-
     def sample(self, tau: float) -> ReferenceSample:
         """The reference at publish time tau (which must not exceed :attr:`computed_until`)."""
+        return self.samples([tau])[0]
+
+    def samples(self, taus) -> list[ReferenceSample]:
+        """The references at the publish times ``taus`` (none beyond :attr:`computed_until`): the computed
+        instants themselves, or interpolated between two of them (:func:`~.sample.between`, all at once)."""
         if self._hold is not None:
-            return self._hold
-        t, rate, rate_change = self._warp.at(tau)
-        times = self._history.times
-        if t > times[-1] + 1e-12:
-            raise ValueError(f"t = {t:.6g} s is beyond the computed motion ({times[-1]:.6g} s): call compute()")
-        k, exact = self._history.bracket(t)
-        a = self._reference(self._history.entries[k].sample)
-        if not exact:
-            a = between(a, self._reference(self._history.entries[k + 1].sample), t,
-                        self.scenario.dynamics.end_effector_pose)
-        return warped(a, rate, rate_change)
+            return [self._hold] * len(taus)
+        warps = [self._warp.at(tau) for tau in taus]
+        entries, end = self._history.entries, self._history.times[-1]
+        made: list[ReferenceSample | None] = []
+        left, right, inside, times = [], [], [], []
+        for t, _, _ in warps:
+            if t > end + 1e-12:
+                raise ValueError(f"t = {t:.6g} s is beyond the computed motion ({end:.6g} s): call compute()")
+            k, exact = self._history.bracket(t)
+            made.append(entries[k].sample if exact else None)
+            if not exact:
+                left.append(entries[k].sample)
+                right.append(entries[k + 1].sample)
+                inside.append(len(made) - 1)
+                times.append(t)
+        if inside:
+            poses = self.scenario.dynamics.end_effector_poses
+            for i, sample in zip(inside, between(left, right, np.array(times), poses), strict=True):
+                made[i] = sample
+        return [warped(sample, rate, rate_change) for sample, (_, rate, rate_change) in zip(made, warps, strict=True)]
 
     def preview(self, tau: float, horizon: float, count: int) -> list[ReferenceSample]:
         """``count`` samples over (tau, tau + horizon], strictly increasing in time."""
         self.compute(tau + horizon)
-        return [self.sample(min(tau + horizon * (i + 1) / count, self.computed_until)) for i in range(count)]
+        return self.samples([min(tau + horizon * (i + 1) / count, self.computed_until) for i in range(count)])
 
     def release(self, tau: float, keep: float = 1.0) -> None:
         """Forget computed states older than ``keep`` seconds of motion before publish time tau."""

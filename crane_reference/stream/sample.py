@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..motion.trajectory import Sample, cubic_hermite, generalized_effort
+from ..motion.trajectory import Sample, generalized_effort, hermite_segment, stack_samples
 
 
 @dataclass(frozen=True)
@@ -33,29 +34,46 @@ class ReferenceSample:
 
     def is_finite(self) -> bool:
         """Whether every number is finite (a NaN or infinity propagates into the sum)."""
-        arrays = (self.q, self.qd, self.qdd, self.effort, self.ee_position, self.ee_quaternion)
-        return bool(np.isfinite(sum(float(np.sum(a)) for a in arrays) + self.residual_distance))
+        return math.isfinite(self.q.sum() + self.qd.sum() + self.qdd.sum() + self.effort.sum()
+                             + self.ee_position.sum() + self.ee_quaternion.sum() + self.residual_distance)
+
+
+def reference_samples(rows: dict[str, np.ndarray], drive_joint: int) -> list[ReferenceSample]:
+    """The references at computed steps, from their :class:`~crane_reference.motion.trajectory.Sample`
+    fields stacked per step (one quaternion conversion for all of them)."""
+    effort = generalized_effort(rows["constraint_forces"], rows["drive_torque"], drive_joint)
+    quaternions = Rotation.from_matrix(rows["ee_rotation"]).as_quat()
+    residuals = np.max(rows["residual_distance"], axis=-1).tolist()
+    return [ReferenceSample(*fields, False) for fields in zip(
+        rows["t"].tolist(), rows["q"], rows["qd"], rows["qdd"], effort, rows["ee_position"], quaternions, residuals,
+        strict=True)]
 
 
 def reference_sample(s: Sample, drive_joint: int) -> ReferenceSample:
-    """The reference at a computed step."""
-    effort = generalized_effort(s.constraint_forces, s.drive_torque, drive_joint)
-    quaternion = Rotation.from_matrix(s.ee_rotation).as_quat()
-    return ReferenceSample(s.t, s.q, s.qd, s.qdd, effort, s.ee_position, quaternion,
-                           float(np.max(s.residual_distance)), False)
+    """The reference at one computed step."""
+    return reference_samples(stack_samples([s]), drive_joint)[0]
 
 
-def between(a: ReferenceSample, b: ReferenceSample, t: float, pose) -> ReferenceSample:
-    """The reference at a.t < t < b.t: q cubic Hermite in q and qd, qd cubic Hermite in qd and qdd (both
-    :func:`~crane_reference.motion.trajectory.cubic_hermite`), qdd and effort linear; E's pose
-    ``pose(q)`` -> (position, rotation matrix) from the kinematics at the interpolated q."""
-    times = np.array([a.t, b.t])
-    q = cubic_hermite(t, times, np.stack((a.q, b.q)), np.stack((a.qd, b.qd)))
-    qd = cubic_hermite(t, times, np.stack((a.qd, b.qd)), np.stack((a.qdd, b.qdd)))
-    s = (t - a.t) / (b.t - a.t)
-    p, R = pose(q)
-    return ReferenceSample(t, q, qd, (1 - s) * a.qdd + s * b.qdd, (1 - s) * a.effort + s * b.effort, p,
-                           Rotation.from_matrix(R).as_quat(), max(a.residual_distance, b.residual_distance), False)
+def between(a: list[ReferenceSample], b: list[ReferenceSample], t: np.ndarray, poses) -> list[ReferenceSample]:
+    """The references at a[i].t < t[i] < b[i].t: q cubic Hermite in q and qd, qd cubic Hermite in qd and qdd
+    (both :func:`~crane_reference.motion.trajectory.hermite_segment`), qdd and effort linear; E's pose from
+    ``poses(q)`` -> (positions (N, 3), rotation matrices (N, 3, 3)), the kinematics at the interpolated q."""
+    def stacked(side: list[ReferenceSample], name: str) -> np.ndarray:
+        return np.array([getattr(sample, name) for sample in side])
+
+    start = stacked(a, "t")
+    h = (stacked(b, "t") - start)[:, None]
+    s = (np.asarray(t, dtype=float)[:, None] - start[:, None]) / h
+    qd0, qd1, qdd0, qdd1 = stacked(a, "qd"), stacked(b, "qd"), stacked(a, "qdd"), stacked(b, "qdd")
+    q = hermite_segment(s, h, stacked(a, "q"), qd0, stacked(b, "q"), qd1)
+    qd = hermite_segment(s, h, qd0, qdd0, qd1, qdd1)
+    qdd = (1 - s) * qdd0 + s * qdd1
+    effort = (1 - s) * stacked(a, "effort") + s * stacked(b, "effort")
+    positions, rotations = poses(q)
+    quaternions = Rotation.from_matrix(rotations).as_quat()
+    residuals = np.maximum(stacked(a, "residual_distance"), stacked(b, "residual_distance")).tolist()
+    return [ReferenceSample(*fields, False) for fields in zip(
+        np.asarray(t, dtype=float).tolist(), q, qd, qdd, effort, positions, quaternions, residuals, strict=True)]
 
 
 def warped(sample: ReferenceSample, rate: float, rate_change: float) -> ReferenceSample:

@@ -97,8 +97,12 @@ class FrameSchedule:
     def plan(self) -> Plan:
         """Where the worker goes on: after the last frame made (or the next one to publish, if publishing
         overtook it: the stream time goes on from made_tau, so nothing jumps)."""
-        k = max(self.made_k, self.next_k)
-        return Plan(k, self.made_tau, self.generation, self.next_preview_k, self.lookahead - (k - self.next_k))
+        return Plan(max(self.made_k, self.next_k), self.made_tau, self.generation, self.next_preview_k, self.room)
+
+    @property
+    def room(self) -> int:
+        """Frames the buffer lacks to the look-ahead."""
+        return self.lookahead - (max(self.made_k, self.next_k) - self.next_k)
 
     def make_frames(self, stream: ReferenceStream, plan: Plan, count: int, horizon: float, points: int,
                     decimation: int, compute_budget: float | None) -> tuple[list[Frame], int, bool]:
@@ -116,20 +120,18 @@ class FrameSchedule:
             if math.isfinite(stream.computed_until):
                 self.compute_wall += time.perf_counter() - start
                 self.compute_motion += stream.computed_until - before
-        frames: list[Frame] = []
         last = self.last_valid  # the last sample of the frames made so far (finite)
-        for i in range(count):
-            t = tau + i * dt
-            if stream.state == ERROR:  # hold the last sample made, not the stream's (computed further ahead)
-                frames.append(Frame(plan.k + i, t, last.hold()))
-                continue
-            if t > stream.computed_until - TIME_TOLERANCE:
-                break
+        if stream.state == ERROR:  # hold the last sample made, not the stream's (computed further ahead)
+            return [Frame(plan.k + i, tau + i * dt, last.hold()) for i in range(count)], next_preview_k, False
+        times = [tau + i * dt for i in range(count)]
+        times = [t for t in times if t <= stream.computed_until - TIME_TOLERANCE]
+        frames: list[Frame] = []
+        for i, (t, sample) in enumerate(zip(times, stream.samples(times), strict=True)):
             preview = None
             if plan.k + i >= next_preview_k and stream.computed_until >= t + horizon:
                 preview = stream.preview(t, horizon, points)
                 next_preview_k = plan.k + i + decimation
-            frames.append(self.checked(Frame(plan.k + i, t, stream.sample(t), preview, horizon), last))
+            frames.append(self.checked(Frame(plan.k + i, t, sample, preview, horizon), last))
             last = frames[-1].sample
         return frames, next_preview_k, stream.computed_until < ahead
 
