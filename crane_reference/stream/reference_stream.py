@@ -181,12 +181,12 @@ class ReferenceStream:
     def _rewind(self, k: int) -> None:
         """Forget the motion after the k-th computed instant and put the solver back there.  Instants
         inside a compiled run keep their samples only: the solver restarts from the last restartable
-        instant before k and steps to k again, one step at a time (the same steps, bit for bit)."""
+        instant before k and steps to k again in one compiled run (the same steps, bit for bit)."""
         start = self._history.restart_point(k)
         self._stepper.rewind(self._history.entries[start].snapshot)
-        for i in range(start + 1, k + 1):
-            self._stepper.advance()
-            self._history.set_snapshot(i, self._stepper.snapshot())
+        if k > start:
+            self._stepper.advance_until(self._history.times[k])
+            self._history.set_snapshot(k, self._stepper.snapshot())
         self._history.truncate(k)
 
     def _fail(self, failure: Exception) -> None:
