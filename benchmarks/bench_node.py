@@ -14,7 +14,9 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
   real-time factor it reports;
 * latency from a parameter change (``ellipse.a``, through the parameter service) to the reception of
   the first sample that uses it (the node reports that sample's stamp in /diagnostics as
-  ``retarget_stamp_s``), over ``--changes`` changes;
+  ``retarget_stamp_s``), over ``--changes`` changes, and from the node's acceptance of the change to that
+  sample's stamp (``retarget_accepted_s`` to ``retarget_stamp_s``, both on the node's clock); samples held
+  late while the changes and the commands below were made (held_late_commands);
 * smoothness of the commands: the largest change of the column's velocity between two received samples
   (rad/s) in normal running and after ~/pause, resume, a speed_scaling change to 0.5 and a re-target
   (each window: the ramp time plus 0.5 s; the flexible boom's 70 Hz bending makes the column's velocity
@@ -25,7 +27,7 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
   and whether a valid change still takes effect afterwards.
 
 Run: ``.venv/bin/python benchmarks/bench_node.py [--duration 30] [--rates 100 500 1000] [--model flexible]
-[--flood 300]``.
+[--flood 300] [-p command_lead:=0.05 ...]``.
 """
 
 from __future__ import annotations
@@ -103,9 +105,10 @@ def spin_until(executor: SingleThreadedExecutor, condition, timeout: float) -> b
 
 
 def measure_latency(executor: SingleThreadedExecutor, client: AsyncParameterClient, recorder: Recorder,
-                    changes: int) -> list[float]:
-    """Seconds from sending each ellipse.a change to receiving the first sample that uses it."""
-    latencies = []
+                    changes: int) -> tuple[list[float], list[float]]:
+    """Seconds from sending each ellipse.a change to receiving the first sample that uses it, and from its
+    acceptance by the node (its clock, /diagnostics retarget_accepted_s) to that sample's stamp."""
+    latencies, after_acceptance = [], []
     for i in range(changes):
         previous = recorder.diagnostics.get("retarget_stamp_s")
         sent = time.monotonic_ns()
@@ -119,8 +122,10 @@ def measure_latency(executor: SingleThreadedExecutor, client: AsyncParameterClie
         spin_until(executor, lambda e=effective: recorder.stamps and recorder.stamps[-1] >= e, 10.0)
         first = next(i for i, s in enumerate(recorder.stamps) if s >= effective)
         latencies.append((recorder.monotonic[first] - sent) / NS)
+        after_acceptance.append(float(recorder.diagnostics["retarget_stamp_s"])
+                                - float(recorder.diagnostics["retarget_accepted_s"]))
         spin_for(executor, 1.0)
-    return latencies
+    return latencies, after_acceptance
 
 
 def call(executor: SingleThreadedExecutor, client, request, timeout: float = 10.0):
@@ -193,10 +198,12 @@ def flood(executor: SingleThreadedExecutor, client: AsyncParameterClient, record
                                               and recorder.diagnostics.get("target_ellipse_a_m") == "3")}
 
 
-def run(rate: int, duration: float, model: str, changes: int, domain: int, flood_requests: int) -> dict[str, float]:
+def run(rate: int, duration: float, model: str, changes: int, domain: int, flood_requests: int,
+        parameters: list[str]) -> dict[str, float]:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     node = subprocess.Popen([sys.executable, "-m", "crane_reference.ros.node", "--ros-args", "-p",
-                             f"publish_rate:={rate}", "-p", f"model:={model}", "-p", "status_period:=3600.0"],
+                             f"publish_rate:={rate}", "-p", f"model:={model}", "-p", "status_period:=3600.0",
+                             *(arg for parameter in parameters for arg in ("-p", parameter))],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     context = rclpy.Context()
@@ -220,8 +227,10 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         spin_until(executor, lambda: float(recorder.diagnostics.get("published", 0)) > 0, 2.0)
         late = {k: float(recorder.diagnostics.get(k, 0)) - before[k] for k in before}
         factor = recorder.diagnostics.get("real_time_factor", "nan")
-        latencies = measure_latency(executor, client, recorder, changes) if changes else [float("nan")]
+        latencies, after_acceptance = (measure_latency(executor, client, recorder, changes) if changes
+                                       else ([float("nan")], [float("nan")]))
         smoothness = command_smoothness(executor, subscriber, client, recorder, 1.0)
+        held_in_commands = float(recorder.diagnostics.get("held_late", 0)) - before["held_late"] - late["held_late"]
         flooded = flood(executor, client, recorder, flood_requests, rate) if flood_requests else {}
     finally:
         node.send_signal(signal.SIGINT)
@@ -242,6 +251,8 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         "missed": int(expected - len(stamps)), "held_late": int(late["held_late"]), "skipped": int(late["skipped"]),
         "cpu_percent": 100.0 * cpu / wall, "real_time_factor": float(factor),
         "latency_median_ms": 1e3 * float(np.median(latencies)), "latency_max_ms": 1e3 * float(np.max(latencies)),
+        "effect_after_acceptance_max_ms": 1e3 * float(np.max(after_acceptance)),
+        "held_late_commands": int(held_in_commands),
         **smoothness, **flooded, "exit_code": node.returncode, "traceback": "Traceback" in stderr,
     }
 
@@ -254,8 +265,11 @@ def main() -> int:
     parser.add_argument("--changes", type=int, default=5, help="parameter changes for the latency (default 5)")
     parser.add_argument("--domain-id", type=int, default=os.getpid() % 100 + 1)
     parser.add_argument("--flood", type=int, default=0, metavar="N", help="N random parameter requests at 50 Hz")
+    parser.add_argument("-p", "--parameter", action="append", default=[], metavar="NAME:=VALUE",
+                        help="a further node parameter, e.g. -p command_lead:=0.05 (repeatable)")
     args = parser.parse_args()
-    rows = [run(rate, args.duration, args.model, args.changes, args.domain_id, args.flood) for rate in args.rates]
+    rows = [run(rate, args.duration, args.model, args.changes, args.domain_id, args.flood, args.parameter)
+            for rate in args.rates]
     print_table(f"crane_reference node, {args.model} model, {args.duration:g} s per rate, {os.cpu_count()} CPUs", rows)
     return 0
 

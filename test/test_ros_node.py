@@ -661,3 +661,25 @@ def test_speed_scaling_topic_sets_the_parameter_and_slows_the_reference(ros: Har
     expected = [reference.sample(ti) for ti in t]
     np.testing.assert_allclose(data["q"][index], [e.q for e in expected], atol=1e-9)
     np.testing.assert_allclose(data["qd"][index], [0.5 * e.qd for e in expected], atol=1e-9)
+
+
+def test_command_lead_sets_when_a_command_takes_effect(ros: Harness) -> None:
+    """A command takes effect at the first sample command_lead after the next one to publish when it is
+    accepted: the stamp the node announces lies within [lead, lead + 2 periods] of its acceptance, for the
+    default and for a lead changed while running, and the stream is told the same instant."""
+    rate = 100
+    node = ros.start(publish_rate=rate, model="rigid")
+    times = record_stream_times(node)
+    time.sleep(0.5)
+    for lead in (node.get_parameter("command_lead").value, 0.4):
+        (result,) = ros.set_parameters(Parameter("command_lead", value=lead))
+        assert result.successful, result.reason
+        scaling = spy(node._stream, "set_speed_scaling")
+        value = 0.5 if lead != 0.4 else 1.0
+        (result,) = ros.set_parameters(Parameter("speed_scaling", value=value))
+        assert result.successful and len(scaling) == 1, result.reason
+        effective, accepted = node._effective["speed_scaling"], node._accepted["speed_scaling"]
+        assert lead <= effective - accepted <= lead + 2.0 / rate, (lead, effective - accepted)
+        assert abs(stamp_of(ros, times, scaling[0][0]) - effective * NS) < 1e3  # [ns], float seconds
+    (result,) = ros.set_parameters(Parameter("command_lead", value=0.0))
+    assert not result.successful and "command_lead" in result.reason

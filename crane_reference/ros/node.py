@@ -34,11 +34,13 @@ Computing ahead
 
 Commands
     A re-target (``ellipse.*``, ``z.*`` parameters), a speed change (``speed_scaling``), ``~/pause`` and
-    ``~/restart`` take effect at the frame :data:`COMMAND_LEAD` s after the next one to be published (the
-    frames computed beyond it are dropped and computed again), so a change reaches the published samples
-    about COMMAND_LEAD after it is accepted.  A shorter lead (20, 50 and 100 ms were tried) lets the
-    command, or the frames made again after it, come too late on a loaded machine: the frame worker
-    shares the interpreter with the publisher and the executor.
+    ``~/restart`` take effect at the frame ``command_lead`` seconds after the next one to be published (the
+    frames from there on are dropped at once and made again after the command), so a change reaches the
+    published samples within command_lead plus one period after it is accepted; diagnostics give both
+    instants (``{command}_accepted_s``, ``{command}_stamp_s``).  If the worker cannot make the frame at the
+    command point in time (a lead too short for a loaded machine: it shares the interpreter with the
+    publisher and the executor), the publisher holds the last sample and counts it (held_late); it never
+    publishes the motion from before the command past that point.
     Speed changes and pauses are C2 ramps of the stream's time warp; ``~/restart`` of a moving reference
     pauses first and restarts at the first sample at rest.
     Parameter values are validated in the on-set callback (table of
@@ -94,7 +96,6 @@ from .parameters import PARAMETERS, SPECS, TARGET_PARAMETERS, ParameterError, ch
 
 NODE_NAME = messages.NODE_NAME
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
-COMMAND_LEAD = 0.25  # [s] from the next sample to publish to the one a command takes effect at
 COMPUTE_SLICE = 0.005  # [s] of wall time the worker holds the stream per compute call
 FRAME_BATCH = 20  # frames sampled per hold of the stream lock, and the room the worker waits for to refill
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to compute (for commands)
@@ -131,8 +132,8 @@ class CraneReferenceNode(Node):
         ready = time.perf_counter()
         self._stream = self._make_stream(config)
         self.get_logger().info(f"solver ready in {time.perf_counter() - ready:.1f} s")
-        self._schedule = FrameSchedule(self._rate, max(2, math.ceil(LOOKAHEAD * self._rate)), COMMAND_LEAD,
-                                       MAX_CATCH_UP, self._stream.sample(0.0))
+        self._schedule = FrameSchedule(self._rate, max(2, math.ceil(LOOKAHEAD * self._rate)),
+                                       self._values["command_lead"], MAX_CATCH_UP, self._stream.sample(0.0))
         self._refill = min(FRAME_BATCH, max(1, self._schedule.lookahead // 4))  # frames made per batch at least
         self._types = rclpy_types()
         self._joint_names = list(self._stream.joint_names)
@@ -148,7 +149,9 @@ class CraneReferenceNode(Node):
         self._last_stamp = 0
         self._achieved_rate = 0.0
         self._late_reported = 0
-        self._effective: dict[str, float] = {}
+        self._effective: dict[str, float] = {}  # command -> stamp [s] of the sample it takes effect at
+        self._accepted: dict[str, float] = {}  # command -> node-clock time [s] it was accepted at
+        self._commands_pending = 0  # commands whose frames are dropped and whose action is not applied yet
         self._trail: deque[np.ndarray] = deque(maxlen=TRAIL_POINTS)
         self._diagnostics_reference = (0, 0.0, 0.0, self.get_clock().now().nanoseconds)
 
@@ -238,9 +241,13 @@ class CraneReferenceNode(Node):
         try:
             while not self._stop.is_set():
                 with self._lock:
+                    while self._commands_pending and not self._stop.is_set():  # frames after a command once
+                        self._lock.wait(timeout=LOOKAHEAD)  # it is applied
                     plan = schedule.plan()
                     fault = schedule.fault
-                    count = min(plan.room, FRAME_BATCH) if plan.room >= self._refill else 0
+                    # in batches, but up to the whole look-ahead before publishing starts
+                    refill = plan.room >= self._refill or self._start_ns is None
+                    count = min(plan.room, FRAME_BATCH) if refill else 0
                 with self._stream_lock:
                     if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
                         continue
@@ -269,17 +276,27 @@ class CraneReferenceNode(Node):
 
     # -- commands (executor threads) ------------------------------------------------------------------
 
-    def _command(self, action: Callable[[float], None]) -> int:
-        """Apply ``action(tau)`` to the stream at the schedule's command point (COMMAND_LEAD after the next
-        sample to publish) and drop the frames from there on.  Returns the index of that frame;
-        exceptions of ``action`` propagate with the stream and the buffer untouched."""
-        with self._stream_lock:
+    def _command(self, name: str, action: Callable[[float], None]) -> int:
+        """Apply ``action(tau)`` to the stream at the schedule's command point (command_lead after the next
+        sample to publish, decided on acceptance), dropping the frames from there on at once; the worker
+        makes none until the action is applied, so no frame of the motion before the command is published
+        from that point.  Returns the index of that frame and records it with the acceptance time
+        (diagnostics ``{name}_stamp_s``, ``{name}_accepted_s``).  Exceptions of ``action`` propagate with
+        the stream untouched (the dropped frames are made again, the same)."""
+        accepted = self.get_clock().now().nanoseconds
+        with self._lock:
+            k, tau = self._schedule.command_point()
+            self._schedule.after_command(k, tau)
+            self._commands_pending += 1
+        try:
+            with self._stream_lock:
+                action(tau)
+        finally:
             with self._lock:
-                k, tau = self._schedule.command_point()
-            action(tau)
-            with self._lock:
-                self._schedule.after_command(k, tau)
-                self._lock.notify()  # the worker makes the frames from k again now, not at the next publish
+                self._commands_pending -= 1
+                self._lock.notify_all()  # the worker makes the frames from k now, not at the next publish
+        self._effective[name] = self._stamp_s(k)
+        self._accepted[name] = accepted / NANOSECONDS
         return k
 
     def _stamp_s(self, k: int) -> float:
@@ -301,10 +318,13 @@ class CraneReferenceNode(Node):
             stamp = self._stamp_s(self._pending_restart)
             response.message = f"a restart is already pending at the sample stamped {stamp:.6f} s"
             return response
+        accepted = self.get_clock().now().nanoseconds
+        with self._lock:  # frames from k on are dropped now (see _command)
+            k, tau = self._schedule.command_point()
+            self._schedule.after_command(k, tau)
+            self._commands_pending += 1
         try:
             with self._stream_lock:
-                with self._lock:
-                    k, tau = self._schedule.command_point()
                 stream = self._stream
                 if stream.state == ERROR or (stream.rate == 0.0 and stream.settled_at() <= tau):
                     rest_k, last_tau = k, tau
@@ -320,9 +340,6 @@ class CraneReferenceNode(Node):
                     self._restart_now(tau)
                 else:
                     self._pending_restart = rest_k
-                with self._lock:
-                    self._schedule.after_command(k, tau)
-                    self._lock.notify()
         except SOLVER_FAILURES as error:
             response.success, response.message = False, f"restart failed, stream unchanged: {error}"
         else:
@@ -330,11 +347,16 @@ class CraneReferenceNode(Node):
             joint = self._joint_names[int(np.argmax(jump))]
             stamp = self._stamp_s(rest_k)
             self._effective["restart"] = stamp
+            self._accepted["restart"] = accepted / NANOSECONDS
             self._last_restart = {"restart_jump_rad": f"{jump.max():.6g}", "restart_jump_joint": joint}
             response.success = True
             response.message = (f"{'coming to rest, then ' if rest_k > k else ''}restarting from the static "
                                 f"equilibrium at the sample stamped {stamp:.6f} s: position jump up to "
                                 f"{jump.max():.6g} (SI units) on {joint}")
+        finally:
+            with self._lock:
+                self._commands_pending -= 1
+                self._lock.notify_all()  # the worker makes the frames from k now
         self.get_logger().info(response.message)
         return response
 
@@ -352,12 +374,12 @@ class CraneReferenceNode(Node):
         elif state == wanted:
             response.success, response.message = True, f"already {state.lower()}"
         else:
-            k = self._command(self._stream.pause if request.data else self._stream.resume)
+            k = self._command("pause" if request.data else "resume",
+                              self._stream.pause if request.data else self._stream.resume)
             verb = "coming to rest" if request.data else "resuming"
             response.success = True
             response.message = (f"{verb} from the sample stamped {self._stamp_s(k):.6f} s over "
                                 f"{self._stream.ramp_time:g} s")
-            self._effective["pause" if request.data else "resume"] = self._stamp_s(k)
         self.get_logger().info(f"~/pause {request.data}: {response.message}")
         return response
 
@@ -394,6 +416,9 @@ class CraneReferenceNode(Node):
         if "blend_time" in names:
             with self._stream_lock:
                 self._stream.set_blend_time(self._values["blend_time"])
+        if "command_lead" in names:
+            with self._lock:
+                self._schedule.lead = self._values["command_lead"]
         if "status_period" in names:
             self._status_timer.timer_period_ns = round(self._values["status_period"] * NANOSECONDS)
             self._status_timer.reset()
@@ -401,14 +426,12 @@ class CraneReferenceNode(Node):
             self._preview_indices = self._joint_indices(list(self._values["preview.joints"]))
         if "speed_scaling" in names:
             rate = self._values["speed_scaling"]
-            k = self._command(lambda tau: self._stream.set_speed_scaling(tau, rate))
-            self._effective["speed_scaling"] = self._stamp_s(k)
+            k = self._command("speed_scaling", lambda tau: self._stream.set_speed_scaling(tau, rate))
             self.get_logger().info(f"speed scaling {rate:g} from the sample stamped {self._stamp_s(k):.6f} s")
         if any(name in TARGET_PARAMETERS for name in names) and self._targets() != self._stream.targets:
             targets = self._targets()
             # the targets passed check_targets in the on-set callback
-            k = self._command(lambda tau: self._stream.retarget(tau, targets, checked=True))
-            self._effective["retarget"] = self._stamp_s(k)
+            k = self._command("retarget", lambda tau: self._stream.retarget(tau, targets, checked=True))
             self.get_logger().info(f"re-targeting to {targets} from the sample stamped {self._stamp_s(k):.6f} s "
                                    f"over {self._values['blend_time']:g} s")
 
@@ -513,7 +536,8 @@ class CraneReferenceNode(Node):
             stream.state, sample, factor, self._rate, rate, counters.as_dict(), stream.targets, stream.rate,
             stream.last_error or fault,
             {"frames_ready": len(self._schedule.frames),
-             **{f"{name}_stamp_s": f"{stamp:.6f}" for name, stamp in self._effective.items()}, **self._last_restart})
+             **{f"{name}_stamp_s": f"{stamp:.6f}" for name, stamp in self._effective.items()},
+             **{f"{name}_accepted_s": f"{stamp:.6f}" for name, stamp in self._accepted.items()}, **self._last_restart})
         stamp = self.get_clock().now().nanoseconds
         self._diagnostics_pub.publish(messages.diagnostics(
             self._types, stamp, f"{self.get_name()}: reference", self.get_fully_qualified_name(), level, message,

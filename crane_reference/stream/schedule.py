@@ -107,16 +107,20 @@ class FrameSchedule:
     def make_frames(self, stream: ReferenceStream, plan: Plan, count: int, horizon: float, points: int,
                     decimation: int, compute_budget: float | None) -> tuple[list[Frame], int, bool]:
         """Up to ``count`` frames of ``plan`` as far as the motion is computed, after computing ahead (for
-        at most ``compute_budget`` s of wall time, unbounded with None) far enough for them and a
-        ``horizon``-second preview of ``points`` points every ``decimation`` frames.  Returns the frames,
-        the next frame due a preview and whether the motion is still short of the preview horizon."""
+        at most ``compute_budget`` s of wall time; unbounded with None) far enough for them, and then (with a
+        budget: once they are) for a ``horizon``-second preview of ``points`` points every ``decimation``
+        frames (a frame due a preview whose horizon is not computed yet passes it to the next one).  Returns
+        the frames, the next frame due a preview and whether the motion is still short of the preview
+        horizon."""
         dt = 1.0 / self.rate
         tau, next_preview_k = plan.tau, plan.next_preview_k
         ahead = tau + count * dt + horizon + COMPUTE_MARGIN
+        frames_until = tau + (count - 1) * dt + 2 * TIME_TOLERANCE
         before = stream.computed_until
-        if before < ahead:
+        if before < ahead:  # within a budget the frames first (quick after a command), the horizon on later calls
             start = time.perf_counter()
-            stream.compute(ahead, compute_budget)
+            first = compute_budget is not None and before < frames_until
+            stream.compute(frames_until if first else ahead, compute_budget)
             if math.isfinite(stream.computed_until):
                 self.compute_wall += time.perf_counter() - start
                 self.compute_motion += stream.computed_until - before
