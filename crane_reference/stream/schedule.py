@@ -29,6 +29,7 @@ from .sample import ReferenceSample
 
 TIME_TOLERANCE = 1e-9  # [s], rounding slack when comparing stream times
 COMPUTE_MARGIN = 0.05  # [s] of motion computed beyond the preview horizon
+URGENT_PART = 4  # frames within lookahead / URGENT_PART of publishing are made before the preview horizon
 NANOSECONDS = 10**9
 
 
@@ -107,19 +108,22 @@ class FrameSchedule:
     def make_frames(self, stream: ReferenceStream, plan: Plan, count: int, horizon: float, points: int,
                     decimation: int, compute_budget: float | None) -> tuple[list[Frame], int, bool]:
         """Up to ``count`` frames of ``plan`` as far as the motion is computed, after computing ahead (for
-        at most ``compute_budget`` s of wall time; unbounded with None) far enough for them, and then (with a
-        budget: once they are) for a ``horizon``-second preview of ``points`` points every ``decimation``
-        frames (a frame due a preview whose horizon is not computed yet passes it to the next one).  Returns
-        the frames, the next frame due a preview and whether the motion is still short of the preview
-        horizon."""
+        at most ``compute_budget`` s of wall time; unbounded with None) far enough for them and for a
+        ``horizon``-second preview of ``points`` points every ``decimation`` frames.  With a budget, frames
+        due within 1 / URGENT_PART of the look-ahead (those after a command) are made as soon as their own
+        motion is computed, and a frame due a preview whose horizon is not computed yet passes it to the
+        next one.  Returns the frames, the next frame due a preview and whether the motion is still short of
+        the preview horizon."""
         dt = 1.0 / self.rate
         tau, next_preview_k = plan.tau, plan.next_preview_k
         ahead = tau + count * dt + horizon + COMPUTE_MARGIN
         frames_until = tau + (count - 1) * dt + 2 * TIME_TOLERANCE
         before = stream.computed_until
-        if before < ahead:  # within a budget the frames first (quick after a command), the horizon on later calls
+        if before < ahead:
             start = time.perf_counter()
-            first = compute_budget is not None and before < frames_until
+            # frames due soon (after a command) first, within a budget: the horizon on later calls
+            urgent = compute_budget is not None and plan.k < self.next_k + self.lookahead // URGENT_PART
+            first = urgent and before < frames_until
             stream.compute(frames_until if first else ahead, compute_budget)
             if math.isfinite(stream.computed_until):
                 self.compute_wall += time.perf_counter() - start
