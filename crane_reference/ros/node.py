@@ -63,7 +63,8 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 import numpy as np
 import rclpy
@@ -276,27 +277,37 @@ class CraneReferenceNode(Node):
 
     # -- commands (executor threads) ------------------------------------------------------------------
 
-    def _command(self, name: str, action: Callable[[float], None]) -> int:
-        """Apply ``action(tau)`` to the stream at the schedule's command point (command_lead after the next
-        sample to publish, decided on acceptance), dropping the frames from there on at once; the worker
-        makes none until the action is applied, so no frame of the motion before the command is published
-        from that point.  Returns the index of that frame and records it with the acceptance time
-        (diagnostics ``{name}_stamp_s``, ``{name}_accepted_s``).  Exceptions of ``action`` propagate with
-        the stream untouched (the dropped frames are made again, the same)."""
+    @contextmanager
+    def _command_point(self) -> Iterator[tuple[int, float, int]]:
+        """The schedule's command point, frame k at stream time tau (command_lead after the next sample to
+        publish, decided on acceptance), and the acceptance time [ns].  The frames from k on are dropped at
+        once and the worker makes none until the block ends, so no frame of the motion before the command
+        is published from that point."""
         accepted = self.get_clock().now().nanoseconds
         with self._lock:
             k, tau = self._schedule.command_point()
             self._schedule.after_command(k, tau)
             self._commands_pending += 1
         try:
-            with self._stream_lock:
-                action(tau)
+            yield k, tau, accepted
         finally:
             with self._lock:
                 self._commands_pending -= 1
                 self._lock.notify_all()  # the worker makes the frames from k now, not at the next publish
+
+    def _announce(self, name: str, k: int, accepted: int) -> None:
+        """Record that command ``name`` accepted at ``accepted`` [ns] takes effect at sample k (diagnostics
+        ``{name}_stamp_s``, ``{name}_accepted_s``)."""
         self._effective[name] = self._stamp_s(k)
         self._accepted[name] = accepted / NANOSECONDS
+
+    def _command(self, name: str, action: Callable[[float], None]) -> int:
+        """Apply ``action(tau)`` to the stream at the command point (:meth:`_command_point`) and announce it.
+        Returns the index of that frame.  Exceptions of ``action`` propagate with the stream untouched (the
+        dropped frames are made again, the same)."""
+        with self._command_point() as (k, tau, accepted), self._stream_lock:
+            action(tau)
+        self._announce(name, k, accepted)
         return k
 
     def _stamp_s(self, k: int) -> float:
@@ -318,45 +329,35 @@ class CraneReferenceNode(Node):
             stamp = self._stamp_s(self._pending_restart)
             response.message = f"a restart is already pending at the sample stamped {stamp:.6f} s"
             return response
-        accepted = self.get_clock().now().nanoseconds
-        with self._lock:  # frames from k on are dropped now (see _command)
-            k, tau = self._schedule.command_point()
-            self._schedule.after_command(k, tau)
-            self._commands_pending += 1
-        try:
-            with self._stream_lock:
-                stream = self._stream
-                if stream.state == ERROR or (stream.rate == 0.0 and stream.settled_at() <= tau):
-                    rest_k, last_tau = k, tau
-                else:  # come to rest; the last sample before the restart is the first one at rest
-                    if stream.state != PAUSED:
-                        stream.pause(tau)
-                    rest_k = k + math.ceil((stream.settled_at() - tau) * self._rate - 1e-9) + 1
-                    last_tau = tau + (rest_k - 1 - k) / self._rate
-                stream.compute(last_tau)
-                before = stream.sample(last_tau).q
-                after = stream.start_configuration()
-                if rest_k == k:
-                    self._restart_now(tau)
-                else:
-                    self._pending_restart = rest_k
-        except SOLVER_FAILURES as error:
-            response.success, response.message = False, f"restart failed, stream unchanged: {error}"
-        else:
-            jump = np.abs(after - before)
-            joint = self._joint_names[int(np.argmax(jump))]
-            stamp = self._stamp_s(rest_k)
-            self._effective["restart"] = stamp
-            self._accepted["restart"] = accepted / NANOSECONDS
-            self._last_restart = {"restart_jump_rad": f"{jump.max():.6g}", "restart_jump_joint": joint}
-            response.success = True
-            response.message = (f"{'coming to rest, then ' if rest_k > k else ''}restarting from the static "
-                                f"equilibrium at the sample stamped {stamp:.6f} s: position jump up to "
-                                f"{jump.max():.6g} (SI units) on {joint}")
-        finally:
-            with self._lock:
-                self._commands_pending -= 1
-                self._lock.notify_all()  # the worker makes the frames from k now
+        with self._command_point() as (k, tau, accepted):
+            try:
+                with self._stream_lock:
+                    stream = self._stream
+                    if stream.state == ERROR or (stream.rate == 0.0 and stream.settled_at() <= tau):
+                        rest_k, last_tau = k, tau
+                    else:  # come to rest; the last sample before the restart is the first one at rest
+                        if stream.state != PAUSED:
+                            stream.pause(tau)
+                        rest_k = k + math.ceil((stream.settled_at() - tau) * self._rate - 1e-9) + 1
+                        last_tau = tau + (rest_k - 1 - k) / self._rate
+                    stream.compute(last_tau)
+                    before = stream.sample(last_tau).q
+                    after = stream.start_configuration()
+                    if rest_k == k:
+                        self._restart_now(tau)
+                    else:
+                        self._pending_restart = rest_k
+            except SOLVER_FAILURES as error:
+                response.success, response.message = False, f"restart failed, stream unchanged: {error}"
+            else:
+                jump = np.abs(after - before)
+                joint = self._joint_names[int(np.argmax(jump))]
+                self._announce("restart", rest_k, accepted)
+                self._last_restart = {"restart_jump_rad": f"{jump.max():.6g}", "restart_jump_joint": joint}
+                response.success = True
+                response.message = (f"{'coming to rest, then ' if rest_k > k else ''}restarting from the static "
+                                    f"equilibrium at the sample stamped {self._stamp_s(rest_k):.6f} s: position "
+                                    f"jump up to {jump.max():.6g} (SI units) on {joint}")
         self.get_logger().info(response.message)
         return response
 

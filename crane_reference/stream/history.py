@@ -56,9 +56,9 @@ class History:
         """The last restartable instant at or before k."""
         return max(i for i in range(k + 1) if self.entries[i].snapshot is not None)
 
-    def set_snapshot(self, k: int, snapshot: StepperSnapshot, sample: ReferenceSample | None = None) -> None:
-        """Make instant k restartable from ``snapshot``, with a new ``sample`` if given (else the same one)."""
-        self.entries[k] = Entry(sample or self.entries[k].sample, snapshot.motion, snapshot)
+    def set_snapshot(self, k: int, snapshot: StepperSnapshot) -> None:
+        """Make instant k (its sample unchanged) restartable from ``snapshot``."""
+        self.entries[k] = Entry(self.entries[k].sample, snapshot.motion, snapshot)
 
     def truncate(self, k: int) -> None:
         """Forget everything after instant k."""
