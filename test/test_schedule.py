@@ -4,10 +4,12 @@ when, commands, held and skipped samples, and frames made from a real stream."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
 
+from crane_reference.model.parameters import Task
 from crane_reference.stream.reference_stream import ReferenceStream
 from crane_reference.stream.schedule import NANOSECONDS, Frame, FrameSchedule
 
@@ -95,3 +97,33 @@ def test_a_non_finite_frame_is_replaced_by_the_last_valid_sample_held(stream_fac
     assert checked.k == 3 and checked.preview is None and checked.sample.held
     np.testing.assert_array_equal(checked.sample.q, valid.q)
     assert schedule.counters.held_non_finite == 1 and "non-finite" in schedule.fault
+
+
+def test_after_a_command_samples_come_first_then_previews_on_their_cadence(stream_factory):
+    """After a re-target the frames within a quarter of the look-ahead from publishing are made before their
+    preview horizon is computed (their previews pass on); from there on a frame due a preview waits for it,
+    so previews keep their cadence (with a compute budget, as in the node)."""
+    stream = stream_factory()
+    decimation, lookahead = 10, 100
+    schedule = FrameSchedule(RATE, lookahead, 0.1, 1.0, stream.sample(0.0))
+
+    def fill(budget: float | None) -> list[int]:
+        with_preview = []
+        while schedule.room > 0 or stream.computed_until < schedule.made_tau + 1.0:
+            plan = schedule.plan()
+            frames, next_preview_k, _ = schedule.make_frames(stream, plan, min(plan.room, 20), 1.0, 5, decimation,
+                                                             budget)
+            schedule.accept(frames, plan, next_preview_k)
+            with_preview += [f.k for f in frames if f.preview is not None]
+        return with_preview
+
+    fill(None)
+    schedule.due(NANOSECONDS // 2, 0)  # published up to 0.5 s
+    k, tau = schedule.command_point()
+    schedule.after_command(k, tau)
+    stream.retarget(tau, Task(3.1, 2.0, 0.2, 5.0))
+    window_end = schedule.next_k + lookahead // 4
+    previews = fill(0.005)
+    assert k == schedule.next_k + 10 and k < window_end
+    assert previews[:4] == [window_end + i * decimation for i in range(4)]
+    assert all(b - a == decimation for a, b in itertools.pairwise(previews))

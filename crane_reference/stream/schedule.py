@@ -29,7 +29,7 @@ from .sample import ReferenceSample
 
 TIME_TOLERANCE = 1e-9  # [s], rounding slack when comparing stream times
 COMPUTE_MARGIN = 0.05  # [s] of motion computed beyond the preview horizon
-URGENT_PART = 4  # frames within lookahead / URGENT_PART of publishing are made before the preview horizon
+URGENT_PART = 4  # frames within lookahead / URGENT_PART of publishing are made before their preview horizon
 NANOSECONDS = 10**9
 
 
@@ -109,22 +109,21 @@ class FrameSchedule:
                     decimation: int, compute_budget: float | None) -> tuple[list[Frame], int, bool]:
         """Up to ``count`` frames of ``plan`` as far as the motion is computed, after computing ahead (for
         at most ``compute_budget`` s of wall time; unbounded with None) far enough for them and for a
-        ``horizon``-second preview of ``points`` points every ``decimation`` frames.  With a budget, frames
-        due within 1 / URGENT_PART of the look-ahead (those after a command) are made as soon as their own
-        motion is computed, and a frame due a preview whose horizon is not computed yet passes it to the
-        next one.  Returns the frames, the next frame due a preview and whether the motion is still short of
-        the preview horizon."""
+        ``horizon``-second preview of ``points`` points every ``decimation`` frames.  A frame due a preview
+        waits until its horizon is computed, so previews keep their cadence; only with a budget, frames due
+        within 1 / URGENT_PART of the look-ahead from publishing (those just after a command) are made as
+        soon as their own motion is computed, and pass a preview due to the first frame after that window.
+        Returns the frames, the next frame due a preview and whether the motion is still short of the
+        preview horizon."""
         dt = 1.0 / self.rate
         tau, next_preview_k = plan.tau, plan.next_preview_k
         ahead = tau + count * dt + horizon + COMPUTE_MARGIN
         frames_until = tau + (count - 1) * dt + 2 * TIME_TOLERANCE
+        urgent_until = self.next_k + self.lookahead // URGENT_PART if compute_budget is not None else plan.k
         before = stream.computed_until
         if before < ahead:
             start = time.perf_counter()
-            # frames due soon (after a command) first, within a budget: the horizon on later calls
-            urgent = compute_budget is not None and plan.k < self.next_k + self.lookahead // URGENT_PART
-            first = urgent and before < frames_until
-            stream.compute(frames_until if first else ahead, compute_budget)
+            stream.compute(frames_until if plan.k < urgent_until and before < frames_until else ahead, compute_budget)
             if math.isfinite(stream.computed_until):
                 self.compute_wall += time.perf_counter() - start
                 self.compute_motion += stream.computed_until - before
@@ -135,11 +134,14 @@ class FrameSchedule:
         times = [t for t in times if t <= stream.computed_until - TIME_TOLERANCE]
         frames: list[Frame] = []
         for i, (t, sample) in enumerate(zip(times, stream.samples(times), strict=True)):
-            preview = None
-            if plan.k + i >= next_preview_k and stream.computed_until >= t + horizon:
-                preview = stream.preview(t, horizon, points)
-                next_preview_k = plan.k + i + decimation
-            frames.append(self.checked(Frame(plan.k + i, t, sample, preview, horizon), last))
+            k, preview = plan.k + i, None
+            if k >= next_preview_k:
+                if stream.computed_until >= t + horizon:
+                    preview = stream.preview(t, horizon, points)
+                    next_preview_k = k + decimation
+                elif k >= urgent_until:
+                    break  # this frame's preview is not computed yet: make it on a later call
+            frames.append(self.checked(Frame(k, t, sample, preview, horizon), last))
             last = frames[-1].sample
         return frames, next_preview_k, stream.computed_until < ahead
 
