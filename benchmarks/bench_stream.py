@@ -1,0 +1,89 @@
+"""Benchmark of the online stream without ROS: what the node's worker spends per sample and per command.
+
+For the flexible crane (h = 1 ms), in one process:
+
+* the quaternion of a rotation matrix by scipy's ``Rotation``: one call per matrix, and one call for 50
+  (what the stream now does once per compiled run of CHUNK_STEPS steps);
+* ``ReferenceStream.compute``: CPU milliseconds per second of motion (solver plus bookkeeping);
+* ``ReferenceStream.samples``: microseconds per sample, one at a time and in batches of 20 (the node's
+  FRAME_BATCH), at the computed steps (a 1 kHz grid) and between them (interpolated);
+* a re-target: the reachability check (``check_targets``, run in the node's parameter callback before
+  the change is accepted), ``retarget`` itself (rewind and blend), then the motion of 20 samples after it.
+
+Each figure is the median of ``--repeats`` timings.  Run: ``.venv/bin/python benchmarks/bench_stream.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from crane_reference.model.config import load_config
+from crane_reference.model.parameters import Task
+from crane_reference.stream.reference_stream import CHUNK_STEPS, ReferenceStream
+
+STEP = 1e-3  # [s]
+BATCH = 20
+
+
+def median_time(function, repeats: int) -> float:
+    """Median wall time [s] of ``function()`` over ``repeats`` calls."""
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        function()
+        times.append(time.perf_counter() - start)
+    return float(np.median(times))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--repeats", type=int, default=20)
+    args = parser.parse_args()
+
+    rotations = Rotation.random(CHUNK_STEPS, random_state=1).as_matrix()
+    single = median_time(lambda: [Rotation.from_matrix(R).as_quat() for R in rotations], args.repeats)
+    batch = median_time(lambda: Rotation.from_matrix(rotations).as_quat(), args.repeats)
+    print(f"[quaternion] scipy Rotation.from_matrix(...).as_quat(): {single / CHUNK_STEPS * 1e6:7.1f} us per matrix "
+          f"one at a time, {batch / CHUNK_STEPS * 1e6:7.2f} us per matrix for {CHUNK_STEPS} at once")
+
+    stream = ReferenceStream(load_config(), "flexible", STEP)
+    stream.compute(0.5)
+    motion = 5.0
+    start = time.process_time()
+    stream.compute(0.5 + motion)
+    cpu = time.process_time() - start
+    print(f"[compute] {cpu / motion * 1e3:7.1f} ms of CPU per s of motion (real-time factor {motion / cpu:.1f})")
+
+    for name, offset in (("at the steps", 0.0), ("between steps", 0.37 * STEP)):
+        taus = [1.0 + i * STEP + offset for i in range(BATCH)]
+        one = median_time(lambda taus=taus: [stream.sample(tau) for tau in taus], args.repeats) / BATCH
+        many = median_time(lambda taus=taus: stream.samples(taus), args.repeats) / BATCH
+        print(f"[sample] {name:<14} {one * 1e6:7.1f} us per sample one at a time, {many * 1e6:7.1f} us in batches "
+              f"of {BATCH}")
+
+    checks, retargets, after = [], [], []
+    for i in range(args.repeats):
+        tau = stream.computed_until - 0.5
+        targets = Task(3.1 if i % 2 == 0 else 3.0, 2.0, 0.2, 5.0)
+        start = time.perf_counter()
+        stream.check_targets(targets)
+        checks.append(time.perf_counter() - start)
+        start = time.perf_counter()
+        stream.retarget(tau, targets, checked=True)
+        retargets.append(time.perf_counter() - start)
+        start = time.perf_counter()
+        stream.compute(tau + BATCH * STEP)
+        stream.samples([tau + j * STEP for j in range(BATCH)])
+        after.append(time.perf_counter() - start)
+        stream.compute(tau + 1.0)
+    print(f"[retarget] reachability check {np.median(checks) * 1e3:6.1f} ms, retarget (rewind, blend) "
+          f"{np.median(retargets) * 1e3:6.1f} ms, the first {BATCH} samples after it {np.median(after) * 1e3:6.1f} ms "
+          f"(medians of {args.repeats})")
+
+
+if __name__ == "__main__":
+    main()
