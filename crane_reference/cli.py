@@ -49,8 +49,7 @@ def simulate_command(args: argparse.Namespace) -> int:
         ready = time.perf_counter() - ready
         wall = time.perf_counter()
         with progress_bar(variant, args.duration) as bar:
-            trajectory = simulate(scenario.motion, start.q, args.duration, step=args.step, rho_inf=args.rho_inf,
-                                  progress=advance_to(bar))
+            trajectory = simulate(scenario.motion, start.q, args.duration, step=args.step, progress=advance_to(bar))
         wall = time.perf_counter() - wall
         trajectory.to_csv(out / f"{variant}.csv")
         trajectory.to_npz(out / f"{variant}.npz")
@@ -88,7 +87,7 @@ def export_command(args: argparse.Namespace) -> int:
         return 2
     wall = time.perf_counter()
     with writer, progress_bar(variant, args.duration) as bar:
-        samples = bag.export_reference(writer, bag.node_stream(config, variant, args.step, args.rho_inf), args.rate,
+        samples = bag.export_reference(writer, bag.node_stream(config, variant, args.step), args.rate,
                                        args.duration, progress=advance_to(bar))
     wall = time.perf_counter() - wall
     counts = ", ".join(f"{topic} {count}" for topic, count in writer.counts.items())
@@ -168,7 +167,7 @@ def analyze_command(args: argparse.Namespace) -> int:
     if not (np.isfinite(args.duration) and args.duration > 0 and args.step > 0):
         print(f"crane-reference: --duration {args.duration} and --step {args.step} must be > 0 s", file=sys.stderr)
         return 2
-    analyze(load_config(args.config), args.out, args.duration, args.step, args.rho_inf)
+    analyze(load_config(args.config), args.out, args.duration, args.step)
     print(f"wrote deflection.png, spectra.png, differences.png, efforts.png, summary.json and summary.md to {args.out}")
     return 0
 
@@ -182,8 +181,6 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--duration", type=float, default=10.0, help="simulated time [s] (default 10)")
     s.add_argument("--out", default="results", help="output directory (default ./results)")
     s.add_argument("--step", type=float, default=1e-3, help="integrator step [s] (default 1e-3)")
-    s.add_argument("--rho-inf", type=float, default=0.8,
-                   help="generalized-alpha spectral radius at infinite frequency, 0..1 (default 0.8)")
     s.add_argument("--bag", metavar="DIR", help="instead of CSV/NPZ/Figure 2, write the node's topics as a rosbag2 "
                    "bag (new directory DIR), stamped with simulated time; --model both records flexible")
     s.add_argument("--rate", type=int, default=100, metavar="HZ", help="--bag: publish rate (default 100)")
@@ -225,7 +222,6 @@ def parser() -> argparse.ArgumentParser:
     a.add_argument("--out", default="results/analysis", help="output directory (default ./results/analysis)")
     a.add_argument("--duration", type=float, default=10.0, help="simulated time [s] (default 10)")
     a.add_argument("--step", type=float, default=2.5e-4, help="integrator step [s] (default 2.5e-4)")
-    a.add_argument("--rho-inf", type=float, default=0.8, help="generalized-alpha rho_inf (default 0.8)")
     return p
 
 

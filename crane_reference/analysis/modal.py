@@ -406,13 +406,13 @@ def scenario_motion(scenario: Scenario, realisation: str = "ideal") -> tuple[Pro
 
 
 def modes_at(params: CraneParameters, variant: str = "flexible", t: float = 0.0, realisation: str = "ideal",
-             step: float = 1e-3, rho_inf: float = 0.8) -> tuple[Modes, ProgrammedMotion]:
+             step: float = 1e-3) -> tuple[Modes, ProgrammedMotion]:
     """Modes of the default scenario at time t of its programmed motion: at the static equilibrium for
-    t = 0, else at the state (q, qd) reached by generalized-alpha (``step``, ``rho_inf``)."""
+    t = 0, else at the state (q, qd) reached by the integrator (``step``)."""
     motion, q = scenario_motion(Scenario(params, variant), realisation)
     qd = np.zeros_like(q)
     if t > 0.0:
-        trajectory = simulate(motion, q, t, step=step, rho_inf=rho_inf)
+        trajectory = simulate(motion, q, t, step=step)
         t, q, qd = float(trajectory.t[-1]), trajectory.q[-1], trajectory.qd[-1]
     return modal_analysis(linearise(motion, t, q, qd)), motion
 

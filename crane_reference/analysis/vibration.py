@@ -19,10 +19,9 @@ overlap, linear detrend per window), one-sided PSD, resolution df = fs / nperseg
 Agreement with the modal analysis (:mod:`crane_reference.analysis.modal`): the constrained modes are computed at
 states of the run every ``modal_interval`` s (linearised with the state's velocities).  The crane's
 configuration changes as E goes round the ellipse, so mode k sweeps a band [min_t f_k, max_t f_k].  The
-integrator reproduces a mode of frequency f at a slightly lower frequency (period elongation, ~(omega
-h)^2 / 12), computed exactly for the linear oscillator by :func:`generalized_alpha_frequency`; the bands
-are shifted accordingly.  A spectral peak
-agrees with mode k if it lies in k's shifted band widened by the tolerance
+integrator (:mod:`crane_reference.motion.integration`) reproduces a mode at its own frequency when omega h
+is below its cutoff and damps the modes above, so only the resolved modes explain peaks.  A spectral peak
+agrees with mode k if it lies in k's band widened by the tolerance
 
     delta = df + 0.01 f,
 
@@ -63,10 +62,10 @@ from ..dynamics.kinematics import forward_kinematics
 from ..dynamics.structures import ChainData
 from ..model.chain import VARIANTS, ChainModel
 from ..model.parameters import CraneParameters
-from ..motion.integration import GeneralizedAlphaParameters
+from ..motion.integration import CUTOFF, METHOD
 from ..motion.programmed_motion import REALISATIONS, ProgrammedMotion
 from ..motion.simulation import SOLVER_FAILURES, MotionStepper, Scenario
-from ..motion.trajectory import Trajectory
+from ..motion.trajectory import Trajectory, stack_samples
 from .modal import Modes, linearise, modal_analysis, scenario_motion
 
 MIN_FREQUENCY = 2.0  # [Hz] peaks below are the quasi-static response to the slewing
@@ -76,6 +75,7 @@ SIGNALS = {"tip_vertical": "tip deflection $w_y$ (luffing plane) [m]",
            "tip_horizontal": "tip deflection $w_z$ (horizontal) [m]",
            "tip_torsion": r"tip torsion $\sum \varphi$ [rad]"}
 MEAN_WINDOW = 0.1  # [s] moving mean that separates drift from ringing in the differences
+RUN_CHUNK = 0.25  # [s] of motion per compiled run
 
 
 def rfe_indices(model: ChainModel, suffix: str = "") -> np.ndarray:
@@ -140,52 +140,29 @@ def spectral_peaks(spec: Spectrum, count: int = 4, min_frequency: float = MIN_FR
     return f[index]
 
 
-def generalized_alpha_frequency(frequency: np.ndarray, step: float, rho_inf: float) -> np.ndarray:
-    """Frequency [Hz] at which the generalized-alpha method (:mod:`crane_reference.motion.integration`) with step h
-    reproduces an undamped mode of frequency f: |arg lambda| / (2 pi h) of the complex pair of eigenvalues
-    lambda of its amplification matrix for x'' = -omega^2 x (the third, real root is the method's spurious
-    one), with state (x, v, a~) and a = -omega^2 x:
-
-        x1 - h^2 beta a~1 = x0 + h v0 + h^2 (1/2 - beta) a~0
-        v1 - h gamma a~1 = v0 + h (1 - gamma) a~0
-        (1 - alpha_m) a~1 + (1 - alpha_f) omega^2 x1 = -alpha_m a~0 - alpha_f omega^2 x0.
-    """
-    c = GeneralizedAlphaParameters.from_spectral_radius(rho_inf)
-    h = step
-    out = []
-    for f in np.atleast_1d(np.asarray(frequency, dtype=float)):
-        w2 = (2.0 * np.pi * f) ** 2
-        left = np.array([[1.0, 0.0, -h * h * c.beta],
-                         [0.0, 1.0, -h * c.gamma],
-                         [(1.0 - c.alpha_f) * w2, 0.0, 1.0 - c.alpha_m]])
-        right = np.array([[1.0, h, h * h * (0.5 - c.beta)],
-                          [0.0, 1.0, h * (1.0 - c.gamma)],
-                          [-c.alpha_f * w2, 0.0, -c.alpha_m]])
-        roots = np.linalg.eigvals(np.linalg.solve(left, right))
-        principal = roots[np.abs(roots.imag) > 1e-12 * np.abs(roots)]  # the complex pair (not the spurious root)
-        out.append(np.max(np.abs(np.angle(principal)), initial=0.0) / (2.0 * np.pi * h))
-    return np.array(out)
-
-
 @dataclass(frozen=True)
 class ModalBands:
-    """Constrained natural frequencies (len(times), m) [Hz] at states of a run (sorted per state),
-    their characters, and the frequencies the run's integrator reproduces them at (``numerical``)."""
+    """Constrained natural frequencies (len(times), m) [Hz] at states of a run (sorted per state), their
+    characters, and ``resolved_below`` [Hz]: the integrator reproduces a mode below it at its own
+    frequency and damps the modes above it (:data:`crane_reference.motion.integration.CUTOFF`)."""
 
     times: np.ndarray
     frequencies: np.ndarray
-    numerical: np.ndarray
+    resolved_below: float
     characters: list[list[str]]
 
-    def band(self, k: int, numerical: bool = False) -> tuple[float, float]:
-        f = (self.numerical if numerical else self.frequencies)[:, k]
+    def band(self, k: int) -> tuple[float, float]:
+        f = self.frequencies[:, k]
         return float(f.min()), float(f.max())
 
+    def resolved(self) -> list[int]:
+        """The modes the integrator resolves over the whole run."""
+        return [k for k in range(self.frequencies.shape[1]) if self.frequencies[:, k].max() < self.resolved_below]
 
-def modal_bands(motion: ProgrammedMotion, trajectory: Trajectory, interval: float, step: float,
-                rho_inf: float) -> ModalBands:
-    """Modes of the linearisation at the samples closest to every ``interval`` s of the run, and their
-    frequencies as integrated with generalized-alpha (``step``, ``rho_inf``)."""
+
+def modal_bands(motion: ProgrammedMotion, trajectory: Trajectory, interval: float, step: float) -> ModalBands:
+    """Modes of the linearisation at the samples closest to every ``interval`` s of the run (integrated
+    with the step ``step``)."""
     times, frequencies, characters = [], [], []
     for target in np.arange(trajectory.t[0], trajectory.t[-1] + 1e-9, interval):
         i = int(np.argmin(np.abs(trajectory.t - target)))
@@ -193,9 +170,7 @@ def modal_bands(motion: ProgrammedMotion, trajectory: Trajectory, interval: floa
         times.append(trajectory.t[i])
         frequencies.append(modes.frequencies)
         characters.append([modes.character(k) for k in range(modes.frequencies.size)])
-    frequencies = np.array(frequencies)
-    numerical = generalized_alpha_frequency(frequencies.ravel(), step, rho_inf).reshape(frequencies.shape)
-    return ModalBands(np.array(times), frequencies, numerical, characters)
+    return ModalBands(np.array(times), np.array(frequencies), CUTOFF / (2.0 * np.pi * step), characters)
 
 
 def _distance(frequency: float, values: np.ndarray) -> float:
@@ -204,22 +179,22 @@ def _distance(frequency: float, values: np.ndarray) -> float:
 
 
 def match_peak(frequency: float, bands: ModalBands, resolution: float) -> dict:
-    """Explain a spectral peak by the modal analysis.  A mode k explains it if the peak lies within
-    delta = df + 0.01 f of the band its frequency sweeps over the run as integrated
-    (:attr:`ModalBands.numerical`).  Otherwise a second-order combination f_i + f_j or |f_i - f_j| of two
-    elastic modes (above :data:`MIN_FREQUENCY`; e.g. 2 f_i from the quadratic kinematic coupling of
-    the deflections) may explain it; ``explained_by`` is "mode", "combination" or "none"."""
+    """Explain a spectral peak by the modal analysis.  A mode k the integrator resolves
+    (:meth:`ModalBands.resolved`) explains it if the peak lies within delta = df + 0.01 f of the band its
+    frequency sweeps over the run.  Otherwise a second-order combination f_i + f_j or |f_i - f_j| of two
+    resolved elastic modes (above :data:`MIN_FREQUENCY`; e.g. 2 f_i from the quadratic kinematic coupling
+    of the deflections) may explain it; ``explained_by`` is "mode", "combination" or "none"."""
     tolerance = resolution + RELATIVE_TOLERANCE * frequency
-    f = bands.numerical
-    distances = [_distance(frequency, f[:, k]) for k in range(f.shape[1])]
-    k = int(np.argmin(distances))
+    f = bands.frequencies
+    resolved = bands.resolved()
+    distances = {k: _distance(frequency, f[:, k]) for k in resolved}
+    k = min(distances, key=distances.get)
     closest = int(np.argmin(np.abs(f[:, k] - frequency)))
-    entry = {"peak_hz": float(frequency), "mode": k + 1, "band_hz": list(bands.band(k)),
-             "band_integrated_hz": list(bands.band(k, numerical=True)), "distance_hz": distances[k],
+    entry = {"peak_hz": float(frequency), "mode": k + 1, "band_hz": list(bands.band(k)), "distance_hz": distances[k],
              "tolerance_hz": float(tolerance), "character": bands.characters[closest][k], "explained_by": "mode"}
     if distances[k] <= tolerance:
         return entry
-    elastic = [j for j in range(f.shape[1]) if f[:, j].min() >= MIN_FREQUENCY]
+    elastic = [j for j in resolved if f[:, j].min() >= MIN_FREQUENCY]
     pairs = [(i, j, sign) for a, i in enumerate(elastic) for j in elastic[a:] for sign in (1, -1) if sign > 0 or i != j]
     if not pairs:
         entry["explained_by"] = "none"
@@ -232,11 +207,10 @@ def match_peak(frequency: float, bands: ModalBands, resolution: float) -> dict:
     if distance > tolerance:
         entry["explained_by"] = "none"
         return entry
-    physical, integrated = combine(bands.frequencies, i, j, sign), combine(f, i, j, sign)
-    at = int(np.argmin(np.abs(integrated - frequency)))
+    combined = combine(f, i, j, sign)
+    at = int(np.argmin(np.abs(combined - frequency)))
     return {**entry, "explained_by": "combination", "combination": f"f{i + 1} {'+' if sign > 0 else '-'} f{j + 1}",
-            "mode": None, "band_hz": [float(physical.min()), float(physical.max())],
-            "band_integrated_hz": [float(integrated.min()), float(integrated.max())], "distance_hz": distance,
+            "mode": None, "band_hz": [float(combined.min()), float(combined.max())], "distance_hz": distance,
             "character": f"{bands.characters[at][i]} / {bands.characters[at][j]}"}
 
 
@@ -253,8 +227,7 @@ class Run:
     start_modes: Modes | None
 
 
-def run(params: CraneParameters, variant: str, realisation: str, duration: float, step: float,
-        rho_inf: float) -> Run:
+def run(params: CraneParameters, variant: str, realisation: str, duration: float, step: float) -> Run:
     """Simulate one variant and realisation from its equilibrium; a failure keeps the samples so far."""
     scenario = Scenario(params, variant)
     wall = time.perf_counter()
@@ -263,15 +236,22 @@ def run(params: CraneParameters, variant: str, realisation: str, duration: float
     except SOLVER_FAILURES as error:
         return Run(realisation, variant, scenario.motion, None, time.perf_counter() - wall, str(error), None)
     start_modes = modal_analysis(linearise(motion, 0.0, q0))
-    stepper = MotionStepper(motion, 0.0, q0, np.zeros_like(q0), step, rho_inf)
-    samples, error = [stepper.sample], None
-    try:
-        while stepper.state.t < duration - 1e-9 * step:
-            samples.append(stepper.advance())
-    except SOLVER_FAILURES as failure:
-        error = f"stopped at t = {stepper.state.t:.6g} s: {failure}"
+    stepper = MotionStepper(motion, 0.0, q0, np.zeros_like(q0), step)
+    parts, error = [stack_samples([stepper.sample])], None
+    while error is None and stepper.state.t < duration - 1e-9 * step:
+        before = stepper.snapshot()
+        try:  # compiled runs of RUN_CHUNK seconds
+            parts.append(stepper.advance_until(min(stepper.state.t + RUN_CHUNK, duration)))
+        except SOLVER_FAILURES:  # again step by step from the run's start, to keep every step before the failure
+            stepper.rewind(before)
+            try:
+                while stepper.state.t < duration - 1e-9 * step:
+                    parts.append(stack_samples([stepper.advance()]))
+            except SOLVER_FAILURES as failure:
+                error = f"stopped at t = {stepper.state.t:.6g} s: {failure}"
     model = scenario.model
-    trajectory = Trajectory.from_samples(model.variant, model.joint_names, model.drive_joint, samples)
+    arrays = {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
+    trajectory = Trajectory.from_arrays(model.variant, model.joint_names, model.drive_joint, arrays)
     return Run(realisation, variant, motion, trajectory, time.perf_counter() - wall, error, start_modes)
 
 
@@ -317,7 +297,7 @@ def _run_summary(r: Run) -> dict:
 
 
 def analyze(params: CraneParameters, out: str | Path, duration: float = 10.0, step: float = 2.5e-4,
-            rho_inf: float = 0.8, modal_interval: float = 0.25, realisations: tuple[str, ...] = REALISATIONS,
+            modal_interval: float = 0.25, realisations: tuple[str, ...] = REALISATIONS,
             log: Callable[[str], None] = print) -> dict:
     """Run both variants under each realisation, write the PNGs, ``summary.json`` and ``summary.md`` to
     ``out`` and return the summary."""
@@ -326,12 +306,13 @@ def analyze(params: CraneParameters, out: str | Path, duration: float = 10.0, st
     runs: dict[tuple[str, str], Run] = {}
     for realisation in realisations:
         for variant in VARIANTS[::-1]:
-            r = run(params, variant, realisation, duration, step, rho_inf)
+            r = run(params, variant, realisation, duration, step)
             runs[realisation, variant] = r
             reached = r.trajectory.t[-1] if r.trajectory is not None else 0.0
             log(f"{realisation:>5} {variant:>8}: {reached:.3f} s in {r.wall:.1f} s wall"
                 + (f" - {r.error}" if r.error else ""))
-    summary: dict = {"duration_s": duration, "step_s": step, "rho_inf": rho_inf,
+    summary: dict = {"duration_s": duration, "step_s": step, "method": METHOD,
+                     "resolved_below_hz": CUTOFF / (2.0 * np.pi * step),
                      "runs": [_run_summary(r) for r in runs.values()], "differences": {}, "spectra": {}}
     first = runs.get((realisations[0], "flexible"))
     if first is not None and first.start_modes is not None:
@@ -356,7 +337,7 @@ def analyze(params: CraneParameters, out: str | Path, duration: float = 10.0, st
         if r.error or tr.t[-1] < 1.0:
             continue
         signals = deflection_signals(r.motion.dynamics.model, r.motion.dynamics.chain, tr)
-        bands = modal_bands(r.motion, tr, modal_interval, step, rho_inf)
+        bands = modal_bands(r.motion, tr, modal_interval, step)
         result = {"signals": signals, "bands": bands, "spectra": {}, "peaks": {}}
         entry = {"max_abs": {name: float(np.max(np.abs(x))) for name, x in signals.items()},
                  "max_abs_rfe_angle_rad": float(np.max(np.abs(tr.q[:, rfe_indices(r.motion.dynamics.model)]))),
@@ -381,8 +362,9 @@ def analyze(params: CraneParameters, out: str | Path, duration: float = 10.0, st
 
 def summary_markdown(summary: dict) -> str:
     """The short markdown report of :func:`analyze`'s summary."""
-    lines = [f"# Vibration report ({summary['duration_s']:g} s, h = {summary['step_s']:g} s, "
-             f"rho_inf = {summary['rho_inf']:g})", "", "## Runs", "",
+    lines = [f"# Vibration report ({summary['duration_s']:g} s, h = {summary['step_s']:g} s)", "",
+             f"Integrator: {summary['method']}; modes above {summary['resolved_below_hz']:.0f} Hz are not resolved "
+             "at this step (damped by the integrator).", "", "## Runs", "",
              "| realisation | model | simulated [s] | max residual [m] | max energy-balance error [J] | wall [s] "
              "| note |", "|---|---|---|---|---|---|---|"]
     nan = float("nan")
@@ -409,13 +391,13 @@ def summary_markdown(summary: dict) -> str:
     for realisation, entry in summary["spectra"].items():
         lines += ["", f"## Dominant spectral peaks, {realisation} constraints (flexible boom; bin "
                   f"{entry['resolution_hz']:.3f} Hz, tolerance bin + 1 %)", "",
-                  "| signal | peak [Hz] | explained by | modal band [Hz] | as integrated [Hz] | distance [Hz] | "
-                  "character |", "|---|---|---|---|---|---|---|"]
+                  "| signal | peak [Hz] | explained by | modal band [Hz] | distance [Hz] | character |",
+                  "|---|---|---|---|---|---|"]
         for p in entry["peaks"]:
             by = {"mode": f"mode {p['mode']}", "none": "NOTHING"}.get(p["explained_by"], p.get("combination"))
-            band, integrated = p["band_hz"], p["band_integrated_hz"]
+            band = p["band_hz"]
             lines.append(f"| {p['signal']} | {p['peak_hz']:.2f} | {by} | {band[0]:.2f} - {band[1]:.2f} | "
-                         f"{integrated[0]:.2f} - {integrated[1]:.2f} | {p['distance_hz']:.2f} | {p['character']} |")
+                         f"{p['distance_hz']:.2f} | {p['character']} |")
         largest = entry["max_abs"]
         lines.append(f"\nMax |w_y| = {largest['tip_vertical']:.3e} m, max |w_z| = {largest['tip_horizontal']:.3e} m, "
                      f"max |tip torsion| = {largest['tip_torsion']:.3e} rad, max |RFE angle| = "
@@ -462,7 +444,7 @@ def _plot_deflection(runs: dict, spectra: dict, path: Path) -> None:
 
 
 def _plot_spectra(spectra: dict, path: Path) -> None:
-    """PSDs of the deflection signals with the modal bands (shaded: min-max over the run, as integrated)
+    """PSDs of the deflection signals with the bands of the resolved modes (shaded: min-max over the run)
     and the peaks."""
     plt = _pyplot()
     columns = list(spectra)
@@ -475,8 +457,8 @@ def _plot_spectra(spectra: dict, path: Path) -> None:
             spec = result["spectra"][name]
             ax.semilogy(spec.frequency, spec.psd, lw=0.8, color="k")
             top = min(spec.frequency[-1], 1.2 * max(float(np.max(result["peaks"][name], initial=0.0)), 250.0))
-            for k in range(bands.frequencies.shape[1]):
-                low, high = bands.band(k, numerical=True)
+            for k in bands.resolved():
+                low, high = bands.band(k)
                 if high >= MIN_FREQUENCY and low <= top:
                     ax.axvspan(low, max(high, low + spec.resolution), color="tab:orange", alpha=0.3, lw=0)
             for f in result["peaks"][name]:
@@ -484,8 +466,8 @@ def _plot_spectra(spectra: dict, path: Path) -> None:
             ax.set_xlim(0.0, top)
             ax.set_ylabel(f"PSD of {label.split(' [')[0]} [{label.split('[')[-1].rstrip(']')}$^2$/Hz]",
                           fontsize="small")
-            ax.set_title(f"{realisation} constraints: {label.split(' [')[0]} (orange: modal bands over the run "
-                         "as integrated, red: peaks)", fontsize="small")
+            ax.set_title(f"{realisation} constraints: {label.split(' [')[0]} (orange: modal bands over the run, "
+                         "red: peaks)", fontsize="small")
             ax.grid(True, alpha=0.3)
         axes[-1, c].set_xlabel("f [Hz]")
     fig.savefig(path, dpi=110)

@@ -1,8 +1,8 @@
-"""Compiled (numba) evaluation of the programmed motion (7)-(8) and of generalized-alpha steps.
+"""Compiled (numba) evaluation of the programmed motion (7)-(8) and of the integrator's steps.
 
 The mathematics is documented where it is defined: chain terms in :mod:`.terms`, quadric task
 constraints in :mod:`.quadrics`, equations (7)-(8) and the coordinate partitioning in
-:mod:`crane_reference.motion.programmed_motion`, the generalized-alpha method in
+:mod:`crane_reference.motion.programmed_motion`, the integrator in
 :mod:`crane_reference.motion.integration`.  Here they are fused so that one integration step, or a run
 of steps, is one call; the data come and go as the named tuples of :mod:`.structures`.  Time-dependent
 data (constraint coefficients, drive) enter as numbers evaluated at each step's end; ``drive`` is the
@@ -30,15 +30,20 @@ from .linalg import (
 )
 from .quadrics import acceleration_terms, constraint_values, holonomic_values, velocity_residual
 from .structures import (
+    ACCOUNTS,
+    CONSTRAINTS_UNSOLVABLE,
+    CONVERGED,
+    NOT_CONVERGED,
     Accelerations,
-    AlphaSettings,
     ChainData,
     Coefficients,
     Evaluation,
+    ModalCorrection,
     Partition,
     Run,
     Step,
     StepRows,
+    StepSettings,
 )
 from .terms import energy_accounts, frame_terms, generalized_forces, inverse_dynamics, velocity_products
 
@@ -211,41 +216,79 @@ def evaluate(q, qd, k: Coefficients, drive, partition: Partition, chain: ChainDa
 
 
 @njit(cache=True, nogil=True)
-def iteration_factor(M, B, h, partition: Partition, chain: ChainData, settings: AlphaSettings):
-    """The factor of the Newton iteration matrix P^T (M + beta' K + gamma' D) B for the step h
-    (beta' = h^2 beta (1 - alpha_f)/(1 - alpha_m), gamma' = h gamma (1 - alpha_f)/(1 - alpha_m)): its
-    Cholesky factor for ideal constraints (P = B, symmetric positive definite), its inverse for
+def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: ChainData, settings: StepSettings):
+    """The modal terms of the step h at a configuration of reduced mass M_r = B^T M B (see
+    :mod:`crane_reference.motion.integration`).  The springs act on independent coordinates only, so the
+    reduced stiffness K_r = K[ic, ic] (plus the drive's spring on psi2) is constant; with M_r = L L^T the
+    modes K_r phi = omega^2 M_r phi, Phi^T M_r Phi = I, are Phi = L^-T V with the
+    eigenvectors V of L^-1 K_r L^-T.  A mode with omega h below ``settings.cutoff`` gets the inertia
+    correction c = 1 - ((omega h / 2) / tan(omega h / 2))^2, one above it the damping 2 zeta omega; in the
+    independent coordinates Delta M_r = M_r Phi diag(c) Phi^T M_r = (L V) diag(c) (L V)^T and likewise
+    D_u.  Servo-constraints (P = E_ic: no symmetric reduced mass) get none."""
+    independent = partition.independent
+    n_ic = independent.size
+    inertia = np.zeros((n_ic, n_ic))
+    damping = np.zeros((n_ic, n_ic))
+    if partition.servo:
+        return ModalCorrection(inertia, damping, t, h)
+    L = cholesky(reduced_mass)
+    stiffness = np.empty((n_ic, n_ic))
+    for i in range(n_ic):
+        for j in range(n_ic):
+            stiffness[i, j] = chain.stiffness[independent[i], independent[j]]
+        if independent[i] == chain.drive_joint:
+            stiffness[i, i] += drive[1]
+    L_inverse = np.linalg.inv(L)
+    omega_squared, V = np.linalg.eigh(L_inverse @ stiffness @ L_inverse.T)
+    LV = L @ V
+    c = np.zeros(n_ic)
+    d = np.zeros(n_ic)
+    for i in range(n_ic):
+        omega = np.sqrt(max(omega_squared[i], 0.0))
+        half = 0.5 * omega * h
+        if omega * h >= settings.cutoff:
+            d[i] = 2.0 * settings.unresolved_damping * omega
+        elif half > 1e-6:
+            c[i] = 1.0 - (half / np.tan(half)) ** 2
+        else:
+            c[i] = half * half * (2.0 / 3.0)  # the series of 1 - (x / tan x)^2 = 2 x^2 / 3 + ...
+    for i in range(n_ic):
+        for j in range(i + 1):
+            total_c = 0.0
+            total_d = 0.0
+            for m in range(n_ic):
+                total_c += LV[i, m] * c[m] * LV[j, m]
+                total_d += LV[i, m] * d[m] * LV[j, m]
+            inertia[i, j] = inertia[j, i] = total_c
+            damping[i, j] = damping[j, i] = total_d
+    return ModalCorrection(inertia, damping, t, h)
+
+
+@njit(cache=True, nogil=True)
+def iteration_factor(M, B, h, correction: ModalCorrection, partition: Partition, chain: ChainData):
+    """The factor of the Newton iteration matrix P^T (M + h^2/4 K + h/2 D) B - Delta M_r + h/2 D_u for the
+    step h: its Cholesky factor for ideal constraints (P = B, symmetric positive definite), its inverse for
     servo-constraints (P = E_ic)."""
     independent, dependent, servo = partition.independent, partition.dependent, partition.servo
-    beta_p, gamma_p = _alpha_scales(h, settings)
-    matrix = M + beta_p * chain.stiffness
+    matrix = M + (0.25 * h * h) * chain.stiffness
     if chain.damped:
-        matrix += gamma_p * chain.damping
+        matrix += (0.5 * h) * chain.damping
     reduced = map_columns(project_rows(matrix, B, independent, dependent, servo), B, independent, dependent)
+    reduced += (0.5 * h) * correction.damping - correction.inertia
     return cholesky(reduced) if not servo else np.linalg.inv(reduced)
 
 
 @njit(cache=True, nogil=True)
-def _alpha_scales(h, settings: AlphaSettings):
-    """beta' = h^2 beta (1 - alpha_f)/(1 - alpha_m) and gamma' = h gamma (1 - alpha_f)/(1 - alpha_m): the
-    change of x and of its velocity per change of the accelerations a_{n+1}."""
-    ratio = (1.0 - settings.alpha_f) / (1.0 - settings.alpha_m)
-    return h * h * settings.beta * ratio, h * settings.gamma * ratio
-
-
-@njit(cache=True, nogil=True)
-def _state_at(a1, x0, v0, a0, at0, q_guess, qd_size, h, k: Coefficients, partition: Partition, chain: ChainData,
-              settings: AlphaSettings, project, exact_frames):
-    """The generalized-alpha state for the accelerations a1 of the integrated coordinates: the pseudo-
-    acceleration, q = ``q_guess`` with x from a1 and q_hd from the position constraints (``project``;
-    frames as in :func:`project_positions`) or as guessed (the caller predicts it to second order in the
-    change of x), qd with qd_dc from the velocity constraints, the frames and E's terms there, and
-    whether the constraints were met."""
-    alpha_m, alpha_f, gamma, beta = settings.alpha_m, settings.alpha_f, settings.gamma, settings.beta
+def _state_at(a1, x0, v0, a0, q_guess, qd_size, h, k: Coefficients, partition: Partition, chain: ChainData,
+              settings: StepSettings, project, exact_frames):
+    """The trapezoidal state for the accelerations a1 of the integrated coordinates,
+    x1 = x0 + h v0 + h^2/4 (a0 + a1), v1 = v0 + h/2 (a0 + a1): q = ``q_guess`` with x1 and q_hd from the
+    position constraints (``project``; frames as in :func:`project_positions`) or as guessed (the caller
+    predicts it to second order in the change of x), qd with qd_dc from the velocity constraints, the frames
+    and E's terms there, and whether the constraints were met."""
     integrated = partition.integrated
-    at1 = ((1.0 - alpha_f) * a1 + alpha_f * a0 - alpha_m * at0) / (1.0 - alpha_m)
     q1 = q_guess.copy()
-    q1[integrated] = x0 + h * v0 + h * h * ((0.5 - beta) * at0 + beta * at1)
+    q1[integrated] = x0 + h * v0 + (0.25 * h * h) * (a0 + a1)
     if project:
         q1, T, S, p, C, solved = project_positions(q1, k, partition.holonomic_dependent, chain,
                                                    settings.projection_tolerance, 25, exact_frames)
@@ -254,10 +297,10 @@ def _state_at(a1, x0, v0, a0, at0, q_guess, qd_size, h, k: Coefficients, partiti
         p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
         solved = True
     qd1 = np.zeros(qd_size)
-    qd1[integrated] = v0 + h * ((1.0 - gamma) * at0 + gamma * at1)
+    qd1[integrated] = v0 + (0.5 * h) * (a0 + a1)
     if solved:
         qd1, solved = dependent_velocities(qd1, p, C, k, partition.dependent)
-    return at1, q1, qd1, T, S, p, C, solved
+    return q1, qd1, T, S, p, C, solved
 
 
 @njit(cache=True, nogil=True)
@@ -292,47 +335,64 @@ def newton_residual(q, qd, a1, T, S, p, C, k: Coefficients, drive, partition: Pa
 
 
 @njit(cache=True, nogil=True)
-def generalized_alpha_step(q0, qd0, qdd0, at0, M0, B0, h, k: Coefficients, drive, partition: Partition,
-                           chain: ChainData, settings: AlphaSettings):
-    """One generalized-alpha step (see :mod:`crane_reference.motion.integration`) of the integrated
-    coordinates x = q[integrated] = (q_ic, q_vd): the independent ones and those made dependent by
-    first-order constraints.  Newton (iteration matrix :func:`iteration_factor` from M0, B0 at t0) on the
-    independent accelerations with the residual of (8) from inverse dynamics, fixed point on the q_vd
-    ones; q_hd from the position constraints and qd_dc from the velocity-level constraints at every
-    iterate.  At least ``settings.evaluations`` evaluations, then until the last correction is below the
-    tolerance; the step ends at the state of the corrected accelerations, evaluated there with
-    qdd = B a_ic + e.  Starts from q0, qd0, qdd0, the pseudo-acceleration at0 at t0; h is the step."""
-    independent, integrated, servo = partition.independent, partition.integrated, partition.servo
+def integration_step(q0, qd0, qdd0, M0, B0, correction: ModalCorrection, t0, h, k: Coefficients, drive,
+                     partition: Partition, chain: ChainData, settings: StepSettings):
+    """One step of the integrator (see :mod:`crane_reference.motion.integration`) from t0 to t0 + h of the
+    integrated coordinates x = q[integrated] = (q_ic, q_vd): the trapezoidal rule on the residual of (8)
+    with the modal terms P^T (M qdd + h - Q) - Delta M_r a_ic + D_u v_ic (the correction is computed anew
+    when ``settings.refresh_interval`` has passed since it was, or for another step size, from M0, B0 at
+    t0).  Newton (iteration matrix :func:`iteration_factor`) on the independent accelerations with the
+    residual from inverse dynamics, fixed point on the q_vd ones; q_hd from the position constraints and
+    qd_dc from the velocity-level constraints at every iterate.  At least ``settings.evaluations``
+    evaluations, then until the last correction is below the tolerance; the step ends at the state of the
+    corrected accelerations, evaluated there with qdd = B a_ic + e.  Starts from q0, qd0, qdd0 at t0.
+
+    The accelerations a_n carried from step to step are those of the corrected equation; with a new
+    correction they are converted so that the force they balance stays the same,
+    (M_r - Delta M_new) a_new + D_new v = (M_r - Delta M_old) a_old + D_old v (at a start the old terms are
+    zero: a_old is the acceleration of (8) itself)."""
+    independent, dependent, integrated, servo = (partition.independent, partition.dependent, partition.integrated,
+                                                 partition.servo)
     n_ic = independent.size
-    x0, v0, a0 = q0[integrated], qd0[integrated], qdd0[integrated]
-    beta_p, gamma_p = _alpha_scales(h, settings)
-    factor = iteration_factor(M0, B0, h, partition, chain, settings)
+    x0, v0, a0 = q0[integrated], qd0[integrated], qdd0[integrated].copy()
+    if t0 - correction.time >= settings.refresh_interval or abs(h - correction.step) > 1e-9 * h:
+        reduced_mass = map_columns(project_rows(M0, B0, independent, dependent, False), B0, independent, dependent)
+        fresh = modal_correction(reduced_mass, h, t0, drive, partition, chain, settings)
+        if not servo:
+            force = (matvec(reduced_mass - correction.inertia, a0[:n_ic])
+                     + matvec(correction.damping - fresh.damping, v0[:n_ic]))
+            a0[:n_ic] = cholesky_solve(cholesky(reduced_mass - fresh.inertia), force)
+        correction = fresh
+    factor = iteration_factor(M0, B0, h, correction, partition, chain)
     q1 = q0 + h * qd0 + 0.5 * h * h * qdd0
     a1 = a0.copy()
-    status = 1
+    status = NOT_CONVERGED
     for iteration in range(settings.max_iterations):
         # the first iterate (from the predictor) solves q_hd by Newton; the later ones take it as predicted below
-        _, q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain,
-                                                   settings, iteration == 0, False)
+        q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings,
+                                                iteration == 0, False)
         if not solved:
-            return Step(q0, qd0, at0, evaluate(q0, qd0, k, drive, partition, chain), 2, iteration + 1)
+            return Step(q0, qd0, evaluate(q0, qd0, k, drive, partition, chain), correction, CONSTRAINTS_UNSOLVABLE,
+                        iteration + 1)
         qdd, residual, B = newton_residual(q1, qd1, a1, T, S, p, C, k, drive, partition, chain)
-        correction = qdd[integrated] - a1
-        correction[:n_ic] = -(cholesky_solve(factor, residual) if not servo else matvec(factor, residual))
-        a1 = a1 + correction
-        # q_hd of the next iterate to second order in the change of x: dx = beta' da
-        q1 = _predict_dependent(q1, B, beta_p * correction[:n_ic], partition.holonomic_dependent)
-        if iteration + 1 >= settings.evaluations and gamma_p * np.max(np.abs(correction)) <= settings.tolerance:
-            status = 0
+        residual += matvec(correction.damping, qd1[independent]) - matvec(correction.inertia, a1[:n_ic])
+        correction_step = qdd[integrated] - a1
+        correction_step[:n_ic] = -(cholesky_solve(factor, residual) if not servo else matvec(factor, residual))
+        a1 = a1 + correction_step
+        # q_hd of the next iterate to second order in the change of x: dx = h^2/4 da
+        q1 = _predict_dependent(q1, B, (0.25 * h * h) * correction_step[:n_ic], partition.holonomic_dependent)
+        if iteration + 1 >= settings.evaluations and 0.5 * h * np.max(np.abs(correction_step)) <= settings.tolerance:
+            status = CONVERGED
             break
-    at1, q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, at0, q1, q0.size, h, k, partition, chain, settings,
-                                                 True, True)
+    q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, True,
+                                            True)
     if not solved:
-        return Step(q0, qd0, at0, evaluate(q0, qd0, k, drive, partition, chain), 2, iteration + 1)
+        return Step(q0, qd0, evaluate(q0, qd0, k, drive, partition, chain), correction, CONSTRAINTS_UNSOLVABLE,
+                    iteration + 1)
     M, h_terms, forces, Vg, p, R, C, d, A, c_acc, B, e_dc = _terms_at(q1, qd1, T, S, k, drive, partition, chain)
     qdd1 = _accelerations_from(a1[:n_ic], B, e_dc, independent, partition.dependent)
     acc = Accelerations(M, h_terms, forces, Vg, p, R, C, d, A, c_acc, B, qdd1)
-    return Step(q1, qd1, at1, _evaluation(q1, qd1, acc, k, drive, partition, chain), status, iteration + 1)
+    return Step(q1, qd1, _evaluation(q1, qd1, acc, k, drive, partition, chain), correction, status, iteration + 1)
 
 
 @njit(cache=True, nogil=True)
@@ -342,19 +402,19 @@ def _at_step(k: Coefficients, i):
 
 
 @njit(cache=True, nogil=True)
-def generalized_alpha_run(q, qd, qdd, at, M, B, t0, times, k: Coefficients, drives, partition: Partition,
-                          chain: ChainData, settings: AlphaSettings):
-    """:func:`generalized_alpha_step` from t0 through ``times`` (N,) in one call, with the constraint
+def integration_run(q, qd, qdd, M, B, correction: ModalCorrection, t0, times, k: Coefficients, drives,
+                    partition: Partition, chain: ChainData, settings: StepSettings):
+    """:func:`integration_step` from t0 through ``times`` (N,) in one call, with the constraint
     coefficients ``k`` (stacked per step) and drive parameters ``drives`` (N, 4) of each step's end; M, B
     at t0.  Stops at the first step that fails; returns a :class:`Run`."""
     N, n, m = times.size, q.size, k.order.size
     rows = StepRows(np.empty((N, n)), np.empty((N, n)), np.empty((N, n)), np.empty((N, m)), np.empty((N, n)),
                     np.empty((N, 3)), np.empty((N, 3, 3)), np.empty((N, 3)), np.empty((N, m)), np.empty((N, m)),
-                    np.empty((N, 7)), np.empty(N, dtype=np.int64))
-    step = generalized_alpha_step(q, qd, qdd, at, M, B, times[0] - t0, _at_step(k, 0), drives[0], partition, chain,
-                                  settings)
+                    np.empty((N, len(ACCOUNTS))), np.empty(N, dtype=np.int64))
+    step = integration_step(q, qd, qdd, M, B, correction, t0, times[0] - t0, _at_step(k, 0), drives[0], partition,
+                            chain, settings)
     completed = 0
-    while step.status == 0:
+    while step.status == CONVERGED:
         e = step.evaluation
         acc = e.terms
         rows.q[completed], rows.qd[completed], rows.qdd[completed] = step.q, step.qd, acc.qdd
@@ -366,7 +426,7 @@ def generalized_alpha_run(q, qd, qdd, at, M, B, t0, times, k: Coefficients, driv
         completed += 1
         if completed == N:
             break
-        step = generalized_alpha_step(step.q, step.qd, acc.qdd, step.pseudo_acceleration, acc.M, acc.velocity_map,
-                                      times[completed] - times[completed - 1], _at_step(k, completed),
-                                      drives[completed], partition, chain, settings)
+        step = integration_step(step.q, step.qd, acc.qdd, acc.M, acc.velocity_map, step.correction,
+                                times[completed - 1], times[completed] - times[completed - 1],
+                                _at_step(k, completed), drives[completed], partition, chain, settings)
     return Run(completed, step.status, rows, step)

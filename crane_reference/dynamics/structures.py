@@ -2,8 +2,9 @@
 
 In the spirit of Pinocchio's Model / Data: :class:`ChainData` is the immutable description of the
 chain (built once per model by :class:`~crane_reference.dynamics.chain_dynamics.CraneDynamics`),
-:class:`Partition` and :class:`AlphaSettings` fix the problem and the method, and the kernels return
-:class:`Evaluation`, :class:`Step` and :class:`StepRows` by name.  Every field is documented here once.
+:class:`Partition` and :class:`StepSettings` fix the problem and the method, :class:`ModalCorrection` is the
+method's own state, and the kernels return :class:`Evaluation`, :class:`Step` and :class:`StepRows` by name.
+Every field is documented here once.
 """
 
 from __future__ import annotations
@@ -62,20 +63,33 @@ class Partition(NamedTuple):
     servo: bool
 
 
-class AlphaSettings(NamedTuple):
-    """Generalized-alpha coefficients and the Newton stopping rules (see
-    :mod:`crane_reference.motion.integration`): at least ``evaluations`` Newton evaluations per step, then
-    until the last velocity correction is at most ``tolerance``, at most ``max_iterations``;
-    ``projection_tolerance`` [rad] of Newton on the position constraints."""
+class StepSettings(NamedTuple):
+    """The integrator's rules (see :mod:`crane_reference.motion.integration`): at least ``evaluations``
+    Newton evaluations per step, then until the last velocity correction is at most ``tolerance`` [rad/s or
+    m/s], at most ``max_iterations``; ``projection_tolerance`` [rad] of Newton on the position constraints;
+    the modal correction is computed again after ``refresh_interval`` [s] of motion (and for a new step
+    size); modes with omega h at or above ``cutoff`` [rad] are not resolved by the step and get the damping
+    ratio ``unresolved_damping``."""
 
-    alpha_m: float
-    alpha_f: float
-    gamma: float
-    beta: float
     evaluations: int
     tolerance: float
     max_iterations: int
     projection_tolerance: float
+    refresh_interval: float
+    cutoff: float
+    unresolved_damping: float
+
+
+class ModalCorrection(NamedTuple):
+    """The integrator's modal terms in the independent coordinates (n_ic, n_ic), computed at ``time`` [s]
+    for the step ``step`` [s] (see :func:`crane_reference.dynamics.kernels.modal_correction`): ``inertia``
+    Delta M_r, removed from the reduced mass so that the trapezoidal rule turns each resolved mode by
+    exactly omega h per step, and ``damping`` D_u, which damps the modes the step does not resolve."""
+
+    inertia: np.ndarray
+    damping: np.ndarray
+    time: float
+    step: float
 
 
 class Accelerations(NamedTuple):
@@ -121,16 +135,25 @@ constraint forces and the dampers [W], and sigma_min(K_dc)."""
 
 
 class Step(NamedTuple):
-    """One generalized-alpha step: q, qd at its end, the pseudo-acceleration a~ of the integrated
-    coordinates, the evaluation there, ``status`` (0 converged, 1 Newton did not converge, 2 the
-    position or velocity constraints could not be solved) and the Newton iterations."""
+    """One integration step: q, qd at its end, the evaluation there, the modal correction it used,
+    ``status`` (:data:`STATUS_MESSAGES`) and the Newton iterations."""
 
     q: np.ndarray
     qd: np.ndarray
-    pseudo_acceleration: np.ndarray
     evaluation: Evaluation
+    correction: ModalCorrection
     status: int
     iterations: int
+
+
+CONVERGED, NOT_CONVERGED, CONSTRAINTS_UNSOLVABLE = 0, 1, 2
+STATUS_MESSAGES = {
+    NOT_CONVERGED: "the step from t = {t0:.6g} s with h = {h:g} s did not converge in {iterations} Newton iterations",
+    CONSTRAINTS_UNSOLVABLE: "position or velocity constraints cannot be met at t = {t1:.6g} s: the target is not "
+                            "reachable",
+}
+"""A step's ``status``: converged, Newton did not converge, or the constraints could not be solved; the
+messages of the failures (formatted with t0, t1, h and iterations)."""
 
 
 class StepRows(NamedTuple):

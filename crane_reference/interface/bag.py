@@ -249,11 +249,10 @@ class ReferenceBag:
 # --- offline export of the reference ---------------------------------------------------------------
 
 
-def node_stream(config: CraneParameters, variant: str = "flexible", step: float = 1e-3,
-                rho_inf: float = 0.8) -> ReferenceStream:
+def node_stream(config: CraneParameters, variant: str = "flexible", step: float = 1e-3) -> ReferenceStream:
     """The stream the node builds for ``config`` with its parameters at their defaults (the column drive
     made as the node makes it, so that the motion is the same to the bit)."""
-    return ReferenceStream(config, variant, step, drive=column_drive(config), rho_inf=rho_inf)
+    return ReferenceStream(config, variant, step, drive=column_drive(config))
 
 
 def export_reference(bag: BagWriter, stream: ReferenceStream, rate: int, duration: float, *,

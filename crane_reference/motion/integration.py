@@ -1,58 +1,83 @@
-"""Time integration of the programmed motion: generalized-alpha on the integrated coordinates.
+"""Time integration of the programmed motion: the trapezoidal rule with exact modal frequencies.
 
-Why this scheme: the RFE springs put constrained natural frequencies up to ~1.7 kHz into the default
-crane, and the undamped torque steps excite all of them.  An explicit integrator must resolve them all
-(millions of steps for 10 s); flexible multibody codes use an implicit, second-order scheme with
-controllable high-frequency numerical dissipation instead.  We use the generalized-alpha method of
-Chung and Hulbert (1993) in the form of Arnold and Brüls (2007) on the independent coordinates x = q_ic
-(plus q_vd, below):
+Why this scheme.  The RFE springs put constrained natural frequencies up to ~1.7 kHz into the default
+crane, and the undamped torque steps excite them; the boom keeps vibrating at 70-200 Hz for ever, and
+that vibration is what the paper studies.  Any second-order scheme (generalized-alpha, the trapezoidal
+or the midpoint rule) turns a mode of frequency omega by omega h (1 - O((omega h)^2)) per step.  On the
+crane that error matters far beyond its size: along the ellipse the modes pass through internal
+resonances (2 f9 = f8 + f10 of the column-slew, base and luffing-bending modes, and f9 + f10 = f11), where
+the energy that the large ~75 Hz column-slew vibration hands to the luffing bending (119 Hz) depends on
+the modes' relative phases.  Shifted frequencies shift those resonances: at h = 0.25 ms the luffing
+vibration grows to several times the model's (with or without numerical damping, converged Newton or
+not), while numerical damping that hides it (rho_inf < 1) removes half of the 40-250 Hz vibration within
+seconds at h = 1 ms.  The README's Accuracy section gives the evidence (benchmarks/bench_accuracy.py).
 
-    x_{n+1} = x_n + h v_n + h^2 (1/2 - beta) a~_n + h^2 beta a~_{n+1}
-    v_{n+1} = v_n + h (1 - gamma) a~_n + h gamma a~_{n+1}
-    (1 - alpha_m) a~_{n+1} + alpha_m a~_n = (1 - alpha_f) a_{n+1} + alpha_f a_n
-    a_{n+1} = qdd_x(t_{n+1}, q_{n+1}, qd_{n+1})        from (8)
+The method.  On the integrated coordinates x = q_ic (plus q_vd, below) the trapezoidal rule
 
-with alpha_m = (2 rho - 1)/(rho + 1), alpha_f = rho/(rho + 1), gamma = 1/2 + alpha_f - alpha_m,
-beta = (gamma + 1/2)^2 / 4: second-order accurate, unconditionally stable, and the spectral radius at
-infinite frequency is rho (rho = 1: no dissipation; rho < 1 damps the modes with omega h >> 1, while
-the slow motion is unaffected to second order).  The holonomically dependent coordinates are never
-integrated: q_hd comes from the position constraints and qd_dc from (7) at every evaluation, so the
-constraints hold to the Newton tolerance at every step, with no drift.  A coordinate made dependent
-by a first-order constraint (q_vd) has no position constraint: its position is integrated with the
-formulas above (x = (q_ic, q_vd)), its velocity comes from the constraints.
+    x_{n+1} = x_n + h v_n + h^2/4 (a_n + a_{n+1}),   v_{n+1} = v_n + h/2 (a_n + a_{n+1}),
 
-The nonlinear step equation for a_{n+1} is solved by a modified Newton method on the residual of (8),
-P^T (M qdd + h - Q) with qdd = B a_ic + e (from inverse dynamics, without forming M), whose iteration
-matrix is M_r + beta' K_r + gamma' D_r (B^T M B, B^T K B, B^T D B at the start of the step: reduced
-mass, spring stiffness and damping; beta' = h^2 beta (1 - alpha_f)/(1 - alpha_m), gamma' = h gamma
-(1 - alpha_f)/(1 - alpha_m)): exact for the stiff linear springs, approximate for gravity, velocity and
+with a_{n+1} solving the residual of (8) at t_{n+1}, corrected per mode:
+
+    P^T (M qdd + h - Q) - Delta M_r a_ic + D_u v_ic = 0.
+
+Every spring of the model (supports, RFE, the drive) acts on independent coordinates, so the reduced
+stiffness K_r is constant, and the configuration dependence sits in the reduced mass M_r = B^T M B.  For
+the modes K_r phi_i = omega_i^2 M_r phi_i (Phi^T M_r Phi = I) the trapezoidal rule with the mass
+m_i (1 - c_i) turns mode i by 2 arctan(omega_hat_i h / 2) per step, omega_hat_i^2 = omega_i^2 / (1 - c_i);
+c_i = 1 - ((omega_i h / 2) / tan(omega_i h / 2))^2 makes that exactly omega_i h (the bilinear transform
+with pre-warping of digital filter design, per mode), i.e. Delta M_r = M_r Phi diag(c) Phi^T M_r.  The
+linear spring-mass part is then exact at the steps in amplitude and phase, with no numerical damping;
+the slow motion (omega h -> 0, c -> 0) keeps the trapezoidal rule's second order, and so do the gravity,
+velocity and constraint terms.  Velocities of a vibrating mode come out larger than the exact ones by
+tan(omega h / 2) / (omega h / 2) (the positions are exact): 1.6 % at 70 Hz and h = 1 ms, 4.8 % at 119 Hz.
+
+Modes with omega h at or above the cutoff (0.8 pi: the output sampled every step cannot show them;
+at h = 1 ms those above 400 Hz) cannot be turned exactly (tan has a pole at pi) and are not resolved:
+D_u = M_r Phi_u diag(2 zeta omega) Phi_u^T M_r damps them with zeta = 1 (they keep their static
+deflection), so that no such mode rings at a frequency it does not have.  M_r moves with the
+configuration, so Delta M_r and D_u are computed again every :data:`REFRESH_INTERVAL` of motion (an
+eigenproblem of the n_ic x n_ic reduced matrices); a stale D_u would leak into resolved modes.
+Servo-constraints (P = E_ic) have no symmetric reduced mass and use the plain trapezoidal rule.
+
+The holonomically dependent coordinates are never integrated: q_hd comes from the position constraints
+and qd_dc from (7) at every evaluation, so the constraints hold to the Newton tolerance at every step,
+with no drift.  A coordinate made dependent by a first-order constraint (q_vd) has no position
+constraint: its position is integrated with the formulas above (x = (q_ic, q_vd)), its velocity comes
+from the constraints.
+
+The step's nonlinear equation is solved by a modified Newton method on the residual (from O(n) inverse
+dynamics, without forming M) with the iteration matrix B^T (M + h^2/4 K + h/2 D) B - Delta M_r + h/2 D_u
+at the start of the step: exact for the stiff linear springs, approximate for gravity, velocity and
 constraint-curvature terms, so each correction shrinks the next by a factor of about 1e-3; the q_vd
-accelerations are iterated as a fixed point.  Each evaluation's correction is applied, and the step
-ends at the state of the corrected accelerations: after at least ``evaluations`` evaluations, once the
-last correction in velocities (gamma' |da|) is at most ``tolerance`` [rad/s or m/s] (the error left
-is then about 1e-3 of it).  The bound is on velocities, not positions: a velocity error persists and
-makes the positions drift, for ever on the undamped crane.
+accelerations are iterated as a fixed point.  Each evaluation's correction is applied, and the step ends
+at the state of the corrected accelerations: after at least ``evaluations`` evaluations, once the last
+correction in velocities (h/2 |da|) is at most ``tolerance`` [rad/s or m/s].
 
-Two uses (printed by benchmarks/bench_core.py, [iterations]): the online default,
-:data:`EVALUATIONS` evaluations with the loose :data:`ONLINE_TOLERANCE` (a fixed cost per step, the
-controller-band accuracy of the converged iteration), and a converged iteration (``tolerance`` 1e-9 or
-below, ``evaluations`` 2) for offline studies of the discrete method itself.
+Two uses (benchmarks/bench_accuracy.py): the online default, :data:`EVALUATIONS` evaluations with the
+loose :data:`ONLINE_TOLERANCE`, and a converged iteration (``tolerance`` 1e-9 or below, ``evaluations``
+2) for studies of the discrete method itself.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..dynamics import kernels
-from ..dynamics.structures import AlphaSettings, StepRows
+from ..dynamics.structures import (
+    ACCOUNTS,
+    CONSTRAINTS_UNSOLVABLE,
+    STATUS_MESSAGES,
+    ModalCorrection,
+    StepRows,
+    StepSettings,
+)
 from .programmed_motion import MotionSolution, ProgrammedMotion, ProjectionError
 
 EVALUATIONS = 3
-"""Newton evaluations per step of the online default: with two, the velocity error left per step
-(~1e-3 of the second correction) drifts psi2 by about 1e-4 rad over 10 s; with three it is at the
-level of the converged iteration (benchmarks/bench_core.py, [iterations])."""
+"""Newton evaluations per step of the online default (benchmarks/bench_accuracy.py, [iterations])."""
 
 ONLINE_TOLERANCE = 1e-4
 """[rad/s or m/s]: after :data:`EVALUATIONS` evaluations, a step goes on only while its last velocity
@@ -63,53 +88,45 @@ PROJECTION_TOLERANCE = 1e-9
 Newton converges quadratically, so the residual left is ~|Phi_qq| 1e-18, far below 1e-15 m; the
 velocities and (8) are then evaluated at the projected q itself."""
 
+REFRESH_INTERVAL = 0.02
+"""[s] of motion after which the modal correction is computed again at the current configuration."""
+
+CUTOFF = 0.8 * math.pi
+"""omega h [rad] from which a mode counts as not resolved by the step (damped, not turned exactly)."""
+
+UNRESOLVED_DAMPING = 1.0
+"""Damping ratio given to the modes the step does not resolve."""
+
+METHOD = "trapezoidal rule with exact modal frequencies (crane_reference.motion.integration)"
+"""How reports name the method."""
+
 
 class IntegrationError(RuntimeError):
     """A step of the integrator did not converge."""
 
 
 @dataclass(frozen=True)
-class GeneralizedAlphaParameters:
-    """Coefficients of the generalized-alpha method for a spectral radius ``rho_inf`` in [0, 1]."""
-
-    alpha_m: float
-    alpha_f: float
-    gamma: float
-    beta: float
-
-    @classmethod
-    def from_spectral_radius(cls, rho_inf: float) -> GeneralizedAlphaParameters:
-        if not 0.0 <= rho_inf <= 1.0:
-            raise ValueError(f"rho_inf = {rho_inf}: must lie in [0, 1]")
-        alpha_m = (2.0 * rho_inf - 1.0) / (rho_inf + 1.0)
-        alpha_f = rho_inf / (rho_inf + 1.0)
-        gamma = 0.5 + alpha_f - alpha_m
-        return cls(alpha_m, alpha_f, gamma, 0.25 * (gamma + 0.5) ** 2)
-
-
-@dataclass(frozen=True)
 class StepState:
-    """Integrator state at t: full q, qd, the solution of (8) there and the pseudo-acceleration a~ of
-    the integrated coordinates (:attr:`ProgrammedMotion.integrated`)."""
+    """Integrator state at t: full q, qd, the solution of (8) there and the modal correction in use."""
 
     t: float
     q: np.ndarray
     qd: np.ndarray
     solution: MotionSolution
-    pseudo_acceleration: np.ndarray
+    correction: ModalCorrection
 
     @property
     def qdd(self) -> np.ndarray:
         return self.solution.qdd
 
 
-class GeneralizedAlpha:
-    """Generalized-alpha stepper for a :class:`ProgrammedMotion` (one compiled call per step)."""
+class ExactFrequencyTrapezoidal:
+    """The trapezoidal rule with exact modal frequencies for a :class:`ProgrammedMotion` (one compiled
+    call per run of steps)."""
 
-    def __init__(self, motion: ProgrammedMotion, rho_inf: float = 0.8, tolerance: float = ONLINE_TOLERANCE,
-                 max_iterations: int = 30, evaluations: int = EVALUATIONS):
+    def __init__(self, motion: ProgrammedMotion, tolerance: float = ONLINE_TOLERANCE, max_iterations: int = 30,
+                 evaluations: int = EVALUATIONS):
         self.motion = motion
-        self.coefficients = GeneralizedAlphaParameters.from_spectral_radius(rho_inf)
         self.evaluations = evaluations
         self.tolerance = tolerance
         self.max_iterations = max_iterations
@@ -117,24 +134,28 @@ class GeneralizedAlpha:
         """Newton iterations of the last step (a diagnostic)."""
 
     @property
-    def settings(self) -> AlphaSettings:
+    def settings(self) -> StepSettings:
         """The method and its stopping rules in the layout of the compiled kernels."""
-        c = self.coefficients
-        return AlphaSettings(c.alpha_m, c.alpha_f, c.gamma, c.beta, self.evaluations, self.tolerance,
-                             self.max_iterations, PROJECTION_TOLERANCE)
+        return StepSettings(self.evaluations, self.tolerance, self.max_iterations, PROJECTION_TOLERANCE,
+                            REFRESH_INTERVAL, CUTOFF, UNRESOLVED_DAMPING)
+
+    def _fresh(self) -> ModalCorrection:
+        """No modal correction yet: the first step computes it."""
+        n_ic = len(self.motion.independent)
+        return ModalCorrection(np.zeros((n_ic, n_ic)), np.zeros((n_ic, n_ic)), -math.inf, 0.0)
 
     def start(self, t: float, q: np.ndarray, qd: np.ndarray) -> StepState:
         """Consistent start: q_dc from the position constraints, qd_dc from (7), qdd from (8)."""
         q, kinematics = self.motion.project_positions(t, q)
         qd = self.motion.dependent_velocities(t, q, qd, kinematics)
         solution = self.motion.solve(t, q, qd)
-        return StepState(t, q, qd, solution, solution.qdd[self.motion.integrated].copy())
+        return StepState(t, q, qd, solution, self._fresh())
 
     def restart(self, state: StepState) -> StepState:
-        """Re-solve (8) at ``state`` with the drive's value from t on (after a jump) and restart the
-        method's acceleration history there (a~ = a), as at a start."""
+        """Re-solve (8) at ``state`` with the drive's value from t on (after a jump) or under new
+        constraints, as at a start."""
         solution = self.motion.solve(state.t, state.q, state.qd)
-        return StepState(state.t, state.q, state.qd, solution, solution.qdd[self.motion.integrated].copy())
+        return StepState(state.t, state.q, state.qd, solution, self._fresh())
 
     def step(self, state: StepState, t1: float, ends_on_jump: bool = False) -> StepState:
         """Advance ``state`` to time t1 > state.t [s] (one step of :meth:`run`).  A step ending on a drive
@@ -152,24 +173,18 @@ class GeneralizedAlpha:
         if ends_on_jump:
             drives[-1] = drive.kernel_parameters(times[-1], left_limit=True)
         previous = state.solution
-        run = kernels.generalized_alpha_run(
-            state.q, state.qd, previous.qdd, state.pseudo_acceleration, previous.dynamics.M, previous.velocity_map,
-            state.t, times, motion.constraints.coefficients_at(times), drives,
-            motion.partition, motion.dynamics.chain, self.settings)
-        self._check(run.status, times[run.completed - 1] if run.completed else state.t,
-                    times[min(run.completed, len(times) - 1)])
+        run = kernels.integration_run(
+            state.q, state.qd, previous.qdd, previous.dynamics.M, previous.velocity_map, state.correction,
+            state.t, times, motion.constraints.coefficients_at(times), drives, motion.partition,
+            motion.dynamics.chain, self.settings)
+        if run.status != 0:
+            t0 = times[run.completed - 1] if run.completed else state.t
+            t1 = times[min(run.completed, len(times) - 1)]
+            message = STATUS_MESSAGES[run.status].format(t0=t0, t1=t1, h=t1 - t0, iterations=self.max_iterations)
+            raise ProjectionError(message) if run.status == CONSTRAINTS_UNSOLVABLE else IntegrationError(message)
         rows = run.rows
-        motion.check_singularity(float(np.min(rows.accounts[:, 6])))
+        motion.check_singularity(float(np.min(rows.accounts[:, ACCOUNTS.index("kdc_min_singular_value")])))
         self.last_iterations = int(rows.iterations[-1])
-        return StepState(float(times[-1]), rows.q[-1], rows.qd[-1],
-                         motion.solution_from_evaluation(run.last.evaluation), run.last.pseudo_acceleration), rows
-
-    def _check(self, status: int, t0: float, t1: float) -> None:
-        """Raise for a step from t0 to t1 that did not converge (status 1) or could not meet the
-        constraints (status 2)."""
-        if status == 2:
-            raise ProjectionError(f"position or velocity constraints cannot be met at t = {t1:.6g} s: the target is "
-                                  "not reachable")
-        if status == 1:
-            raise IntegrationError(f"generalized-alpha step from t = {t0:.6g} s with h = {t1 - t0:g} s did not "
-                                   f"converge in {self.max_iterations} iterations")
+        last = run.last
+        return StepState(float(times[-1]), rows.q[-1], rows.qd[-1], motion.solution_from_evaluation(last.evaluation),
+                         last.correction), rows

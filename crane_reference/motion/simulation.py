@@ -1,7 +1,7 @@
 """The paper's scenario and its time integration, offline (whole runs) and step by step (online).
 
 :class:`Scenario` assembles model -> dynamics -> programmed constraints -> consistent start from a
-:class:`CraneParameters`.  :class:`MotionStepper` advances the generalized-alpha integrator on a fixed
+:class:`CraneParameters`.  :class:`MotionStepper` advances the integrator (:mod:`.integration`) on a fixed
 grid t_k = t0 + k h, lands exactly on the drive's jumps (restarting the method there) and
 accumulates the work of the drive, the constraint forces and the dampers with the trapezoidal rule
 (second order, like the integrator).  :func:`simulate` runs it to an end time; :func:`simulate_reference`
@@ -25,7 +25,7 @@ from ..model.parameters import CraneParameters, Task
 from ..model.profiles import Constant, QuinticRise
 from .constraints import ConstraintSet, paper_constraints
 from .equilibrium import Equilibrium, EquilibriumError, static_equilibrium
-from .integration import EVALUATIONS, ONLINE_TOLERANCE, GeneralizedAlpha, IntegrationError, StepState
+from .integration import EVALUATIONS, ONLINE_TOLERANCE, ExactFrequencyTrapezoidal, IntegrationError, StepState
 from .programmed_motion import ConstraintSingularityError, ProgrammedMotion, ProjectionError
 from .trajectory import Sample, Trajectory, make_sample, stack_samples
 
@@ -79,15 +79,14 @@ class StepperSnapshot(NamedTuple):
 
 
 class MotionStepper:
-    """Online generalized-alpha integration of a :class:`ProgrammedMotion` with work bookkeeping."""
+    """Online integration (:mod:`.integration`) of a :class:`ProgrammedMotion` with work bookkeeping."""
 
     def __init__(self, motion: ProgrammedMotion, t0: float, q0: np.ndarray, qd0: np.ndarray,
-                 step: float = 1e-3, rho_inf: float = 0.8, tolerance: float = ONLINE_TOLERANCE,
-                 evaluations: int = EVALUATIONS):
+                 step: float = 1e-3, tolerance: float = ONLINE_TOLERANCE, evaluations: int = EVALUATIONS):
         if not step > 0.0:
             raise ValueError(f"step = {step}: must be > 0 s")
         self.step_size = step
-        self.integrator = GeneralizedAlpha(motion, rho_inf=rho_inf, tolerance=tolerance, evaluations=evaluations)
+        self.integrator = ExactFrequencyTrapezoidal(motion, tolerance=tolerance, evaluations=evaluations)
         self._t0 = t0
         self._k = 0
         self.state: StepState = self.integrator.start(t0, q0, qd0)
@@ -170,15 +169,14 @@ class MotionStepper:
         self.state = self.integrator.restart(self.state)
 
 
-def simulate(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, step: float = 1e-3, rho_inf: float = 0.8,
-             t0: float = 0.0, qd0: np.ndarray | None = None, progress: Progress | None = None,
-             chunk: float = 0.25, tolerance: float = ONLINE_TOLERANCE,
-             evaluations: int = EVALUATIONS) -> Trajectory:
-    """Programmed motion from (t0, q0, qd0) to t_end with generalized-alpha (Newton ``evaluations`` and
+def simulate(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, step: float = 1e-3, t0: float = 0.0,
+             qd0: np.ndarray | None = None, progress: Progress | None = None, chunk: float = 0.25,
+             tolerance: float = ONLINE_TOLERANCE, evaluations: int = EVALUATIONS) -> Trajectory:
+    """Programmed motion from (t0, q0, qd0) to t_end with the integrator (Newton ``evaluations`` and
     ``tolerance``, see :mod:`.integration`); one sample per step, computed in compiled runs
     of ``chunk`` seconds (``progress`` is called after each)."""
     qd0 = np.zeros_like(q0) if qd0 is None else qd0
-    stepper = MotionStepper(motion, t0, q0, qd0, step, rho_inf, tolerance, evaluations)
+    stepper = MotionStepper(motion, t0, q0, qd0, step, tolerance, evaluations)
     parts = [stack_samples([stepper.sample])]
     while stepper.state.t < t_end - 1e-9 * step:
         parts.append(stepper.advance_until(min(stepper.state.t + chunk, t_end)))
@@ -197,7 +195,7 @@ def simulate_reference(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, s
     model = dyn.model
     ic = motion.independent
     n_ic = len(ic)
-    start = GeneralizedAlpha(motion).start(t0, q0, np.zeros_like(q0))
+    start = ExactFrequencyTrapezoidal(motion).start(t0, q0, np.zeros_like(q0))
     guess = [start.q]
 
     def full_state(t: float, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

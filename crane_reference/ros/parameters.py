@@ -128,7 +128,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "'' loads the packaged default", empty_allowed=True, read_only=True),
     ParameterSpec("model", STRING, "flexible", "Crane model variant: 'flexible' (rigid finite element boom) "
                   "or 'rigid' (one boom element)", choices=VARIANTS, read_only=True),
-    ParameterSpec("integrator.step", DOUBLE, 1e-3, "Step of the generalized-alpha integrator", "s",
+    ParameterSpec("integrator.step", DOUBLE, 1e-3, "Step of the integrator", "s",
                   (1e-5, 1e-2), read_only=True),
     ParameterSpec("publish_rate", INTEGER, 100, "Rate of joint_states and ~/end_effector_pose; sample k is "
                   "stamped start + k / publish_rate", "Hz", (1, MAX_PUBLISH_RATE), read_only=True),

@@ -54,7 +54,7 @@ class ReferenceStream:
 
     def __init__(self, params: CraneParameters, variant: str = "flexible", step: float = 1e-3,
                  blend_time: float = 2.0, targets: Task | None = None,
-                 drive: TorqueDrive | FlexibleDrive | None = None, rho_inf: float = 0.8,
+                 drive: TorqueDrive | FlexibleDrive | None = None,
                  singular_value_margin: float = 0.1, task_constraints: TaskConstraints = paper_task_constraints,
                  dependent: tuple[int, ...] | None = None, speed_scaling: float = 1.0, ramp_time: float = 1.0,
                  at_rest: bool = False):
@@ -66,7 +66,6 @@ class ReferenceStream:
         self.joint_names = self.model.joint_names
         self.dependent = tuple(self.model.dependent_joints) if dependent is None else tuple(dependent)
         self.step = step
-        self.rho_inf = rho_inf
         self.singular_value_margin = singular_value_margin
         self.set_blend_time(blend_time)
         self.speed_scaling = check_rate(speed_scaling)
@@ -91,8 +90,7 @@ class ReferenceStream:
         moving at the speed scaling (or ``at_rest``: PAUSED until :meth:`resume`)."""
         constraints = self.task_constraints(self.targets, self.scenario.z_static)
         start = self._static_start(constraints)
-        self._stepper = MotionStepper(self._motion(constraints), 0.0, start, np.zeros_like(start), self.step,
-                                      self.rho_inf)
+        self._stepper = MotionStepper(self._motion(constraints), 0.0, start, np.zeros_like(start), self.step)
         self._history = History(self._stepper.snapshot(),
                                 reference_sample(self._stepper.sample, self.model.drive_joint))
         self._warp = TimeWarp(self._warp.ramp_time, 0.0 if at_rest else self.speed_scaling, tau)

@@ -5,7 +5,7 @@ A study spec (YAML) names the crane, the run and the parameters to vary::
     config: ""              # crane description YAML ('' = the packaged config/crane.yaml)
     variant: both           # flexible | rigid | both (both: the flexible-minus-rigid difference too)
     duration: 3.0           # [s] simulated per case
-    step: 0.001             # [s] generalized-alpha step
+    step: 0.001             # [s] integrator step
     vary:                   # grids (values) and/or random ranges (low, high); random ranges draw `samples`
       ellipse_a: {values: [2.8, 3.0, 3.2]}
       path_speed: {values: [0.4, 0.8]}
