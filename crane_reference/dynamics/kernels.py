@@ -194,12 +194,19 @@ def accelerations_at(q, qd, k: Coefficients, drive, partition: Partition, chain:
 @njit(cache=True, nogil=True)
 def _evaluation(q, qd, acc: Accelerations, k: Coefficients, drive, partition: Partition, chain: ChainData):
     """The full :class:`Evaluation` from :class:`Accelerations`: adds the constraint residuals, gradients,
-    distances and velocity residuals, the reactions, their generalized force M qdd + h - Q and the accounts."""
+    distances and velocity residuals, the reactions, their generalized force and the accounts.  The
+    reactions come from the imbalance M qdd + h - Q: lambda = (A A^T)^-1 A (M qdd + h - Q) for ideal
+    constraints, with the generalized force A^T lambda (the imbalance itself where qdd solves (8); for the
+    integrator's accelerations its part along the constraints: the rest is the modal correction's force,
+    see :mod:`crane_reference.motion.integration`); the dependent joints' torques for servo-constraints."""
     dependent = partition.dependent
     reaction_force = matvec(acc.M, acc.qdd) + acc.h - acc.forces
     residual, grads, distance, rate = constraint_values(acc.ee_position, matvec(acc.ee_jacobian, qd), k)
-    reactions = (reaction_force[dependent] if partition.servo
-                 else solve_small_vector(matmul(acc.A, acc.A.T), matvec(acc.A, reaction_force)))
+    if partition.servo:
+        reactions = reaction_force[dependent]
+    else:
+        reactions = solve_small_vector(matmul(acc.A, acc.A.T), matvec(acc.A, reaction_force))
+        reaction_force = matvec(np.ascontiguousarray(acc.A.T), reactions)
     energy = energy_accounts(q, qd, acc.M, acc.gravity_potential, chain, drive)
     accounts = np.array([energy[0], energy[1], energy[2], energy[3], reaction_force @ qd, energy[4],
                          smallest_singular_value(np.ascontiguousarray(acc.A[:, dependent]))])
@@ -224,12 +231,13 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
     eigenvectors V of L^-1 K_r L^-T.  A mode with omega h below ``settings.cutoff`` gets the inertia
     correction c = 1 - ((omega h / 2) / tan(omega h / 2))^2, one above it the damping 2 zeta omega; in the
     independent coordinates Delta M_r = M_r Phi diag(c) Phi^T M_r = (L V) diag(c) (L V)^T and likewise
-    D_u.  Servo-constraints (P = E_ic: no symmetric reduced mass) get none."""
+    D_u.  Servo-constraints (P = E_ic: no symmetric reduced mass) get none, and so does the plain
+    trapezoidal rule (``settings.modal`` False)."""
     independent = partition.independent
     n_ic = independent.size
     inertia = np.zeros((n_ic, n_ic))
     damping = np.zeros((n_ic, n_ic))
-    if partition.servo:
+    if partition.servo or not settings.modal:
         return ModalCorrection(inertia, damping, t, h)
     L = cholesky(reduced_mass)
     stiffness = np.empty((n_ic, n_ic))

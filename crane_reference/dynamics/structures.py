@@ -69,7 +69,8 @@ class StepSettings(NamedTuple):
     m/s], at most ``max_iterations``; ``projection_tolerance`` [rad] of Newton on the position constraints;
     the modal correction is computed again after ``refresh_interval`` [s] of motion (and for a new step
     size); modes with omega h at or above ``cutoff`` [rad] are not resolved by the step and get the damping
-    ratio ``unresolved_damping``."""
+    ratio ``unresolved_damping``; without ``modal`` there is no modal correction (the plain trapezoidal rule,
+    for comparison)."""
 
     evaluations: int
     tolerance: float
@@ -78,6 +79,7 @@ class StepSettings(NamedTuple):
     refresh_interval: float
     cutoff: float
     unresolved_damping: float
+    modal: bool
 
 
 class ModalCorrection(NamedTuple):

@@ -125,8 +125,10 @@ class ExactFrequencyTrapezoidal:
     call per run of steps)."""
 
     def __init__(self, motion: ProgrammedMotion, tolerance: float = ONLINE_TOLERANCE, max_iterations: int = 30,
-                 evaluations: int = EVALUATIONS):
+                 evaluations: int = EVALUATIONS, modal: bool = True):
         self.motion = motion
+        self.modal = modal
+        """False: the plain trapezoidal rule (no modal correction), for comparison."""
         self.evaluations = evaluations
         self.tolerance = tolerance
         self.max_iterations = max_iterations
@@ -137,7 +139,7 @@ class ExactFrequencyTrapezoidal:
     def settings(self) -> StepSettings:
         """The method and its stopping rules in the layout of the compiled kernels."""
         return StepSettings(self.evaluations, self.tolerance, self.max_iterations, PROJECTION_TOLERANCE,
-                            REFRESH_INTERVAL, CUTOFF, UNRESOLVED_DAMPING)
+                            REFRESH_INTERVAL, CUTOFF, UNRESOLVED_DAMPING, self.modal)
 
     def _fresh(self) -> ModalCorrection:
         """No modal correction yet: the first step computes it."""

@@ -1,0 +1,272 @@
+"""Speed of the simulation core; prints the figures quoted in the README and the closing notes.
+
+    python benchmarks/bench_speed.py [--duration 10] [--repeats 3] [--only eval profile speed]
+
+The machine's speed drifts between days, so every time is also given as a multiple of one call of
+Pinocchio's ABA (forward dynamics) on the URDF that crane-reference exports for the same chain, measured in
+the same run.
+
+1. [eval] Time of M(q) with h, gravity and E's kinematics, and of one full qdd from (8), at 24 DOF; the cost
+   of calling a compiled function with the ChainData named tuple.
+2. [profile] The compiled cost of the parts of one step (timed in compiled loops): the modal correction
+   (an eigenproblem, every 20 ms of motion), the iteration factor, per Newton evaluation a projection and a
+   residual, and at the step's end a full evaluation.
+3. [speed] Per case (rigid; flexible with n_rfe = 6, 12, 24): Pinocchio's ABA per call; at h = 1 and 2 ms the
+   throughput of simulate (best of ``--repeats``) per step, as a multiple of one ABA call and as a real-time
+   factor; single steps (one compiled call each, 2 s after the drive's jumps): median, worst and 99.9 %
+   quantile; the mean Newton evaluations per step and the largest constraint residual.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from dataclasses import replace
+
+import numpy as np
+import pinocchio as pin
+from bench_accuracy import newton_iterations
+from numba import njit
+
+from crane_reference.dynamics import kernels
+from crane_reference.dynamics.structures import Coefficients
+from crane_reference.dynamics.terms import chain_terms, end_effector_jacobian, position_terms
+from crane_reference.model.config import load_config
+from crane_reference.model.parameters import CraneParameters
+from crane_reference.model.urdf import model_to_urdf
+from crane_reference.motion.integration import ExactFrequencyTrapezoidal
+from crane_reference.motion.simulation import MotionStepper, Scenario, simulate
+
+
+def per_call(function, repeat: int = 2000) -> float:
+    function()
+    start = time.perf_counter()
+    for _ in range(repeat):
+        function()
+    return (time.perf_counter() - start) / repeat
+
+
+@njit
+def _read_chain(chain):
+    return chain.gravity
+
+
+@njit
+def _read_fields(kinds, axes, origins, body_joint, body_H, gravity, ee_joint, ee_point, stiffness, damping,
+                 damped, drive_joint):
+    return gravity
+
+
+def evaluation_times(params: CraneParameters) -> None:
+    scenario = Scenario(params, "flexible")
+    q = scenario.equilibrium.q
+    qd = np.full_like(q, 0.01)
+    d, m = scenario.dynamics, scenario.model
+    t_m = per_call(lambda: chain_terms(q, qd, d.chain))
+    t_qdd = per_call(lambda: scenario.motion.solve(0.5, q, qd))
+    print(f"[eval] {m.dof} DOF: M(q) with h, gravity and E kinematics {t_m * 1e6:.1f} us; "
+          f"full qdd from (8) incl. constraints and Python wrapper {t_qdd * 1e6:.1f} us")
+    t_named = min(per_call(lambda: _read_chain(d.chain)) for _ in range(5))
+    t_fields = min(per_call(lambda: _read_fields(*d.chain)) for _ in range(5))
+    print(f"[eval] calling a compiled function from Python with the ChainData named tuple {t_named * 1e6:.2f} us, "
+          f"with its 11 fields as arguments {t_fields * 1e6:.2f} us (best of 5)")
+
+
+def aba_time(scenario: Scenario, repeat: int = 20000) -> float:
+    """Best per-call time [s] of Pinocchio's forward dynamics (ABA, called from Python) on the URDF that
+    crane-reference exports for the scenario's chain, at a random state (continuous joints as cos/sin)."""
+    model = pin.buildModelFromXML(model_to_urdf(scenario.model))
+    data = model.createData()
+    rng = np.random.default_rng(0)
+    q, v, tau = pin.randomConfiguration(model), rng.normal(size=model.nv), rng.normal(size=model.nv)
+    best = math.inf
+    for _ in range(5):
+        start = time.perf_counter()
+        for _ in range(repeat):
+            pin.aba(model, data, q, v, tau)
+        best = min(best, (time.perf_counter() - start) / repeat)
+    return best
+
+
+def step_times(scenario: Scenario, step: float, duration: float, after: float = 1.0) -> np.ndarray:
+    """Wall time [s] of each step over ``duration`` seconds from t = ``after`` (past the drive's jumps), each
+    step one compiled call from Python with its inputs prepared beforehand (what one step costs the
+    node, call included)."""
+    stepper = MotionStepper(scenario.motion, 0.0, scenario.equilibrium.q, np.zeros_like(scenario.equilibrium.q),
+                            step)
+    stepper.advance_until(after)
+    state, motion, settings = stepper.state, scenario.motion, stepper.integrator.settings
+    times = state.t + step * np.arange(1, round(duration / step) + 1)
+    k, drives = motion.constraints.coefficients_at(times), motion.dynamics.drive.kernel_parameters(times)
+    q, qd, qdd, correction = state.q, state.qd, state.solution.qdd, state.correction
+    M, B, t0 = state.solution.dynamics.M, state.solution.velocity_map, state.t
+    walls = np.empty(times.size)
+    for i in range(times.size):
+        k_i = Coefficients(k.Q[i:i + 1], k.g[i:i + 1], k.c[i:i + 1], k.order)
+        start = time.perf_counter()
+        run = kernels.integration_run(q, qd, qdd, M, B, correction, t0, times[i:i + 1], k_i, drives[i:i + 1],
+                                      motion.partition, motion.dynamics.chain, settings)
+        walls[i] = time.perf_counter() - start
+        last = run.last
+        q, qd, qdd, correction, t0 = last.q, last.qd, last.evaluation.terms.qdd, last.correction, times[i]
+        M, B = last.evaluation.terms.M, last.evaluation.terms.velocity_map
+    return walls
+
+
+def speed(params: CraneParameters, duration: float, repeats: int) -> None:
+    """[speed] Throughput of simulate (compiled runs of 0.25 s), the cost of single steps (median and worst
+    over 2 s) and both as multiples of one Pinocchio ABA call on the same chain, measured in this run."""
+    cases = [("rigid", params), *(("flexible", replace(params, boom=replace(params.boom, rfe_count=n)))
+                                  for n in (6, 12, 24))]
+    for variant, p in cases:
+        scenario = Scenario(p, variant)
+        q0 = scenario.equilibrium.q
+        simulate(scenario.motion, q0, 0.01, step=1e-3)  # compile / load the kernels
+        aba = aba_time(scenario)
+        label = f"[speed] {variant:8s} n_rfe={p.boom.rfe_count if variant == 'flexible' else 1:2d} " \
+                f"dof={scenario.model.dof:2d}"
+        print(f"{label}: Pinocchio ABA on the exported URDF {aba * 1e6:.2f} us/call")
+        for step in (1e-3, 2e-3):
+            walls = []
+            for _ in range(repeats):
+                start = time.perf_counter()
+                tr = simulate(scenario.motion, q0, duration, step=step)
+                walls.append(time.perf_counter() - start)
+            wall, per_step = min(walls), min(walls) / (tr.t.size - 1)
+            single = step_times(scenario, step, 2.0)
+            print(f"{label} h={step * 1e3:.0f} ms: {duration:.0f} s in {wall:6.2f} s wall (best of {repeats}; median "
+                  f"{np.median(walls):.2f} s), {per_step * 1e6:6.1f} us/step = {per_step / aba:4.1f} ABA, real-time "
+                  f"factor {duration / wall:5.1f}; single steps median {np.median(single) * 1e6:.1f} us, worst "
+                  f"{single.max() * 1e6:.1f} us ({single.max() / np.median(single):.1f}x median), 99.9 % below "
+                  f"{np.quantile(single, 0.999) * 1e6:.1f} us; Newton evaluations "
+                  f"{newton_iterations(scenario, step):.2f}/step, max residual {tr.residual_distance.max():.1e} m")
+
+
+@njit
+def _repeat_position_terms(q, chain, n):
+    total = 0.0
+    for _ in range(n):
+        total += position_terms(q, chain)[3][0, 0]
+    return total
+
+
+@njit
+def _repeat_end_effector(q, chain, n):
+    total = 0.0
+    for _ in range(n):
+        total += end_effector_jacobian(q, chain)[0][0]
+    return total
+
+
+@njit
+def _repeat_projection(q, k, holonomic_dependent, chain, n):
+    total = 0.0
+    for _ in range(n):
+        total += kernels.project_positions(q, k, holonomic_dependent, chain, 1e-9, 25)[0][0]
+    return total
+
+
+@njit
+def _repeat_accelerations(q, qd, k, drive, partition, chain, n):
+    total = 0.0
+    for _ in range(n):
+        total += kernels.accelerations_at(q, qd, k, drive, partition, chain).qdd[0]
+    return total
+
+
+@njit
+def _repeat_residual(q, qd, a, k, drive, partition, chain, n):
+    _, T, S, p, C, _ = kernels.project_positions(q, k, partition.holonomic_dependent, chain, 1e-9, 25)
+    total = 0.0
+    for _ in range(n):
+        total += kernels.newton_residual(q, qd, a, T, S, p, C, k, drive, partition, chain)[1][0]
+    return total
+
+
+@njit
+def _repeat_factor(M, B, correction, partition, chain, n):
+    total = 0.0
+    for _ in range(n):
+        total += kernels.iteration_factor(M, B, 1e-3, correction, partition, chain)[0, 0]
+    return total
+
+
+@njit
+def _repeat_correction(reduced_mass, drive, partition, chain, settings, n):
+    total = 0.0
+    for _ in range(n):
+        total += kernels.modal_correction(reduced_mass, 1e-3, 0.0, drive, partition, chain, settings).inertia[0, 0]
+    return total
+
+
+@njit
+def _repeat_evaluation(q, qd, k, drive, partition, chain, n):
+    total = 0.0
+    for _ in range(n):
+        total += kernels.evaluate(q, qd, k, drive, partition, chain).accounts[0]
+    return total
+
+
+def component_times(params: CraneParameters, repeat: int = 3000) -> None:
+    """[profile] Compiled cost of the parts of a step (flexible, n_rfe = 6), each timed in a compiled loop
+    (no Python call overhead), best of 5: a step is a factor, per Newton evaluation a projection and a
+    residual, and at its end a projection and a full evaluation with the integrator's qdd; every 20 ms of
+    motion the modal correction."""
+    scenario = Scenario(params, "flexible")
+    motion = scenario.motion
+    q, chain, partition = scenario.equilibrium.q, motion.dynamics.chain, motion.partition
+    qd = np.full_like(q, 0.01)
+    k, drive = motion.constraints.coefficients(0.5), motion.dynamics.drive.kernel_parameters(0.5)
+    off = q.copy()
+    off[motion.holonomic_dependent] += 1e-6  # a predictor 1e-6 rad off the constraints
+    acc = kernels.accelerations_at(q, qd, k, drive, partition, chain)
+    settings = ExactFrequencyTrapezoidal(motion).settings
+    B = acc.velocity_map
+    reduced_mass = B.T @ acc.M @ B
+    correction = kernels.modal_correction(reduced_mass, 1e-3, 0.0, drive, partition, chain, settings)
+    parts = (("M, gravity, E's Jacobian (position_terms)", _repeat_position_terms, (q, chain)),
+             ("E's position and Jacobian (kinematics only)", _repeat_end_effector, (q, chain)),
+             ("projection on the position constraints", _repeat_projection,
+              (off, k, motion.holonomic_dependent, chain)),
+             ("Newton residual of (8) by inverse dynamics", _repeat_residual,
+              (q, qd, acc.qdd[partition.integrated], k, drive, partition, chain)),
+             ("modal correction (eigenproblem, every 20 ms)", _repeat_correction,
+              (reduced_mass, drive, partition, chain, settings)),
+             ("iteration matrix and its Cholesky factor", _repeat_factor,
+              (acc.M, acc.velocity_map, correction, partition, chain)),
+             ("qdd from (8) solved (accelerations_at)", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
+             ("full evaluation (+ residuals, reactions, accounts)", _repeat_evaluation,
+              (q, qd, k, drive, partition, chain)))
+    for name, function, arguments in parts:
+        function(*arguments, 10)
+        best = min(_timed(function, arguments, repeat) for _ in range(5))
+        print(f"[profile] {name:<52} {best / repeat * 1e6:7.2f} us")
+
+
+def _timed(function, arguments, repeat: int) -> float:
+    start = time.perf_counter()
+    function(*arguments, repeat)
+    return time.perf_counter() - start
+
+
+SECTIONS = ("eval", "profile", "speed")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--duration", type=float, default=10.0)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--only", nargs="+", choices=SECTIONS, default=SECTIONS, help="sections to run")
+    args = parser.parse_args()
+    params = load_config()
+    if "eval" in args.only:
+        evaluation_times(params)
+    if "profile" in args.only:
+        component_times(params)
+    if "speed" in args.only:
+        speed(params, args.duration, args.repeats)
+
+
+if __name__ == "__main__":
+    main()
