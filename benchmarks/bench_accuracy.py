@@ -143,9 +143,9 @@ def _triple(x: np.ndarray, form: str = ".1e") -> str:
     return "/".join(f"{v:{form}}" for v in x)
 
 
-def vibration(params: CraneParameters, duration: float, cache: Path) -> None:
-    """[vibration] The 40-250 Hz RMS kept per window, raw and controller-band errors, n_rfe 6, 3, 12."""
-    for n_rfe in (6, 3, 12):
+def vibration(params: CraneParameters, duration: float, cache: Path, rfe_counts: tuple[int, ...]) -> None:
+    """[vibration] The 40-250 Hz RMS kept per window, raw and controller-band errors, per n_rfe."""
+    for n_rfe in rfe_counts:
         p = with_rfe(params, n_rfe)
         reference = reference_run(p, duration, cache, "undamped" if n_rfe == 6 else f"undamped-nrfe{n_rfe}")
         scenario = Scenario(p, "flexible")
@@ -308,9 +308,10 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=10.0)
     parser.add_argument("--cache", type=Path, default=Path("results/bench_accuracy"))
     parser.add_argument("--only", nargs="+", choices=SECTIONS, default=SECTIONS[:-1], help="sections to run")
+    parser.add_argument("--rfe", nargs="+", type=int, default=[6, 3, 12], help="[vibration]: the cranes' n_rfe")
     args = parser.parse_args()
     params = load_config()
-    for section, run in (("vibration", lambda: vibration(params, args.duration, args.cache)),
+    for section, run in (("vibration", lambda: vibration(params, args.duration, args.cache, tuple(args.rfe))),
                          ("growth", lambda: growth(params)),
                          ("damped", lambda: damped(params, args.duration, args.cache)),
                          ("iterations", lambda: iteration_rules(params, args.duration, args.cache)),

@@ -9,7 +9,7 @@ the same run.
 1. [eval] Time of M(q) with h, gravity and E's kinematics, and of one full qdd from (8), at 24 DOF; the cost
    of calling a compiled function with the ChainData named tuple.
 2. [profile] The compiled cost of the parts of one step (timed in compiled loops): the modal correction
-   (an eigenproblem, every 20 ms of motion), the iteration factor, per Newton evaluation a projection and a
+   (an eigenproblem, every 5 ms of motion), the iteration factor, per Newton evaluation a projection and a
    residual, and at the step's end a full evaluation.
 3. [speed] Per case (rigid; flexible with n_rfe = 6, 12, 24): Pinocchio's ABA per call; at h = 1 and 2 ms the
    throughput of simulate (best of ``--repeats``) per step, as a multiple of one ABA call and as a real-time
@@ -163,7 +163,7 @@ def _repeat_end_effector(q, chain, n):
 def _repeat_projection(q, k, holonomic_dependent, chain, n):
     total = 0.0
     for _ in range(n):
-        total += kernels.project_positions(q, k, holonomic_dependent, chain, 1e-9, 25)[0][0]
+        total += kernels.project_positions(q, k, holonomic_dependent, chain, 1e-9, 25).q[0]
     return total
 
 
@@ -177,10 +177,11 @@ def _repeat_accelerations(q, qd, k, drive, partition, chain, n):
 
 @njit
 def _repeat_residual(q, qd, a, k, drive, partition, chain, n):
-    _, T, S, p, C, _ = kernels.project_positions(q, k, partition.holonomic_dependent, chain, 1e-9, 25)
+    at = kernels.project_positions(q, k, partition.holonomic_dependent, chain, 1e-9, 25)
     total = 0.0
     for _ in range(n):
-        total += kernels.newton_residual(q, qd, a, T, S, p, C, k, drive, partition, chain)[1][0]
+        total += kernels.newton_residual(q, qd, a, at.T, at.S, at.ee_position, at.ee_jacobian, k, drive, partition,
+                                         chain)[1][0]
     return total
 
 
@@ -211,7 +212,7 @@ def _repeat_evaluation(q, qd, k, drive, partition, chain, n):
 def component_times(params: CraneParameters, repeat: int = 3000) -> None:
     """[profile] Compiled cost of the parts of a step (flexible, n_rfe = 6), each timed in a compiled loop
     (no Python call overhead), best of 5: a step is a factor, per Newton evaluation a projection and a
-    residual, and at its end a projection and a full evaluation with the integrator's qdd; every 20 ms of
+    residual, and at its end a projection and a full evaluation with the integrator's qdd; every 5 ms of
     motion the modal correction."""
     scenario = Scenario(params, "flexible")
     motion = scenario.motion
@@ -231,7 +232,7 @@ def component_times(params: CraneParameters, repeat: int = 3000) -> None:
               (off, k, motion.holonomic_dependent, chain)),
              ("Newton residual of (8) by inverse dynamics", _repeat_residual,
               (q, qd, acc.qdd[partition.integrated], k, drive, partition, chain)),
-             ("modal correction (eigenproblem, every 20 ms)", _repeat_correction,
+             ("modal correction (eigenproblem, every 5 ms)", _repeat_correction,
               (reduced_mass, drive, partition, chain, settings)),
              ("iteration matrix and its Cholesky factor", _repeat_factor,
               (acc.M, acc.velocity_map, correction, partition, chain)),

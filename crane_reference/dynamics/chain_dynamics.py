@@ -58,9 +58,9 @@ class CraneDynamics:
 
     def terms(self, t: float, q: np.ndarray, qd: np.ndarray, left_limit: bool = False) -> DynamicsTerms:
         """Terms at (t, q, qd); ``left_limit`` evaluates the drive just before t (a step ending on a jump)."""
-        M, h, Qg, Vg, p, R, C, d = chain_terms(q, qd, self.chain)
-        Q = generalized_forces(q, qd, Qg, self.chain, self.drive.kernel_parameters(t, left_limit))
-        return DynamicsTerms(M, h, Q, p, R, C, d, Vg)
+        c = chain_terms(q, qd, self.chain)
+        Q = generalized_forces(q, qd, c.gravity_forces, self.chain, self.drive.kernel_parameters(t, left_limit))
+        return DynamicsTerms(c.M, c.h, Q, c.ee_position, c.ee_rotation, c.ee_jacobian, c.ee_bias, c.gravity_potential)
 
     def end_effector(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Position of E and its Jacobian C (3, n) at q."""

@@ -38,9 +38,12 @@ from .structures import (
     ChainData,
     Coefficients,
     Evaluation,
+    Iterate,
     ModalCorrection,
     Partition,
+    Projection,
     Run,
+    StateTerms,
     Step,
     StepRows,
     StepSettings,
@@ -86,29 +89,28 @@ ROUND_OFF_STEP = 1e-15
 def project_positions(q, k: Coefficients, holonomic_dependent, chain: ChainData, tolerance, max_iterations,
                       exact_frames=True):
     """q with the holonomically dependent coordinates solved from Phi(q) = 0 by Newton (Jacobian
-    Phi_p C[:, hd]) until a correction of at most ``tolerance``; also the frames T, twists S, E's position
-    p and Jacobian C, and whether it converged.  The frames are those at the returned q itself, or with
-    ``exact_frames`` False those before the last correction (off by at most ``tolerance``, one forward
-    kinematics less: enough for the Newton iterates of a step)."""
+    Phi_p C[:, hd]) until a correction of at most ``tolerance`` (:class:`Projection`).  The frames are those
+    at the returned q itself, or with ``exact_frames`` False those before the last correction (off by at most
+    ``tolerance``, one forward kinematics less: enough for the Newton iterates of a step)."""
     q = q.copy()
     for _ in range(max_iterations):
         T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
         p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
         if holonomic_dependent.size == 0:
-            return q, T, S, p, C, True
+            return Projection(q, T, S, p, C, True)
         residual, grads = holonomic_values(p, k)
         step = solve_small_vector(matmul(grads, C, holonomic_dependent), residual)
         size = np.max(np.abs(step))
         if size <= ROUND_OFF_STEP:
-            return q, T, S, p, C, True
+            return Projection(q, T, S, p, C, True)
         for i in range(holonomic_dependent.size):
             q[holonomic_dependent[i]] -= step[i]
         if size <= tolerance:
             if exact_frames:
                 T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
                 p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
-            return q, T, S, p, C, True
-    return q, T, S, p, C, False
+            return Projection(q, T, S, p, C, True)
+    return Projection(q, T, S, p, C, False)
 
 
 @njit(cache=True, nogil=True)
@@ -172,23 +174,29 @@ def _solve_accelerations(M, f, A, B, e_dc, c_acc, partition: Partition):
 
 @njit(cache=True, nogil=True)
 def _terms_at(q, qd, T, S, k: Coefficients, drive, partition: Partition, chain: ChainData):
-    """The position and velocity terms of (7)-(8) at (q, qd) from the frames there: Hw, M, h, the forces,
-    the gravity potential, p, R, C, d, A, c, B and e_dc."""
+    """The position and velocity terms of (7)-(8) at (q, qd) from the frames there (:class:`StateTerms`)."""
     Hw, M, Qg, Vg, p, R, C = frame_terms(T, S, chain)
     h, d = velocity_products(qd, S, Hw, chain, p)
     forces = generalized_forces(q, qd, Qg, chain, drive)
     A, c_acc = acceleration_terms(p, matvec(C, qd), C, d, k)
     B, e_dc = constraint_map(A, c_acc, partition.independent, partition.dependent)
-    return M, h, forces, Vg, p, R, C, d, A, c_acc, B, e_dc
+    return StateTerms(M, h, forces, Vg, p, R, C, d, A, c_acc, B, e_dc)
 
 
 @njit(cache=True, nogil=True)
 def accelerations_at(q, qd, k: Coefficients, drive, partition: Partition, chain: ChainData):
     """qdd from (8) at (q, qd) with everything it needs (:class:`Accelerations`)."""
     T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
-    M, h, forces, Vg, p, R, C, d, A, c_acc, B, e_dc = _terms_at(q, qd, T, S, k, drive, partition, chain)
-    qdd = _solve_accelerations(M, forces - h, A, B, e_dc, c_acc, partition)
-    return Accelerations(M, h, forces, Vg, p, R, C, d, A, c_acc, B, qdd)
+    s = _terms_at(q, qd, T, S, k, drive, partition, chain)
+    qdd = _solve_accelerations(s.M, s.forces - s.h, s.A, s.velocity_map, s.particular, s.c, partition)
+    return _with_accelerations(s, qdd)
+
+
+@njit(cache=True, nogil=True)
+def _with_accelerations(s: StateTerms, qdd):
+    """:class:`Accelerations` from :class:`StateTerms` and qdd."""
+    return Accelerations(s.M, s.h, s.forces, s.gravity_potential, s.ee_position, s.ee_rotation, s.ee_jacobian,
+                         s.ee_bias, s.A, s.c, s.velocity_map, qdd)
 
 
 @njit(cache=True, nogil=True)
@@ -230,9 +238,10 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
     modes K_r phi = omega^2 M_r phi, Phi^T M_r Phi = I, are Phi = L^-T V with the
     eigenvectors V of L^-1 K_r L^-T.  A mode with omega h below ``settings.cutoff`` gets the inertia
     correction c = 1 - ((omega h / 2) / tan(omega h / 2))^2, one above it the damping 2 zeta omega; in the
-    independent coordinates Delta M_r = M_r Phi diag(c) Phi^T M_r = (L V) diag(c) (L V)^T and likewise
-    D_u.  Servo-constraints (P = E_ic: no symmetric reduced mass) get none, and so does the plain
-    trapezoidal rule (``settings.modal`` False)."""
+    independent coordinates Delta M_r = M_r Phi diag(c) Phi^T M_r = (L V) diag(c) (L V)^T and likewise D_u
+    (neither acts on a motion no spring resists: Phi^T M_r = diag(omega^-2) Phi^T K_r).  Servo-constraints
+    (P = E_ic: no symmetric reduced mass) get none, and so does the plain trapezoidal rule (``settings.modal``
+    False)."""
     independent = partition.independent
     n_ic = independent.size
     inertia = np.zeros((n_ic, n_ic))
@@ -248,7 +257,7 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
             stiffness[i, i] += drive[1]
     L_inverse = np.linalg.inv(L)
     omega_squared, V = np.linalg.eigh(L_inverse @ stiffness @ L_inverse.T)
-    LV = L @ V
+    LV = L @ V  # M_r Phi = L V
     c = np.zeros(n_ic)
     d = np.zeros(n_ic)
     for i in range(n_ic):
@@ -256,10 +265,10 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
         half = 0.5 * omega * h
         if omega * h >= settings.cutoff:
             d[i] = 2.0 * settings.unresolved_damping * omega
-        elif half > 1e-6:
+        elif half > 1e-3:
             c[i] = 1.0 - (half / np.tan(half)) ** 2
-        else:
-            c[i] = half * half * (2.0 / 3.0)  # the series of 1 - (x / tan x)^2 = 2 x^2 / 3 + ...
+        else:  # the series 1 - (x / tan x)^2 = 2 x^2 / 3 - x^4 / 15 + ..., free of cancellation
+            c[i] = (2.0 / 3.0 - half * half / 15.0) * half * half
     for i in range(n_ic):
         for j in range(i + 1):
             total_c = 0.0
@@ -292,23 +301,24 @@ def _state_at(a1, x0, v0, a0, q_guess, qd_size, h, k: Coefficients, partition: P
     """The trapezoidal state for the accelerations a1 of the integrated coordinates,
     x1 = x0 + h v0 + h^2/4 (a0 + a1), v1 = v0 + h/2 (a0 + a1): q = ``q_guess`` with x1 and q_hd from the
     position constraints (``project``; frames as in :func:`project_positions`) or as guessed (the caller
-    predicts it to second order in the change of x), qd with qd_dc from the velocity constraints, the frames
-    and E's terms there, and whether the constraints were met."""
+    predicts it to second order in the change of x), qd with qd_dc from the velocity constraints
+    (:class:`Iterate`)."""
     integrated = partition.integrated
     q1 = q_guess.copy()
     q1[integrated] = x0 + h * v0 + (0.25 * h * h) * (a0 + a1)
     if project:
-        q1, T, S, p, C, solved = project_positions(q1, k, partition.holonomic_dependent, chain,
-                                                   settings.projection_tolerance, 25, exact_frames)
+        at = project_positions(q1, k, partition.holonomic_dependent, chain, settings.projection_tolerance, 25,
+                               exact_frames)
     else:
         T, S = forward_kinematics(q1, chain.kinds, chain.axes, chain.origins)
         p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
-        solved = True
+        at = Projection(q1, T, S, p, C, True)
     qd1 = np.zeros(qd_size)
     qd1[integrated] = v0 + (0.5 * h) * (a0 + a1)
+    solved = at.solved
     if solved:
-        qd1, solved = dependent_velocities(qd1, p, C, k, partition.dependent)
-    return q1, qd1, T, S, p, C, solved
+        qd1, solved = dependent_velocities(qd1, at.ee_position, at.ee_jacobian, k, partition.dependent)
+    return Iterate(at.q, qd1, at.T, at.S, at.ee_position, at.ee_jacobian, solved)
 
 
 @njit(cache=True, nogil=True)
@@ -377,30 +387,30 @@ def integration_step(q0, qd0, qdd0, M0, B0, correction: ModalCorrection, t0, h, 
     status = NOT_CONVERGED
     for iteration in range(settings.max_iterations):
         # the first iterate (from the predictor) solves q_hd by Newton; the later ones take it as predicted below
-        q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings,
-                                                iteration == 0, False)
-        if not solved:
+        it = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, iteration == 0, False)
+        if not it.solved:
             return Step(q0, qd0, evaluate(q0, qd0, k, drive, partition, chain), correction, CONSTRAINTS_UNSOLVABLE,
                         iteration + 1)
-        qdd, residual, B = newton_residual(q1, qd1, a1, T, S, p, C, k, drive, partition, chain)
-        residual += matvec(correction.damping, qd1[independent]) - matvec(correction.inertia, a1[:n_ic])
+        qdd, residual, B = newton_residual(it.q, it.qd, a1, it.T, it.S, it.ee_position, it.ee_jacobian, k, drive,
+                                           partition, chain)
+        residual += matvec(correction.damping, it.qd[independent]) - matvec(correction.inertia, a1[:n_ic])
         correction_step = qdd[integrated] - a1
         correction_step[:n_ic] = -(cholesky_solve(factor, residual) if not servo else matvec(factor, residual))
         a1 = a1 + correction_step
         # q_hd of the next iterate to second order in the change of x: dx = h^2/4 da
-        q1 = _predict_dependent(q1, B, (0.25 * h * h) * correction_step[:n_ic], partition.holonomic_dependent)
+        q1 = _predict_dependent(it.q, B, (0.25 * h * h) * correction_step[:n_ic], partition.holonomic_dependent)
         if iteration + 1 >= settings.evaluations and 0.5 * h * np.max(np.abs(correction_step)) <= settings.tolerance:
             status = CONVERGED
             break
-    q1, qd1, T, S, p, C, solved = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, True,
-                                            True)
-    if not solved:
+    end = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, True, True)
+    if not end.solved:
         return Step(q0, qd0, evaluate(q0, qd0, k, drive, partition, chain), correction, CONSTRAINTS_UNSOLVABLE,
                     iteration + 1)
-    M, h_terms, forces, Vg, p, R, C, d, A, c_acc, B, e_dc = _terms_at(q1, qd1, T, S, k, drive, partition, chain)
-    qdd1 = _accelerations_from(a1[:n_ic], B, e_dc, independent, partition.dependent)
-    acc = Accelerations(M, h_terms, forces, Vg, p, R, C, d, A, c_acc, B, qdd1)
-    return Step(q1, qd1, _evaluation(q1, qd1, acc, k, drive, partition, chain), correction, status, iteration + 1)
+    terms = _terms_at(end.q, end.qd, end.T, end.S, k, drive, partition, chain)
+    acc = _with_accelerations(terms, _accelerations_from(a1[:n_ic], terms.velocity_map, terms.particular, independent,
+                                                          partition.dependent))
+    return Step(end.q, end.qd, _evaluation(end.q, end.qd, acc, k, drive, partition, chain), correction, status,
+                iteration + 1)
 
 
 @njit(cache=True, nogil=True)

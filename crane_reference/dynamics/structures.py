@@ -94,6 +94,64 @@ class ModalCorrection(NamedTuple):
     step: float
 
 
+class ChainTerms(NamedTuple):
+    """The chain's terms at (q, qd): mass matrix M, velocity terms h, gravity forces, total gravity
+    potential, E's position, the rotation of its frame, its Jacobian C (3, n) and bias d (p'' = C qdd + d)."""
+
+    M: np.ndarray
+    h: np.ndarray
+    gravity_forces: np.ndarray
+    gravity_potential: float
+    ee_position: np.ndarray
+    ee_rotation: np.ndarray
+    ee_jacobian: np.ndarray
+    ee_bias: np.ndarray
+
+
+class Projection(NamedTuple):
+    """q on the position constraints (the holonomically dependent coordinates solved), the frames T and
+    twists S, E's position and Jacobian there, and whether Newton converged."""
+
+    q: np.ndarray
+    T: np.ndarray
+    S: np.ndarray
+    ee_position: np.ndarray
+    ee_jacobian: np.ndarray
+    solved: bool
+
+
+class Iterate(NamedTuple):
+    """A state the integrator tries: q (on the position constraints, or with q_hd as predicted), qd with
+    qd_dc from the velocity constraints, the frames T and twists S, E's position and Jacobian, and whether
+    the constraints were met."""
+
+    q: np.ndarray
+    qd: np.ndarray
+    T: np.ndarray
+    S: np.ndarray
+    ee_position: np.ndarray
+    ee_jacobian: np.ndarray
+    solved: bool
+
+
+class StateTerms(NamedTuple):
+    """What (7)-(8) need at (q, qd) before the accelerations are known: :class:`Accelerations` without qdd,
+    with the particular solution e_dc of the acceleration constraints (qdd = B qdd_ic + e)."""
+
+    M: np.ndarray
+    h: np.ndarray
+    forces: np.ndarray
+    gravity_potential: float
+    ee_position: np.ndarray
+    ee_rotation: np.ndarray
+    ee_jacobian: np.ndarray
+    ee_bias: np.ndarray
+    A: np.ndarray
+    c: np.ndarray
+    velocity_map: np.ndarray
+    particular: np.ndarray
+
+
 class Accelerations(NamedTuple):
     """What (8) needs and gives at (q, qd): mass matrix M, velocity terms h, generalized forces (gravity,
     springs, dampers, drive), total gravity potential, E's position, frame rotation, Jacobian C (3, n) and

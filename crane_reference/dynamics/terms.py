@@ -26,7 +26,7 @@ from .inertia import (
 )
 from .kinematics import forward_kinematics, point_bias, point_jacobian, point_position, velocity_terms
 from .linalg import matvec
-from .structures import ChainData
+from .structures import ChainData, ChainTerms
 
 
 @njit(cache=True)
@@ -66,10 +66,10 @@ def inverse_dynamics(S, Hw, velocity_term, qdd, chain: ChainData):
 
 @njit(cache=True)
 def chain_terms(q, qd, chain: ChainData):
-    """M, h, gravity forces, total gravity potential, E's position, rotation, Jacobian C and d."""
+    """The chain's terms at (q, qd) (:class:`ChainTerms`)."""
     _, S, Hw, M, Qg, Vg, p, R, C = position_terms(q, chain)
     h, d = velocity_products(qd, S, Hw, chain, p)
-    return M, h, Qg, Vg, p, R, C, d
+    return ChainTerms(M, h, Qg, Vg, p, R, C, d)
 
 
 @njit(cache=True)

@@ -36,7 +36,8 @@ at h = 1 ms those above 400 Hz) cannot be turned exactly (tan has a pole at pi) 
 D_u = M_r Phi_u diag(2 zeta omega) Phi_u^T M_r damps them with zeta = 1 (they keep their static
 deflection), so that no such mode rings at a frequency it does not have.  M_r moves with the
 configuration, so Delta M_r and D_u are computed again every :data:`REFRESH_INTERVAL` of motion (an
-eigenproblem of the n_ic x n_ic reduced matrices); a stale D_u would leak into resolved modes.
+eigenproblem of the n_ic x n_ic reduced matrices); stale ones act on the slow motion and leak damping into
+resolved modes.
 Servo-constraints (P = E_ic) have no symmetric reduced mass and use the plain trapezoidal rule.
 
 The holonomically dependent coordinates are never integrated: q_hd comes from the position constraints
@@ -88,7 +89,7 @@ PROJECTION_TOLERANCE = 1e-9
 Newton converges quadratically, so the residual left is ~|Phi_qq| 1e-18, far below 1e-15 m; the
 velocities and (8) are then evaluated at the projected q itself."""
 
-REFRESH_INTERVAL = 0.02
+REFRESH_INTERVAL = 0.005
 """[s] of motion after which the modal correction is computed again at the current configuration."""
 
 CUTOFF = 0.8 * math.pi

@@ -132,13 +132,12 @@ class ProgrammedMotion:
                           max_iterations: int = 25) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """q with q_hd solved from Phi(q, t) = 0 (Newton, Jacobian Phi_p C[:, hd]; the paper's K_dc), and
         (p_E, C) at the returned q; Newton stops after a correction of at most ``tolerance`` [rad or m]."""
-        q, _, _, p, C, converged = kernels.project_positions(np.ascontiguousarray(q, dtype=float),
-                                                       self.constraints.coefficients(t), self.holonomic_dependent,
-                                                       self.dynamics.chain, tolerance, max_iterations)
-        if not converged:
+        projection = kernels.project_positions(np.ascontiguousarray(q, dtype=float), self.constraints.coefficients(t),
+                                               self.holonomic_dependent, self.dynamics.chain, tolerance, max_iterations)
+        if not projection.solved:
             raise ProjectionError(f"position constraints not met after {max_iterations} Newton iterations at "
                                   f"t = {t:.6g} s: the target is not reachable from here")
-        return q, (p, C)
+        return projection.q, (projection.ee_position, projection.ee_jacobian)
 
     def dependent_velocities(self, t: float, q: np.ndarray, qd: np.ndarray,
                              kinematics: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:

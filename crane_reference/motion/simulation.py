@@ -19,6 +19,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from ..dynamics.chain_dynamics import CraneDynamics
+from ..dynamics.structures import ACCOUNTS
 from ..model.chain import ChainModel, build_model
 from ..model.drive import make_drive
 from ..model.parameters import CraneParameters, Task
@@ -28,6 +29,11 @@ from .equilibrium import Equilibrium, EquilibriumError, static_equilibrium
 from .integration import EVALUATIONS, ONLINE_TOLERANCE, ExactFrequencyTrapezoidal, IntegrationError, StepState
 from .programmed_motion import ConstraintSingularityError, ProgrammedMotion, ProjectionError
 from .trajectory import Sample, Trajectory, make_sample, stack_samples
+
+POWERS = [ACCOUNTS.index(name) for name in ("drive_power", "constraint_power", "damping_power")]
+"""Columns of the accounts whose time integrals are the work terms (drive, constraints, dampers)."""
+SAMPLED_ACCOUNTS = ("kinetic_energy", "potential_energy", "drive_torque", "kdc_min_singular_value")
+"""Accounts a sample carries under their own names."""
 
 Progress = Callable[[float], None]
 TaskConstraints = Callable[[Task, float], ConstraintSet]
@@ -133,7 +139,7 @@ class MotionStepper:
         times, on_jump, covered = self._next_times(t_end)
         new, rows = self.integrator.run(start, times, ends_on_jump=on_jump)
         self._k += covered
-        powers = np.vstack((start.solution.powers, rows.accounts[:, 3:6]))
+        powers = np.vstack((start.solution.powers, rows.accounts[:, POWERS]))
         steps = np.diff(np.concatenate(([start.t], times)))
         work = self._work + np.cumsum(0.5 * steps[:, None] * (powers[:-1] + powers[1:]), axis=0)
         self._work = work[-1].copy()
@@ -144,13 +150,12 @@ class MotionStepper:
         if on_jump:  # the sample at a jump shows the motion from the jump on, as after a restart
             solution = self.state.solution
             qdd[-1], reactions[-1], forces[-1] = solution.qdd, solution.reactions, solution.constraint_forces
-            accounts[-1, 2] = solution.drive_torque
+            accounts[-1, ACCOUNTS.index("drive_torque")] = solution.drive_torque
+        columns = {name: accounts[:, i] for i, name in enumerate(ACCOUNTS) if name in SAMPLED_ACCOUNTS}
         return dict(t=times, q=rows.q, qd=rows.qd, qdd=qdd, reactions=reactions, constraint_forces=forces,
-                    drive_torque=accounts[:, 2], ee_position=rows.ee_position, ee_rotation=rows.ee_rotation,
-                    ee_velocity=rows.ee_velocity, residual=rows.residual, residual_distance=rows.residual_distance,
-                    kdc_min_singular_value=accounts[:, 6], kinetic_energy=accounts[:, 0],
-                    potential_energy=accounts[:, 1], work_drive=work[:, 0], work_constraints=work[:, 1],
-                    work_damping=work[:, 2])
+                    ee_position=rows.ee_position, ee_rotation=rows.ee_rotation, ee_velocity=rows.ee_velocity,
+                    residual=rows.residual, residual_distance=rows.residual_distance, **columns,
+                    work_drive=work[:, 0], work_constraints=work[:, 1], work_damping=work[:, 2])
 
     def snapshot(self) -> StepperSnapshot:
         """Everything needed to continue from the current step later (see :meth:`rewind`)."""
