@@ -70,6 +70,7 @@ from ..dynamics import kernels
 from ..dynamics.structures import (
     ACCOUNTS,
     CONSTRAINTS_UNSOLVABLE,
+    CONVERGED,
     STATUS_MESSAGES,
     ModalCorrection,
     StepRows,
@@ -180,7 +181,7 @@ class ExactFrequencyTrapezoidal:
             state.q, state.qd, previous.qdd, previous.dynamics.M, previous.velocity_map, state.correction,
             state.t, times, motion.constraints.coefficients_at(times), drives, motion.partition,
             motion.dynamics.chain, self.settings)
-        if run.status != 0:
+        if run.status != CONVERGED:
             t0 = times[run.completed - 1] if run.completed else state.t
             t1 = times[min(run.completed, len(times) - 1)]
             message = STATUS_MESSAGES[run.status].format(t0=t0, t1=t1, h=t1 - t0, iterations=self.max_iterations)
