@@ -1,7 +1,7 @@
 """Static equilibrium, the RFE discretisation and the rigid limit, against independent truths.
 
 * Started in its static equilibrium with the drive off, the crane stays at rest under the
-  generalized-alpha integrator (a converged implicit step reproduces rest to round-off).
+  integrator (a converged implicit step reproduces rest to round-off).
 * The equilibrium satisfies the static KKT condition Q(q) + A^T lambda = 0 on every row except the
   drive's (lambda by least squares here), and the holding torque is zero by symmetry.
 * A clamped-free uniform beam discretised with :func:`discretise_beam` has a first bending frequency
@@ -81,9 +81,8 @@ def test_equilibrium_is_held(hold):
 
 def test_rest_stays_at_round_off(hold):
     """Started exactly at rest in a stable equilibrium, the motion of the *linear* neighbourhood is
-    only round-off, ~1e-15 rad/s, and a converged implicit step keeps it there (measured with a
-    generalized-alpha step iterated to a residual of 1e-15: max |qd| = 1.8e-15 rigid, 1.8e-15
-    flexible over 5 s).  A step that stops iterating before it has converged behaves like an explicit
+    only round-off, ~1e-15 rad/s, and a converged implicit step keeps it there (the integrator's step
+    iterated to a residual of 1e-15).  A step that stops iterating before it has converged behaves like an explicit
     method and can let round-off grow: 1e-10 leaves five orders of magnitude of margin."""
     worst = hold.max_velocity.max()
     first_second = hold.max_velocity[: round(1.0 / HOLD_STEP)].max()

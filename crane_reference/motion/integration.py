@@ -1,16 +1,15 @@
 """Time integration of the programmed motion: the trapezoidal rule with exact modal frequencies.
 
-Why this scheme.  The RFE springs put constrained natural frequencies up to ~1.7 kHz into the default
-crane, and the undamped torque steps excite them; the boom keeps vibrating at 70-200 Hz for ever, and
-that vibration is what the paper studies.  Any second-order scheme (generalized-alpha, the trapezoidal
-or the midpoint rule) turns a mode of frequency omega by omega h (1 - O((omega h)^2)) per step.  On the
-crane that error matters far beyond its size: along the ellipse the modes pass through internal
-resonances (2 f9 = f8 + f10 of the column-slew, base and luffing-bending modes, and f9 + f10 = f11), where
-the energy that the large ~75 Hz column-slew vibration hands to the luffing bending (119 Hz) depends on
-the modes' relative phases.  Shifted frequencies shift those resonances: at h = 0.25 ms the luffing
-vibration grows to several times the model's (with or without numerical damping, converged Newton or
-not), while numerical damping that hides it (rho_inf < 1) removes half of the 40-250 Hz vibration within
-seconds at h = 1 ms.  The README's Accuracy section gives the evidence (benchmarks/bench_accuracy.py).
+Why this scheme.  The RFE springs put constrained natural frequencies far above the step's into the
+crane, and the undamped torque steps excite them; the boom keeps vibrating for ever, and that vibration
+is what the paper studies.  Any second-order scheme (generalized-alpha, the trapezoidal or the midpoint
+rule) turns a mode of frequency omega by omega h (1 - O((omega h)^2)) per step.  On the crane that error
+matters far beyond its size: along the ellipse the modes pass through internal resonances (2 f9 = f8 +
+f10 of the column-slew, torsion and luffing-bending modes, and f9 + f10 = f11), where the energy that the
+large column-slew vibration hands to the luffing bending depends on the modes' relative phases.  Shifted
+frequencies shift those resonances and pump the luffing vibration (with or without numerical damping,
+converged Newton or not), while numerical damping that hides it removes the vibration the paper is
+about.  The README's method section gives the evidence (benchmarks/bench_accuracy.py, [mechanism]).
 
 The method.  On the integrated coordinates x = q_ic (plus q_vd, below) the trapezoidal rule
 
@@ -29,7 +28,7 @@ with pre-warping of digital filter design, per mode), i.e. Delta M_r = M_r Phi d
 linear spring-mass part is then exact at the steps in amplitude and phase, with no numerical damping;
 the slow motion (omega h -> 0, c -> 0) keeps the trapezoidal rule's second order, and so do the gravity,
 velocity and constraint terms.  Velocities of a vibrating mode come out larger than the exact ones by
-tan(omega h / 2) / (omega h / 2) (the positions are exact): 1.6 % at 70 Hz and h = 1 ms, 4.8 % at 119 Hz.
+tan(omega h / 2) / (omega h / 2) (the positions are exact).
 
 Modes with omega h at or above the cutoff (0.8 pi: the output sampled every step cannot show them;
 at h = 1 ms those above 400 Hz) cannot be turned exactly (tan has a pole at pi) and are not resolved:
