@@ -236,12 +236,15 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
     :mod:`crane_reference.motion.integration`).  The springs act on independent coordinates only, so the
     reduced stiffness K_r = K[ic, ic] (plus the drive's spring on psi2) is constant; with M_r = L L^T the
     modes K_r phi = omega^2 M_r phi, Phi^T M_r Phi = I, are Phi = L^-T V with the
-    eigenvectors V of L^-1 K_r L^-T.  A mode with omega h below ``settings.cutoff`` gets the inertia
-    correction c = 1 - ((omega h / 2) / tan(omega h / 2))^2, one above it the damping 2 zeta omega; in the
-    independent coordinates Delta M_r = M_r Phi diag(c) Phi^T M_r = (L V) diag(c) (L V)^T and likewise D_u
-    (neither acts on a motion no spring resists: Phi^T M_r = diag(omega^-2) Phi^T K_r).  Servo-constraints
-    (P = E_ic: no symmetric reduced mass) get none, and so does the plain trapezoidal rule (``settings.modal``
-    False)."""
+    eigenvectors V of L^-1 K_r L^-T.  A mode with omega h below ``settings.cutoff`` gets the inertia and
+    damping corrections c and e that map its roots lambda of lambda^2 + d lambda + omega^2 (d = phi^T D_r phi,
+    the physical modal damping) exactly: the trapezoidal rule on (1 - c) a + (d + e) v + omega^2 x has the
+    roots lambda_hat = (2 / h) tanh(lambda h / 2), so 1 - c = omega^2 / (lambda_hat_1 lambda_hat_2) and
+    d + e = -(1 - c) (lambda_hat_1 + lambda_hat_2) (undamped: c = 1 - ((omega h / 2) / tan(omega h / 2))^2,
+    e = 0); a mode at or above the cutoff gets the damping e = 2 zeta omega.  In the independent coordinates
+    Delta M_r = M_r Phi diag(c) Phi^T M_r = (L V) diag(c) (L V)^T and likewise D_u with e (neither acts on a
+    motion no spring resists: Phi^T M_r = diag(omega^-2) Phi^T K_r).  Servo-constraints (P = E_ic: no
+    symmetric reduced mass) get none, and so does the plain trapezoidal rule (``settings.modal`` False)."""
     independent = partition.independent
     n_ic = independent.size
     inertia = np.zeros((n_ic, n_ic))
@@ -258,17 +261,33 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
     L_inverse = np.linalg.inv(L)
     omega_squared, V = np.linalg.eigh(L_inverse @ stiffness @ L_inverse.T)
     LV = L @ V  # M_r Phi = L V
+    modal_damping = np.zeros(n_ic)
+    if chain.damped:
+        physical = np.empty((n_ic, n_ic))
+        for i in range(n_ic):
+            for j in range(n_ic):
+                physical[i, j] = chain.damping[independent[i], independent[j]]
+        Phi = L_inverse.T @ V
+        for i in range(n_ic):
+            modal_damping[i] = Phi[:, i] @ physical @ Phi[:, i]
     c = np.zeros(n_ic)
     d = np.zeros(n_ic)
     for i in range(n_ic):
-        omega = np.sqrt(max(omega_squared[i], 0.0))
-        half = 0.5 * omega * h
+        k = max(omega_squared[i], 0.0)
+        omega = np.sqrt(k)
         if omega * h >= settings.cutoff:
             d[i] = 2.0 * settings.unresolved_damping * omega
-        elif half > 1e-3:
-            c[i] = 1.0 - (half / np.tan(half)) ** 2
-        else:  # the series 1 - (x / tan x)^2 = 2 x^2 / 3 - x^4 / 15 + ..., free of cancellation
-            c[i] = (2.0 / 3.0 - half * half / 15.0) * half * half
+            continue
+        root = np.sqrt(complex(modal_damping[i] ** 2 - 4.0 * k))
+        second = 0.5 * (-modal_damping[i] - root)
+        if abs(second * h) < 1e-6:
+            continue
+        first = k / second  # the product of the roots is k: no cancellation for an overdamped mode
+        mapped_first, mapped_second = (2.0 / h) * np.tanh(0.5 * h * first), (2.0 / h) * np.tanh(0.5 * h * second)
+        product = (mapped_first * mapped_second).real
+        mass = k / product if product != 0.0 else 1.0
+        c[i] = 1.0 - mass
+        d[i] = -mass * (mapped_first + mapped_second).real - modal_damping[i]
     for i in range(n_ic):
         for j in range(i + 1):
             total_c = 0.0

@@ -86,7 +86,8 @@ class ModalCorrection(NamedTuple):
     """The integrator's modal terms in the independent coordinates (n_ic, n_ic), computed at ``time`` [s]
     for the step ``step`` [s] (see :func:`crane_reference.dynamics.kernels.modal_correction`): ``inertia``
     Delta M_r, removed from the reduced mass so that the trapezoidal rule turns each resolved mode by
-    exactly omega h per step, and ``damping`` D_u, which damps the modes the step does not resolve."""
+    exactly omega h per step, and ``damping`` D_u, which gives each resolved mode its exact decay per step
+    and damps the modes the step does not resolve."""
 
     inertia: np.ndarray
     damping: np.ndarray

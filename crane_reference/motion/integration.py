@@ -28,7 +28,12 @@ with pre-warping of digital filter design, per mode), i.e. Delta M_r = M_r Phi d
 linear spring-mass part is then exact at the steps in amplitude and phase, with no numerical damping;
 the slow motion (omega h -> 0, c -> 0) keeps the trapezoidal rule's second order, and so do the gravity,
 velocity and constraint terms.  Velocities of a vibrating mode come out larger than the exact ones by
-tan(omega h / 2) / (omega h / 2) (the positions are exact).
+tan(omega h / 2) / (omega h / 2) (the positions are exact).  With the model's damping D (modal damping
+d_i = phi_i^T D_r phi_i) the same idea maps both roots lambda of each mode exactly: the rule turns a root
+lambda_hat of its equation into z = (1 + lambda_hat h / 2) / (1 - lambda_hat h / 2), which is exp(lambda h)
+for lambda_hat = (2 / h) tanh(lambda h / 2), and a mass and a damping correction per mode make those the
+roots (:func:`crane_reference.dynamics.kernels.modal_correction`): each damped mode turns and decays per
+step as the model's does.
 
 Modes with omega h at or above the cutoff (0.8 pi: the output sampled every step cannot show them;
 at h = 1 ms those above 400 Hz) cannot be turned exactly (tan has a pole at pi) and are not resolved:
