@@ -23,7 +23,6 @@ from crane_reference.model.urdf import model_to_urdf
 ROOT = Path(__file__).resolve().parent.parent
 LAUNCH = ROOT / "launch" / "crane_reference.launch.py"
 RVIZ = ROOT / "rviz" / "crane_reference.rviz"
-NODE = f"/{messages.NODE_NAME}"
 
 
 class Recorded:
@@ -56,10 +55,9 @@ def stand_ins(share: Path) -> dict[str, types.ModuleType]:
     return modules
 
 
-@pytest.fixture
-def launched(monkeypatch, tmp_path):
-    """The launch file's description and the nodes it starts with its default arguments, against a share
-    directory laid out as setup.py installs it."""
+def launch(monkeypatch, tmp_path, **overrides):
+    """The launch file's description and the nodes it starts with its default arguments (and
+    ``overrides``), against a share directory laid out as setup.py installs it."""
     share = tmp_path / "share"
     for source, target in (("config/node.yaml", "config/node.yaml"), ("rviz/crane_reference.rviz",
                                                                        "rviz/crane_reference.rviz")):
@@ -74,15 +72,32 @@ def launched(monkeypatch, tmp_path):
     arguments = {a.args[0]: a.kwargs["default_value"] for a in description.args[0] if not a.kwargs.get("function")
                  and a.args}
     (opaque,) = [a for a in description.args[0] if "function" in a.kwargs]
-    nodes = {node.kwargs["package"]: node for node in opaque.kwargs["function"](arguments)}
+    nodes = {node.kwargs["package"]: node for node in opaque.kwargs["function"]({**arguments, **overrides})}
     return arguments, nodes, share
+
+
+@pytest.fixture
+def launched(monkeypatch, tmp_path):
+    return launch(monkeypatch, tmp_path)
+
+
+def resolve(name: str, namespace: str, node: str) -> str:
+    """A topic name as ROS 2 resolves it for ``node`` in ``namespace`` (design article "Topic and Service
+    name mapping"): absolute names stay, ``~`` is the node's own namespace, others are relative to the
+    node's namespace."""
+    base = "/" + namespace.strip("/") if namespace.strip("/") else ""
+    if name.startswith("/"):
+        return name
+    if name.startswith("~"):
+        return f"{base}/{node}{name[1:]}"
+    return f"{base}/{name}"
 
 
 def test_launch_file_parses_and_declares_its_arguments(launched):
     ast.parse(LAUNCH.read_text())
     arguments, _, share = launched
     assert arguments == {"model": "flexible", "config_file": "", "params_file": str(share / "config" / "node.yaml"),
-                         "rviz": "true"}
+                         "rviz": "true", "namespace": "", "use_sim_time": "false"}
 
 
 def test_launch_starts_the_node_robot_state_publisher_and_rviz_consistently(launched):
@@ -93,13 +108,17 @@ def test_launch_starts_the_node_robot_state_publisher_and_rviz_consistently(laun
     setup = (ROOT / "setup.py").read_text()
     assert node["executable"] == "node" and '(f"lib/{PACKAGE}", ["scripts/node"])' in setup
     assert node["name"] == messages.NODE_NAME
-    params_file, overrides = node["parameters"]
+    params_file, overrides, _ = node["parameters"]
     assert Path(params_file).is_file() and overrides == {"model": "flexible", "config_file": ""}
+    assert all(n.kwargs["namespace"] == "" and {"use_sim_time": False} in n.kwargs["parameters"]
+               for n in nodes.values())
     rsp = nodes["robot_state_publisher"].kwargs
     assert rsp["executable"] == "robot_state_publisher"
     # the URDF of the same model as the node's, fed by the node's own joint states
-    assert rsp["parameters"] == [{"robot_description": model_to_urdf(build_model(load_config(), "flexible"))}]
-    assert rsp["remappings"] == [("joint_states", messages.JOINT_STATES_TOPIC.replace("~", NODE))]
+    assert rsp["parameters"][0] == {"robot_description": model_to_urdf(build_model(load_config(), "flexible"))}
+    ((remapped, target),) = rsp["remappings"]
+    assert remapped == "joint_states"
+    assert resolve(target, "", "robot_state_publisher") == resolve(messages.JOINT_STATES_TOPIC, "", messages.NODE_NAME)
     rviz = nodes["rviz2"].kwargs
     assert rviz["executable"] == "rviz2" and rviz["arguments"][0] == "-d" and Path(rviz["arguments"][1]).is_file()
     assert rviz["condition"].args[0].args == ("rviz",)
@@ -118,9 +137,26 @@ def test_rviz_config_shows_the_node_topics_in_the_urdf_frame():
     children = {joint.find("child").get("link") for joint in urdf.iter("joint")}
     assert fixed_frame in links and fixed_frame not in children  # the root link
     displays = {d["Class"]: d for d in manager["Displays"]}
-    node_topics = {topic.replace("~", NODE) for topic in (messages.MARKERS_TOPIC, messages.END_EFFECTOR_POSE_TOPIC)}
-    shown = {d["Topic"]["Value"] for d in displays.values() if "Topic" in d}
-    assert shown == node_topics
-    assert displays["rviz_default_plugins/RobotModel"]["Description Topic"]["Value"] == "/robot_description"
+    for namespace in ("", "crane1", "/site/crane2"):  # relative names follow the namespace of the bring-up
+        node_topics = {resolve(topic, namespace, messages.NODE_NAME)
+                       for topic in (messages.MARKERS_TOPIC, messages.END_EFFECTOR_POSE_TOPIC)}
+        shown = {resolve(d["Topic"]["Value"], namespace, "rviz2") for d in displays.values() if "Topic" in d}
+        assert shown == node_topics
+        description = displays["rviz_default_plugins/RobotModel"]["Description Topic"]["Value"]
+        assert resolve(description, namespace, "rviz2") == resolve("robot_description", namespace,
+                                                                   "robot_state_publisher")
     assert displays["rviz_default_plugins/RobotModel"]["Description Topic"]["Durability Policy"] == "Transient Local"
     assert all(re.fullmatch(r"rviz_(default_plugins|common)/\w+", d["Class"]) for d in manager["Displays"])
+
+
+@pytest.mark.parametrize("namespace", ["crane1", "/site/crane2"])
+def test_launch_in_a_namespace_with_sim_time(monkeypatch, tmp_path, namespace):
+    """namespace:=... and use_sim_time:=true reach all three nodes; robot_state_publisher still reads the
+    node's joint states (both names resolved in that namespace), never the namespace's measured ones."""
+    _, nodes, _ = launch(monkeypatch, tmp_path, namespace=namespace, use_sim_time="true")
+    assert all(n.kwargs["namespace"] == namespace and {"use_sim_time": True} in n.kwargs["parameters"]
+               for n in nodes.values())
+    ((_, target),) = nodes["robot_state_publisher"].kwargs["remappings"]
+    read = resolve(target, namespace, "robot_state_publisher")
+    assert read == resolve(messages.JOINT_STATES_TOPIC, namespace, messages.NODE_NAME)
+    assert read != resolve("joint_states", namespace, "robot_state_publisher")
