@@ -123,10 +123,9 @@ def study_command(args: argparse.Namespace) -> int:
 
 
 def compile_command(args: argparse.Namespace) -> int:
-    from .stream.warmup import compile_kernels
+    from .stream.warmup import warm_up
 
-    seconds = compile_kernels()
-    print(f"kernels ready in {seconds:.1f} s (compiled, or loaded from the cache {os.environ['NUMBA_CACHE_DIR']})")
+    print(f"{warm_up().describe()}; cache {os.environ['NUMBA_CACHE_DIR']}")
     return 0
 
 

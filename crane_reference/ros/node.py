@@ -61,10 +61,9 @@ from __future__ import annotations
 import math
 import sys
 import threading
-import time
 from collections import deque
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 
 import numpy as np
 import rclpy
@@ -92,6 +91,7 @@ from ..motion.simulation import SOLVER_FAILURES
 from ..stream.reference_stream import ERROR, PAUSED, ReferenceStream
 from ..stream.schedule import Frame, FrameSchedule
 from ..stream.targets import UnreachableTargetError
+from ..stream.warmup import warm_up
 from .message_types import rclpy_types
 from .parameters import PARAMETERS, SPECS, TARGET_PARAMETERS, ParameterError, check, coerce_parameters, declare
 
@@ -123,20 +123,43 @@ class CraneReferenceNode(Node):
         :class:`~crane_reference.ros.parameters.ParameterError` if it cannot start.
         """
         super().__init__(node_name, **kwargs)
+        self._types = rclpy_types()
+        self._start_ns: int | None = None
+        self._stop = threading.Event()
+        self._starting = "starting: loading the crane description"  # the diagnostics' message until publishing
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, messages.DIAGNOSTICS_TOPIC,
+                                                      messages.PUBLISHER_DEPTH)
+        self._threads = [threading.Thread(target=self._diagnostics_loop, name="crane_reference_diagnostics",
+                                          daemon=True)]
+        self._threads[0].start()
+        try:
+            self._prepare()
+        except Exception as error:
+            self._starting = f"cannot start: {error}"
+            with suppress(RCLError):  # the context may be shutting down already
+                self._publish_diagnostics()
+            self._stop.set()
+            raise
+        except BaseException:  # KeyboardInterrupt while starting
+            self._stop.set()
+            raise
+
+    def _prepare(self) -> None:
+        """Parameters, crane, kernels, stream, publishers, services and the worker and publisher threads."""
         config_file = declare(self, SPECS["config_file"])
         config = load_config(config_file or None)
         self._values = {spec.name: declare(self, spec, config) for spec in PARAMETERS if spec.name != "config_file"}
         self._check_overrides()
         self._rate = int(self._values["publish_rate"])
-        self.get_logger().info("preparing the solver (with an empty kernel cache this compiles for a minute or two; "
-                               "`crane-reference compile` after installing does it ahead)")
-        ready = time.perf_counter()
+        self._starting = "starting: making the solver kernels ready (compiled on a first start, else loaded)"
+        self.get_logger().info("making the solver kernels ready (with an empty kernel cache this compiles for a "
+                               "minute or two; `crane-reference compile` after installing does it ahead)")
+        self.get_logger().info(f"solver {warm_up((self._values['model'],)).describe()}")
+        self._starting = "starting: computing the start and the first second of motion"
         self._stream = self._make_stream(config)
-        self.get_logger().info(f"solver ready in {time.perf_counter() - ready:.1f} s")
         self._schedule = FrameSchedule(self._rate, max(2, math.ceil(LOOKAHEAD * self._rate)),
                                        self._values["command_lead"], MAX_CATCH_UP, self._stream.sample(0.0))
         self._refill = min(FRAME_BATCH, max(1, self._schedule.lookahead // 4))  # frames made per batch at least
-        self._types = rclpy_types()
         self._joint_names = list(self._stream.joint_names)
         self._preview_indices = self._joint_indices(self._values["preview.joints"])
         self._pending_restart: int | None = None  # sample at which a restart waits for the motion to rest
@@ -146,7 +169,6 @@ class CraneReferenceNode(Node):
         # _stream_lock.
         self._lock = threading.Condition()
         self._stream_lock = threading.Lock()
-        self._start_ns: int | None = None
         self._last_stamp = 0
         self._achieved_rate = 0.0
         self._late_reported = 0
@@ -162,7 +184,6 @@ class CraneReferenceNode(Node):
         self._pose_pub = self.create_publisher(PoseStamped, messages.END_EFFECTOR_POSE_TOPIC, depth)
         self._preview_pub = self.create_publisher(JointTrajectory, messages.REFERENCE_PREVIEW_TOPIC, depth)
         self._marker_pub = self.create_publisher(MarkerArray, messages.MARKERS_TOPIC, depth)
-        self._diagnostics_pub = self.create_publisher(DiagnosticArray, messages.DIAGNOSTICS_TOPIC, depth)
         self._description_pub = self.create_publisher(String, messages.ROBOT_DESCRIPTION_TOPIC, latched)
         self._description_pub.publish(messages.robot_description(self._types, model_to_urdf(self._stream.model)))
 
@@ -173,12 +194,12 @@ class CraneReferenceNode(Node):
         self.create_service(SetBool, "~/pause", self._on_pause)
         self.create_subscription(Float64, messages.SPEED_SCALING_TOPIC, self._on_speed_scaling, depth)
 
-        self._stop = threading.Event()
-        self._threads = [threading.Thread(target=self._work, name="crane_reference_solver", daemon=True),
-                         threading.Thread(target=self._publish_loop, name="crane_reference_publisher", daemon=True)]
-        for thread in self._threads:
+        workers = [threading.Thread(target=self._work, name="crane_reference_solver", daemon=True),
+                   threading.Thread(target=self._publish_loop, name="crane_reference_publisher", daemon=True)]
+        for thread in workers:
             thread.start()
-        self.create_timer(messages.DIAGNOSTICS_PERIOD, self._publish_diagnostics)
+        self._threads += workers
+        self._starting = "starting: computing the first second of motion ahead"
         self.create_timer(1.0 / MARKER_RATE, self._publish_markers)
         self._status_timer = self.create_timer(self._values["status_period"], self._log_status)
         self.get_logger().info(
@@ -450,6 +471,8 @@ class CraneReferenceNode(Node):
         try:
             while not self._stop.is_set() and (self._schedule.made_k < self._schedule.lookahead
                                                or clock.now().nanoseconds == 0):
+                if self._schedule.made_k >= self._schedule.lookahead:
+                    self._starting = "starting: waiting for /clock (use_sim_time is true and ROS time is 0)"
                 self._stop.wait(1.0 / self._rate)
             self._start_ns = clock.now().nanoseconds
             self._diagnostics_reference = (0, 0.0, 0.0, self._start_ns)
@@ -516,9 +539,24 @@ class CraneReferenceNode(Node):
         factor = (motion - last_motion) / (wall - last_wall) if wall > last_wall else math.inf
         return rate, factor
 
+    def _diagnostics_loop(self) -> None:
+        """Diagnostics thread: /diagnostics every DIAGNOSTICS_PERIOD of wall time from the node's creation on
+        (while it starts, and whether or not the ROS clock runs)."""
+        try:
+            while not self._stop.wait(messages.DIAGNOSTICS_PERIOD):
+                self._publish_diagnostics()
+        except RCLError:
+            if self.context.ok():
+                raise  # not a shutdown: let the thread report it
+
     def _publish_diagnostics(self) -> None:
-        """/diagnostics: state, constraint residual, real-time factor, achieved rate, counters."""
+        """/diagnostics: before publishing starts, what the node is doing (or why it cannot start); then
+        state, constraint residual, real-time factor, achieved rate, counters."""
         if self._start_ns is None:
+            level = messages.ERROR if self._starting.startswith("cannot") else messages.OK
+            self._diagnostics_pub.publish(messages.diagnostics(
+                self._types, self.get_clock().now().nanoseconds, f"{self.get_name()}: reference",
+                self.get_fully_qualified_name(), level, self._starting, {}))
             return
         rate, factor = self._rates()
         self._achieved_rate = rate

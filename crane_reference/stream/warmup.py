@@ -9,9 +9,13 @@ Afterwards each process only loads the cached code.
 
 from __future__ import annotations
 
+import sys
 import time
+from collections.abc import Iterable
+from dataclasses import dataclass
 
 import numpy as np
+from numba.core.registry import CPUDispatcher
 
 from ..model.chain import VARIANTS
 from ..model.config import load_config
@@ -21,13 +25,42 @@ from .reference_stream import ReferenceStream
 WARM_UP_STEPS = 3
 
 
-def compile_kernels() -> float:
-    """Call every kernel the simulation, the stream and the node use (both model variants: a few steps
-    offline and streamed, one evaluation, a target check and a re-target); returns the wall time [s]
-    (compiling with an empty cache, loading with a filled one)."""
+@dataclass(frozen=True)
+class WarmUp:
+    """What making the kernels ready took: wall time [s], kernel versions compiled (absent from the cache)
+    and loaded from the cache."""
+
+    seconds: float
+    compiled: int
+    loaded: int
+
+    def describe(self) -> str:
+        how = (f"compiled {self.compiled} and loaded {self.loaded} from the cache" if self.compiled
+               else f"loaded {self.loaded} from the cache")
+        return f"kernels ready in {self.seconds:.1f} s ({how})"
+
+
+def _cache_counts() -> tuple[int, int]:
+    """Kernel versions compiled (cache misses) and loaded (cache hits) so far in this process, over the
+    package's compiled functions."""
+    compiled = loaded = 0
+    for name, module in list(sys.modules.items()):
+        if name.startswith("crane_reference."):
+            for value in vars(module).values():
+                if isinstance(value, CPUDispatcher) and value.__module__ == name:
+                    compiled += sum(value.stats.cache_misses.values())
+                    loaded += sum(value.stats.cache_hits.values())
+    return compiled, loaded
+
+
+def warm_up(variants: Iterable[str] = VARIANTS) -> WarmUp:
+    """Call every kernel the simulation, the stream and the node use for the model ``variants`` (a few steps
+    offline and streamed, one evaluation, a target check and a re-target, on the packaged crane: the
+    kernels depend on the array types only)."""
     start = time.perf_counter()
+    compiled, loaded = _cache_counts()
     params = load_config()
-    for variant in VARIANTS:
+    for variant in variants:
         scenario = Scenario(params, variant)
         q = scenario.equilibrium.q
         simulate(scenario.motion, q, WARM_UP_STEPS * 1e-3, step=1e-3)
@@ -37,4 +70,5 @@ def compile_kernels() -> float:
         stream.sample(0.5e-3)
         stream.check_targets(params.task)
         stream.retarget(1e-3, params.task, checked=True)
-    return time.perf_counter() - start
+    now_compiled, now_loaded = _cache_counts()
+    return WarmUp(time.perf_counter() - start, now_compiled - compiled, now_loaded - loaded)
