@@ -22,6 +22,8 @@ import rclpy
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetState
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -317,7 +319,8 @@ def test_preview_markers_diagnostics_and_robot_description(ros: Harness) -> None
     np.testing.assert_allclose((xy[:, 0] / 3.0) ** 2 + (xy[:, 1] / 2.0) ** 2, 1.0, atol=1e-12)
     assert len(trail.points) > 1
 
-    _, diagnostics = ros.received["diagnostics"][-1]
+    ros.wait_for(lambda: any(d.status[0].values for _, d in list(ros.received["diagnostics"])), "diagnostics values")
+    diagnostics = [d for _, d in list(ros.received["diagnostics"]) if d.status[0].values][-1]
     status = diagnostics.status[0]
     values = {kv.key: kv.value for kv in status.values}
     assert status.level == rclpy_types().byte(messages.OK), status.message
@@ -497,10 +500,8 @@ def test_atomic_ellipse_change_is_smooth_and_converges(ros: Harness) -> None:
 
 
 @pytest.mark.slow
-def test_pause_resume_and_restart(ros: Harness) -> None:
-    """~/pause ramps the speed to rest (no step in velocity), holds, and resumes along a ramp; ~/restart while
-    moving comes to rest first, then jumps to the static equilibrium, announced in the response and the
-    diagnostics."""
+def test_pause_and_resume(ros: Harness) -> None:
+    """~/pause ramps the speed to rest (no step in velocity), holds, and resumes along a ramp."""
     rate, ramp = 100, 0.3
     node = ros.start(publish_rate=rate, speed_scaling__ramp_time=ramp, model="rigid")  # no 70 Hz boom vibration
     times = record_stream_times(node)
@@ -531,26 +532,82 @@ def test_pause_resume_and_restart(ros: Harness) -> None:
     assert dv.max() < 0.15 * speed
     assert_continuous(data["q"], data["qd"], 1.0 / rate)
 
+
+
+def change_state(ros: Harness, transition: int) -> bool:
+    """A lifecycle transition requested through the node's ~/change_state service, as a manager does."""
+    client = ros.probe.create_client(ChangeState, f"/{NODE}/change_state")
+    return ros.call(client, ChangeState.Request(transition=Transition(id=transition))).success
+
+
+def lifecycle_state(ros: Harness) -> str:
+    client = ros.probe.create_client(GetState, f"/{NODE}/get_state")
+    return ros.call(client, GetState.Request()).current_state.label
+
+
+def diagnostic_messages(ros: Harness) -> list[str]:
+    return [d.status[0].message for _, d in list(ros.received["diagnostics"])]
+
+
+def test_lifecycle_deactivate_restart_activate_without_a_jump_while_active(ros: Harness) -> None:
+    """~/restart while active is refused (it would make the reference jump).  Deactivating brings the moving
+    reference to rest along the speed ramp, publishes it to the first sample at rest and stops; while
+    inactive ~/restart goes back to the static equilibrium (announced); activating publishes from there, with
+    stamps that go on increasing, the motion of a fresh stream, and E's trail cleared."""
+    rate = 100
+    node = ros.start(publish_rate=rate, speed_scaling__ramp_time=0.3, model="rigid")
+    time.sleep(1.0)
+    response = ros.call(ros.restart, Trigger.Request())
+    assert not response.success and "refused while active" in response.message
+    assert change_state(ros, Transition.TRANSITION_DEACTIVATE)
+    assert lifecycle_state(ros) == "inactive"
+    count = len(ros.received["joint_states"])
+    time.sleep(0.5)
+    assert len(ros.received["joint_states"]) == count  # no longer published
+    stopped = ros.samples()
+    assert np.all(stopped["qd"][-1] == 0.0)  # the last sample published is at rest
+    assert_continuous(stopped["q"][-rate:], stopped["qd"][-rate:], 1.0 / rate)  # reached along the ramp
+    ros.wait_for(lambda: any(m.startswith("inactive") for m in diagnostic_messages(ros)), "inactive diagnostics")
+
     restart = spy(node._stream, "restart")
     response = ros.call(ros.restart, Trigger.Request())
-    assert response.success and "coming to rest, then restarting" in response.message, response.message
-    ros.wait_for(lambda: restart, "the restart after the stop")
-    restarted_at = stamp_of(ros, times, restart[0][0])
-    ros.wait_until_stamp(restarted_at + NS // 2)
-    data = ros.samples(after_ns=restarted_at - 1)
-    index, tau = streamed(data, times)
+    assert response.success and "position jump up to" in response.message, response.message
+    assert change_state(ros, Transition.TRANSITION_ACTIVATE)
+    ros.wait_for(lambda: len(ros.received["joint_states"]) >= len(stopped["stamp"]) + rate // 2, "samples once active")
+    data = ros.samples(after_ns=stopped["stamp"][-1])
+    assert data["stamp"][0] > stopped["stamp"][-1] and set(np.diff(data["stamp"]).tolist()) == {NS // rate}
     reference = ReferenceStream(load_config(), "rigid")
-    reference.compute(tau[-1] - restart[0][0])
-    np.testing.assert_allclose(data["q"][index], [reference.sample(t - restart[0][0]).q for t in tau], atol=1e-10)
-    np.testing.assert_allclose(data["q"][0], reference.sample(0.0).q, atol=1e-12)  # the static equilibrium
-    before = ros.samples(after_ns=restarted_at - NS // 2)
-    last_before = before["stamp"] < restarted_at
-    assert np.all(before["qd"][last_before][-1] == 0.0)  # at rest when the position jumps
-    jump = np.max(np.abs(data["q"][0] - before["q"][last_before][-1]))
-    announced = float(response.message.split("position jump up to ")[1].split()[0])
-    assert announced == pytest.approx(jump, rel=1e-5)
+    reference.compute(len(data["stamp"]) / rate)
+    np.testing.assert_allclose(data["q"], [reference.sample(i / rate).q for i in range(len(data["stamp"]))],
+                               atol=1e-10)  # the fresh motion from the static equilibrium, from the first sample
+    jump = np.max(np.abs(data["q"][0] - stopped["q"][-1]))
+    assert float(response.message.split("position jump up to ")[1].split()[0]) == pytest.approx(jump, rel=1e-5)
+    assert len(restart) == 1
     ros.wait_for(lambda: any("restart_jump_rad" in {kv.key for kv in d.status[0].values}
                              for _, d in list(ros.received["diagnostics"])), "the restart in the diagnostics")
+
+
+def test_without_autostart_the_node_waits_for_a_manager(ros: Harness) -> None:
+    """autostart false: the node stays unconfigured (diagnostics say so, nothing published) until configured
+    (inactive, still silent) and activated (publishing the motion from its start)."""
+    node = CraneReferenceNode(context=ros.context, parameter_overrides=[
+        Parameter("autostart", value=False), Parameter("publish_rate", value=100)])
+    ros.node = node
+    ros._spin(node)
+    ros.wait_for(lambda: "unconfigured" in diagnostic_messages(ros), "unconfigured diagnostics")
+    assert lifecycle_state(ros) == "unconfigured"
+    assert change_state(ros, Transition.TRANSITION_CONFIGURE)
+    ros.wait_for(lambda: any(m.startswith("inactive") for m in diagnostic_messages(ros)), "inactive diagnostics")
+    assert ros.received["joint_states"] == []
+    assert change_state(ros, Transition.TRANSITION_ACTIVATE)
+    ros.wait_for(lambda: len(ros.received["joint_states"]) >= 10, "joint_states once active")
+    assert lifecycle_state(ros) == "active"
+    data = ros.samples()
+    reference = ReferenceStream(load_config(), "flexible")
+    reference.compute(0.2)
+    # the motion from its start: the first samples can be lost to discovery, so match the first received one
+    first = int(np.argmin([np.max(np.abs(data["q"][0] - reference.sample(i / 100).q)) for i in range(10)]))
+    np.testing.assert_allclose(data["q"][:10], [reference.sample((first + i) / 100).q for i in range(10)], atol=1e-10)
 
 
 def test_solver_failure_holds_and_reports_error(ros: Harness) -> None:
@@ -572,13 +629,16 @@ def test_solver_failure_holds_and_reports_error(ros: Harness) -> None:
     assert np.all(data["qd"][held] == 0.0) and np.all(data["q"][held] == data["q"][-1])
     assert np.all(np.isfinite(data["q"]))
     # held exactly where the published motion stopped: the first sample at rest repeats the last moving one
-    at_rest = np.all(data["qd"] == 0.0, axis=1)
-    first = int(np.argmax(at_rest))
-    assert first > 0 and np.all(at_rest[first:])
-    np.testing.assert_array_equal(data["q"][first], data["q"][first - 1])
+    everything = ros.samples()
+    at_rest = np.all(everything["qd"] == 0.0, axis=1)
+    first = int(np.nonzero(~at_rest)[0][-1]) + 1  # the first of the held samples after the motion
+    assert first < len(at_rest)
+    np.testing.assert_array_equal(everything["q"][first], everything["q"][first - 1])
     (_, diagnostics) = [d for d in ros.received["diagnostics"] if d[1].status[0].level != b"\x00"][-1]
     assert "injected by the test" in diagnostics.status[0].message
+    assert change_state(ros, Transition.TRANSITION_DEACTIVATE)  # no ramp: the stream holds in ERROR
     assert ros.call(ros.restart, Trigger.Request()).success
+    assert change_state(ros, Transition.TRANSITION_ACTIVATE)
     ros.wait_for(lambda: node._stream.state == "RUNNING", "RUNNING after the restart")
 
 

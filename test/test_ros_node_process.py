@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -25,7 +26,8 @@ def start(*ros_args: str) -> subprocess.Popen:
 
 
 @pytest.mark.slow
-def test_publishes_and_exits_cleanly_on_sigint() -> None:
+@pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM])
+def test_publishes_and_exits_cleanly_on_a_signal(signal_number: int) -> None:
     process = start("--params-file", str(NODE_YAML), "-p", "publish_rate:=50", "-p", "ellipse.a:=3")
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -41,7 +43,7 @@ def test_publishes_and_exits_cleanly_on_sigint() -> None:
         node.destroy_node()
     finally:
         context.try_shutdown()
-        process.send_signal(signal.SIGINT)
+        process.send_signal(signal_number)
         stdout, stderr = process.communicate(timeout=30)
     assert len(received) >= 20, stderr
     assert len(received[-1].name) == len(received[-1].position) == 24
@@ -64,3 +66,30 @@ def test_an_unknown_parameter_stops_the_start_naming_it() -> None:
     assert process.returncode == 1
     assert "cannot start: unknown parameter(s) elipse.a; the node's parameters are" in stderr and "ellipse.a" in stderr
     assert "Traceback" not in stderr
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM])
+def test_an_unconfigured_node_reports_itself_and_exits_cleanly_on_a_signal(signal_number: int) -> None:
+    """autostart false: the node publishes /diagnostics while unconfigured (a lifecycle manager would
+    configure it) and ends with exit code 0 on SIGINT or SIGTERM."""
+    process = start("-p", "autostart:=false")
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    received: list[DiagnosticArray] = []
+    try:
+        node = Node("listener", context=context)
+        node.create_subscription(DiagnosticArray, "/diagnostics", received.append, 100)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        deadline = time.monotonic() + 60.0
+        while not received and time.monotonic() < deadline and process.poll() is None:
+            executor.spin_once(timeout_sec=0.1)
+        node.destroy_node()
+    finally:
+        context.try_shutdown()
+        process.send_signal(signal_number)
+        stdout, stderr = process.communicate(timeout=30)
+    assert received and received[0].status[0].message == "unconfigured", stderr
+    assert process.returncode == 0, stderr
+    assert "Traceback" not in stderr and "Traceback" not in stdout, stderr

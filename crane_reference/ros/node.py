@@ -1,6 +1,13 @@
 """ROS 2 node publishing the crane's programmed motion as a reference: ``ros2 run crane_reference node``.
 
-The node is thin: it wires threads, locks and rclpy to the publishing schedule
+A managed (lifecycle) node.  Constructing it declares the parameters and starts /diagnostics (every
+second of wall time, in every state: what it is doing while it starts, why it cannot, or the stream's
+figures); ``configure`` makes the solver kernels ready, builds the stream and starts computing ahead;
+``activate`` publishes; ``deactivate`` ramps a moving reference to rest, publishes it to the first
+sample at rest and stops; ``cleanup`` / ``shutdown`` release the solver.  ``autostart`` (default) runs
+configure and activate at construction.
+
+The node wires threads, locks and rclpy to the publishing schedule
 (:class:`~crane_reference.stream.schedule.FrameSchedule`), the motion
 (:class:`~crane_reference.stream.reference_stream.ReferenceStream`), the messages
 (:mod:`crane_reference.interface.messages`) and the parameter table (:mod:`crane_reference.ros.parameters`).
@@ -12,8 +19,8 @@ Clocks and stamps
     the node clock: it sleeps until the next sample's stamp and publishes every sample due (normally one), so no
     sample is skipped or duplicated even when it wakes late.  ``use_sim_time`` is honoured: the samples follow
     /clock.  With ``use_sim_time`` true and no /clock published, ROS time stays at zero, so publishing does not
-    start and ROS-time timers never fire: nothing is published (no joint_states, pose, preview, markers or
-    diagnostics) until /clock runs; the services and parameters keep working. A thread rather than an rclpy
+    start and ROS-time timers never fire: nothing is published (no joint_states, pose, preview or markers;
+    /diagnostics says why) until /clock runs; the services and parameters keep working. A thread rather than an rclpy
     timer publishes because rclpy's executor adds its overhead to every timer callback and runs the (slow)
     parameter validation on the same thread.
 
@@ -29,20 +36,21 @@ Computing ahead
     held (zero velocity) and the motion continues from there once frames are ready again (no position
     jump); diagnostics count these samples (held_late).  If the solver fails or the crane nears a
     singularity the stream goes to ERROR: the node holds the last sample it made (zero velocity) and
-    diagnostics and the log report ERROR until ``~/restart``.  A sample that is not finite is never
-    published: the last valid one is held instead.
+    diagnostics and the log report ERROR until deactivate, ``~/restart`` and activate.  A sample that is
+    not finite is never published: the last valid one is held instead.
 
 Commands
-    A re-target (``ellipse.*``, ``z.*`` parameters), a speed change (``speed_scaling``), ``~/pause`` and
-    ``~/restart`` take effect at the frame ``command_lead`` seconds after the next one to be published (the
+    A re-target (``ellipse.*``, ``z.*`` parameters), a speed change (``speed_scaling``) and ``~/pause``
+    take effect at the frame ``command_lead`` seconds after the next one to be published (the
     frames from there on are dropped at once and made again after the command), so a change reaches the
     published samples within command_lead plus one period after it is accepted; diagnostics give both
     instants (``{command}_accepted_s``, ``{command}_stamp_s``).  If the worker cannot make the frame at the
     command point in time (a lead too short for a loaded machine: it shares the interpreter with the
     publisher and the executor), the publisher holds the last sample and counts it (held_late); it never
     publishes the motion from before the command past that point.
-    Speed changes and pauses are C2 ramps of the stream's time warp; ``~/restart`` of a moving reference
-    pauses first and restarts at the first sample at rest.
+    Speed changes and pauses are C2 ramps of the stream's time warp.  ``~/restart`` (back to the
+    static-equilibrium start: a position jump) is done while inactive only, at the next frame, and
+    published from the next activation; while nothing is published a command needs no lead.
     Parameter values are validated in the on-set callback (table of
     :mod:`~crane_reference.ros.parameters`, then ``ReferenceStream.check_targets`` for the targets) and
     applied in the post-set callback, so ``set_parameters_atomically`` of ellipse.a and ellipse.b is one
@@ -61,6 +69,7 @@ from __future__ import annotations
 import math
 import sys
 import threading
+import time
 from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
@@ -73,7 +82,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import ParameterNotDeclaredException
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
@@ -102,6 +111,7 @@ FRAME_BATCH = 20  # frames sampled per hold of the stream lock, and the room the
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to compute (for commands)
 MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, older samples are skipped
 MARKER_RATE = 10.0  # [Hz]
+DEACTIVATE_MARGIN = 1.0  # [s] a deactivation waits beyond the ramp and the command lead for the rest sample
 TRAIL_RATE = 50.0  # [Hz] of points added to E's trail
 TRAIL_POINTS = 500
 NANOSECONDS = messages.NANOSECONDS
@@ -112,63 +122,99 @@ class StartupError(RuntimeError):
     """The node cannot start (unusable configuration or target)."""
 
 
-class CraneReferenceNode(Node):
+class CraneReferenceNode(LifecycleNode):
     """Publishes the reference of the crane's programmed motion; see the module documentation."""
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs) -> None:
-        """Declare and read the parameters, build the stream and start publishing.
+        """Declare and read the parameters, publish diagnostics, and with ``autostart`` configure and
+        activate.
 
         ``kwargs`` go to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``, ``cli_args``...).
         Raises :class:`StartupError`, :class:`~crane_reference.model.config.ConfigError` or
-        :class:`~crane_reference.ros.parameters.ParameterError` if it cannot start.
+        :class:`~crane_reference.ros.parameters.ParameterError` if a parameter is unusable, or with
+        ``autostart`` if it cannot be configured.
         """
         super().__init__(node_name, **kwargs)
         self._types = rclpy_types()
+        self._stream: ReferenceStream | None = None
         self._start_ns: int | None = None
-        self._stop = threading.Event()
-        self._starting = "starting: loading the crane description"  # the diagnostics' message until publishing
+        self._stop = threading.Event()  # the node is being destroyed
+        self._halt = threading.Event()  # the solver thread stops (cleanup)
+        self._quiet = threading.Event()  # the publisher thread stops (deactivate)
+        self._starting = "unconfigured"  # the diagnostics' message while not publishing
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, messages.DIAGNOSTICS_TOPIC,
                                                       messages.PUBLISHER_DEPTH)
-        self._threads = [threading.Thread(target=self._diagnostics_loop, name="crane_reference_diagnostics",
-                                          daemon=True)]
-        self._threads[0].start()
+        self._threads: dict[str, threading.Thread] = {}
+        self._start_thread("diagnostics", self._diagnostics_loop)
         try:
-            self._prepare()
+            config_file = declare(self, SPECS["config_file"])
+            self._values = {spec.name: declare(self, spec, load_config(config_file or None))
+                            for spec in PARAMETERS if spec.name != "config_file"}
+            self._check_overrides()
         except Exception as error:
-            self._starting = f"cannot start: {error}"
-            with suppress(RCLError):  # the context may be shutting down already
-                self._publish_diagnostics()
-            self._stop.set()
+            self._fail_start(error)
             raise
         except BaseException:  # KeyboardInterrupt while starting
             self._stop.set()
             raise
-
-    def _prepare(self) -> None:
-        """Parameters, crane, kernels, stream, publishers, services and the worker and publisher threads."""
-        config_file = declare(self, SPECS["config_file"])
-        config = load_config(config_file or None)
-        self._values = {spec.name: declare(self, spec, config) for spec in PARAMETERS if spec.name != "config_file"}
-        self._check_overrides()
         self._rate = int(self._values["publish_rate"])
-        self._starting = "starting: making the solver kernels ready (compiled on a first start, else loaded)"
-        self.get_logger().info("making the solver kernels ready (with an empty kernel cache this compiles for a "
-                               "minute or two; `crane-reference compile` after installing does it ahead)")
-        self.get_logger().info(f"solver {warm_up((self._values['model'],)).describe()}")
-        self._starting = "starting: computing the start and the first second of motion"
-        self._stream = self._make_stream(config)
-        self._schedule = FrameSchedule(self._rate, max(2, math.ceil(LOOKAHEAD * self._rate)),
-                                       self._values["command_lead"], MAX_CATCH_UP, self._stream.sample(0.0))
-        self._refill = min(FRAME_BATCH, max(1, self._schedule.lookahead // 4))  # frames made per batch at least
-        self._joint_names = list(self._stream.joint_names)
-        self._preview_indices = self._joint_indices(self._values["preview.joints"])
-        self._pending_restart: int | None = None  # sample at which a restart waits for the motion to rest
-        self._last_restart: dict[str, str] = {}
+        self._lock = threading.Condition()  # the schedule's buffer and counters (never held while solving)
+        self._stream_lock = threading.Lock()  # the stream
+        self.add_pre_set_parameters_callback(coerce_parameters)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self.create_service(Trigger, "~/restart", self._on_restart)
+        self.create_service(SetBool, "~/pause", self._on_pause)
+        self.create_subscription(Float64, messages.SPEED_SCALING_TOPIC, self._on_speed_scaling,
+                                 messages.PUBLISHER_DEPTH)
+        self._status_timer = self.create_timer(self._values["status_period"], self._log_status)
+        if self._values["autostart"]:
+            if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+                self._stop.set()
+                raise StartupError(self._starting.removeprefix("cannot configure: "))
+            self.trigger_activate()
 
-        # The schedule's buffer and counters are guarded by _lock (never held while solving), the stream by
-        # _stream_lock.
-        self._lock = threading.Condition()
-        self._stream_lock = threading.Lock()
+    def _start_thread(self, name: str, target: Callable[[], None]) -> None:
+        self._threads[name] = threading.Thread(target=target, name=f"crane_reference_{name}", daemon=True)
+        self._threads[name].start()
+
+    def _join_thread(self, name: str) -> None:
+        thread = self._threads.pop(name, None)
+        if thread is not None and thread is not threading.current_thread():
+            thread.join()
+
+    def _fail_start(self, error: Exception) -> None:
+        """Report in /diagnostics (ERROR) and stop the diagnostics thread: the node cannot start."""
+        self._starting = f"cannot start: {error}"
+        with suppress(RCLError):  # the context may be shutting down already
+            self._publish_diagnostics()
+        self._stop.set()
+
+    # -- lifecycle --------------------------------------------------------------------------------------
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Load the crane and the task, make every solver kernel ready, compute the start and the first
+        second of motion, create the publishers; the solver thread computes ahead from here on."""
+        try:
+            config_file = self._values["config_file"] = self.get_parameter("config_file").value
+            config = load_config(config_file or None)
+            self._starting = "configuring: making the solver kernels ready (compiled on a first start, else loaded)"
+            self.get_logger().info("making the solver kernels ready (with an empty kernel cache this compiles for "
+                                   "a minute or two; `crane-reference compile` after installing does it ahead)")
+            self.get_logger().info(f"solver {warm_up((self._values['model'],)).describe()}")
+            self._starting = "configuring: computing the start"
+            stream = self._make_stream(config)
+            self._joint_names = list(stream.joint_names)
+            self._preview_indices = self._joint_indices(self._values["preview.joints"])
+        except (StartupError, ConfigError, ParameterError) as error:
+            self._starting = f"cannot configure: {error}"
+            self.get_logger().error(self._starting)
+            return TransitionCallbackReturn.FAILURE
+        self._stream = stream
+        self._schedule = FrameSchedule(self._rate, max(2, math.ceil(LOOKAHEAD * self._rate)),
+                                       self._values["command_lead"], MAX_CATCH_UP, stream.sample(0.0))
+        self._refill = min(FRAME_BATCH, max(1, self._schedule.lookahead // 4))  # frames made per batch at least
+        self._last_restart: dict[str, str] = {}
         self._last_stamp = 0
         self._achieved_rate = 0.0
         self._late_reported = 0
@@ -177,35 +223,90 @@ class CraneReferenceNode(Node):
         self._commands_pending = 0  # commands whose frames are dropped and whose action is not applied yet
         self._trail: deque[np.ndarray] = deque(maxlen=TRAIL_POINTS)
         self._diagnostics_reference = (0, 0.0, 0.0, self.get_clock().now().nanoseconds)
-
-        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         depth = messages.PUBLISHER_DEPTH
-        self._joint_pub = self.create_publisher(JointState, messages.JOINT_STATES_TOPIC, depth)
-        self._pose_pub = self.create_publisher(PoseStamped, messages.END_EFFECTOR_POSE_TOPIC, depth)
-        self._preview_pub = self.create_publisher(JointTrajectory, messages.REFERENCE_PREVIEW_TOPIC, depth)
-        self._marker_pub = self.create_publisher(MarkerArray, messages.MARKERS_TOPIC, depth)
+        self._publishers_managed = [
+            self.create_lifecycle_publisher(JointState, messages.JOINT_STATES_TOPIC, depth),
+            self.create_lifecycle_publisher(PoseStamped, messages.END_EFFECTOR_POSE_TOPIC, depth),
+            self.create_lifecycle_publisher(JointTrajectory, messages.REFERENCE_PREVIEW_TOPIC, depth),
+            self.create_lifecycle_publisher(MarkerArray, messages.MARKERS_TOPIC, depth)]
+        self._joint_pub, self._pose_pub, self._preview_pub, self._marker_pub = self._publishers_managed
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._description_pub = self.create_publisher(String, messages.ROBOT_DESCRIPTION_TOPIC, latched)
-        self._description_pub.publish(messages.robot_description(self._types, model_to_urdf(self._stream.model)))
+        self._description_pub.publish(messages.robot_description(self._types, model_to_urdf(stream.model)))
+        self._marker_timer = self.create_timer(1.0 / MARKER_RATE, self._publish_markers)
+        self._resume_on_activate = False
+        self._halt.clear()
+        self._start_thread("solver", self._work)
+        self._starting = "inactive: configured, computing ahead; activate to publish"
+        self.get_logger().info(f"configured: the {self._values['model']} crane ({len(self._joint_names)} joints, "
+                               f"config {config_file or 'packaged default'})")
+        return TransitionCallbackReturn.SUCCESS
 
-        self.add_pre_set_parameters_callback(coerce_parameters)
-        self.add_on_set_parameters_callback(self._validate_parameters)
-        self.add_post_set_parameters_callback(self._apply_parameters)
-        self.create_service(Trigger, "~/restart", self._on_restart)
-        self.create_service(SetBool, "~/pause", self._on_pause)
-        self.create_subscription(Float64, messages.SPEED_SCALING_TOPIC, self._on_speed_scaling, depth)
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Publish from the next sample on (stamps continue from the clock's present time); a reference
+        stopped by a deactivation resumes along a speed ramp."""
+        self._starting = "activating: waiting for the first second of motion"
+        if self._stream.state == PAUSED and self._resume_on_activate:
+            self._command("resume", self._stream.resume)
+        self._resume_on_activate = False
+        self._quiet.clear()
+        self._start_thread("publisher", self._publish_loop)
+        self.get_logger().info(f"publishing the {self._values['model']} crane's reference at {self._rate} Hz")
+        return super().on_activate(state)
 
-        workers = [threading.Thread(target=self._work, name="crane_reference_solver", daemon=True),
-                   threading.Thread(target=self._publish_loop, name="crane_reference_publisher", daemon=True)]
-        for thread in workers:
-            thread.start()
-        self._threads += workers
-        self._starting = "starting: computing the first second of motion ahead"
-        self.create_timer(1.0 / MARKER_RATE, self._publish_markers)
-        self._status_timer = self.create_timer(self._values["status_period"], self._log_status)
-        self.get_logger().info(
-            f"publishing the {self._values['model']} crane's reference at {self._rate} Hz "
-            f"({len(self._joint_names)} joints, config {config_file or 'packaged default'}, "
-            f"{'running' if self._values['autostart'] else 'paused until ~/pause data: false'})")
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Bring a moving reference to rest along a speed ramp, publish it to the first sample at rest, then
+        stop publishing (the reference is held there)."""
+        stream = self._stream
+        if stream.state == "RUNNING" and stream.rate > 0.0:
+            with self._command_point() as (k, tau, accepted), self._stream_lock:
+                stream.pause(tau)
+            self._announce("pause", k, accepted)
+            rest_k = k + math.ceil((stream.settled_at() - tau) * self._rate - 1e-9) + 1
+            deadline = time.monotonic() + stream.ramp_time + self._schedule.lead + DEACTIVATE_MARGIN
+            while self._schedule.next_k <= rest_k and time.monotonic() < deadline and not self._stop.is_set():
+                time.sleep(1.0 / self._rate)
+            self._resume_on_activate = True
+        self._stop_publishing()
+        self._starting = "inactive: publishing stopped; activate to publish again"
+        self.get_logger().info("deactivated: the reference is at rest and no longer published")
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop the solver thread and release the stream and the publishers."""
+        self._release()
+        self._starting = "unconfigured"
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_publishing()
+        self._release()
+        self._starting = "finalized"
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_publishing()
+        self._release()
+        self._starting = "unconfigured after an error in a transition"
+        return TransitionCallbackReturn.SUCCESS
+
+    def _stop_publishing(self) -> None:
+        self._quiet.set()
+        self._join_thread("publisher")
+        self._start_ns = None
+
+    def _release(self) -> None:
+        if self._stream is None:
+            return
+        self._halt.set()
+        with self._lock:
+            self._lock.notify_all()
+        self._join_thread("solver")
+        for publisher in self._publishers_managed:
+            self.destroy_lifecycle_publisher(publisher)
+        self.destroy_publisher(self._description_pub)
+        self.destroy_timer(self._marker_timer)
+        self._stream = None
 
     # -- set-up ---------------------------------------------------------------------------------------
 
@@ -247,7 +348,7 @@ class CraneReferenceNode(Node):
             stream = ReferenceStream(config, v["model"], v["integrator.step"], v["blend_time"], targets,
                                      column_drive(config, v["drive.torque"], v["drive.duration"]),
                                      speed_scaling=v["speed_scaling"], ramp_time=v["speed_scaling.ramp_time"],
-                                     at_rest=not v["autostart"])
+                                     at_rest=False)
             stream.check_targets(targets)
         except UnreachableTargetError as error:
             raise StartupError(f"ellipse.* / z.* = {targets}: {error}") from error
@@ -261,9 +362,9 @@ class CraneReferenceNode(Node):
         """Keep LOOKAHEAD of frames ready ahead of publishing and the motion computed beyond them."""
         schedule = self._schedule
         try:
-            while not self._stop.is_set():
+            while not self._halt.is_set():
                 with self._lock:
-                    while self._commands_pending and not self._stop.is_set():  # frames after a command once
+                    while self._commands_pending and not self._halt.is_set():  # frames after a command once
                         self._lock.wait(timeout=LOOKAHEAD)  # it is applied
                     plan = schedule.plan()
                     fault = schedule.fault
@@ -273,11 +374,6 @@ class CraneReferenceNode(Node):
                 with self._stream_lock:
                     if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
                         continue
-                    if self._pending_restart is not None:
-                        if plan.k >= self._pending_restart:  # the motion has come to rest: restart here
-                            self._restart_now(plan.tau)
-                        else:
-                            count = min(count, self._pending_restart - plan.k)
                     frames, next_preview_k, busy = schedule.make_frames(
                         self._stream, plan, count, self._values["preview.horizon"],
                         self._values["preview.points"] - 1, self._preview_decimation(),
@@ -306,7 +402,7 @@ class CraneReferenceNode(Node):
         is published from that point."""
         accepted = self.get_clock().now().nanoseconds
         with self._lock:
-            k, tau = self._schedule.command_point()
+            k, tau = self._schedule.command_point(lead=self._start_ns is not None)  # no lead while not publishing
             self._schedule.after_command(k, tau)
             self._commands_pending += 1
         try:
@@ -335,64 +431,56 @@ class CraneReferenceNode(Node):
         """Stamp [s] of sample k (relative to the start if publishing has not begun)."""
         return messages.stamp_at(self._start_ns or 0, k, self._rate) / NANOSECONDS
 
-    def _restart_now(self, tau: float) -> None:
-        """Restart the stream at publish time tau (stream lock held)."""
-        self._stream.restart(tau)
-        self._pending_restart = None
-        self._schedule.fault = ""
+    def _lifecycle_state(self) -> str:
+        """The lifecycle state's label ('unconfigured', 'inactive', 'active', ...)."""
+        return self._state_machine.current_state[1]
 
     def _on_restart(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        """~/restart: back to the static-equilibrium start of the current targets.  A moving reference
-        first comes to rest along a speed-scaling ramp; the position then jumps to the start, and the
-        response and the diagnostics (restart_*) say when and by how much."""
-        if self._pending_restart is not None:
-            response.success = True
-            stamp = self._stamp_s(self._pending_restart)
-            response.message = f"a restart is already pending at the sample stamped {stamp:.6f} s"
+        """~/restart (while inactive): back to the static-equilibrium start of the current targets, also out of
+        ERROR.  The position jumps to the start, so it is refused while active: consumers see the stream
+        stop (deactivate), and it goes on from the start when activated again; the response and the
+        diagnostics (restart_*) say by how much it jumps."""
+        state = self._lifecycle_state()
+        if state != "inactive":
+            response.success = False
+            response.message = (f"refused while {state}: a restart makes the reference jump to the start, so it is "
+                                "done while inactive (deactivate, restart, activate)" if state == "active" else
+                                f"refused while {state}: configure the node first")
             return response
-        with self._command_point() as (k, tau, accepted):
-            try:
-                with self._stream_lock:
-                    stream = self._stream
-                    if stream.state == ERROR or (stream.rate == 0.0 and stream.settled_at() <= tau):
-                        rest_k, last_tau = k, tau
-                    else:  # come to rest; the last sample before the restart is the first one at rest
-                        if stream.state != PAUSED:
-                            stream.pause(tau)
-                        rest_k = k + math.ceil((stream.settled_at() - tau) * self._rate - 1e-9) + 1
-                        last_tau = tau + (rest_k - 1 - k) / self._rate
-                    stream.compute(last_tau)
-                    before = stream.sample(last_tau).q
-                    after = stream.start_configuration()
-                    if rest_k == k:
-                        self._restart_now(tau)
-                    else:
-                        self._pending_restart = rest_k
-            except SOLVER_FAILURES as error:
-                response.success, response.message = False, f"restart failed, stream unchanged: {error}"
-            else:
-                jump = np.abs(after - before)
-                joint = self._joint_names[int(np.argmax(jump))]
-                self._announce("restart", rest_k, accepted)
-                self._last_restart = {"restart_jump_rad": f"{jump.max():.6g}", "restart_jump_joint": joint}
-                response.success = True
-                response.message = (f"{'coming to rest, then ' if rest_k > k else ''}restarting from the static "
-                                    f"equilibrium at the sample stamped {self._stamp_s(rest_k):.6f} s: position "
-                                    f"jump up to {jump.max():.6g} (SI units) on {joint}")
+        try:
+            with self._command_point() as (k, tau, accepted), self._stream_lock:
+                stream = self._stream
+                stream.compute(tau)
+                before = stream.sample(tau).q
+                stream.restart(tau)
+                after = stream.start_configuration()
+                self._schedule.fault = ""
+                self._resume_on_activate = False
+        except SOLVER_FAILURES as error:
+            response.success, response.message = False, f"restart failed, stream unchanged: {error}"
+        else:
+            self._trail.clear()
+            jump = np.abs(after - before)
+            joint = self._joint_names[int(np.argmax(jump))]
+            self._announce("restart", k, accepted)
+            self._last_restart = {"restart_jump_rad": f"{jump.max():.6g}", "restart_jump_joint": joint}
+            response.success = True
+            response.message = (f"restarted from the static equilibrium at sample {k}, published once active: "
+                                f"position jump up to {jump.max():.6g} (SI units) on {joint}")
         self.get_logger().info(response.message)
         return response
 
     def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
         """~/pause: data true holds the reference (zero velocity), data false resumes it."""
+        if self._stream is None:
+            response.success, response.message = False, f"refused while {self._lifecycle_state()}: configure first"
+            return response
         state = self._stream.state
         wanted = PAUSED if request.data else "RUNNING"
         if state == ERROR:
             response.success = False
-            response.message = f"the stream is in ERROR ({self._stream.last_error}); call ~/restart"
-        elif self._pending_restart is not None:
-            response.success = False
-            response.message = (f"a restart is pending at the sample stamped {self._stamp_s(self._pending_restart):.6f}"
-                                " s; the reference stays at rest until then")
+            response.message = (f"the stream is in ERROR ({self._stream.last_error}); deactivate, call ~/restart "
+                                "and activate")
         elif state == wanted:
             response.success, response.message = True, f"already {state.lower()}"
         else:
@@ -415,13 +503,13 @@ class CraneReferenceNode(Node):
         """On-set callback: the table's checks, then the reachability of changed targets."""
         reason = check(parameters)
         joints = next((p.value for p in parameters if p.name == "preview.joints"), None)
-        if reason is None and joints is not None:
+        if reason is None and joints is not None and self._stream is not None:  # else checked at configure
             try:
                 self._joint_indices(list(joints))
             except ParameterError as error:
                 reason = str(error)
         changed = {p.name: p.value for p in parameters if p.name in TARGET_PARAMETERS}
-        if reason is None and changed:
+        if reason is None and changed and self._stream is not None:  # else checked at configure
             targets = self._targets(changed)
             try:
                 with self._stream_lock:
@@ -435,15 +523,17 @@ class CraneReferenceNode(Node):
         """Post-set callback: apply accepted values (one re-target for all target parameters)."""
         names = [p.name for p in parameters if p.name in self._values]
         self._values.update({p.name: p.value for p in parameters if p.name in self._values})
+        if "status_period" in names:
+            self._status_timer.timer_period_ns = round(self._values["status_period"] * NANOSECONDS)
+            self._status_timer.reset()
+        if self._stream is None:  # the values are read at configure
+            return
         if "blend_time" in names:
             with self._stream_lock:
                 self._stream.set_blend_time(self._values["blend_time"])
         if "command_lead" in names:
             with self._lock:
                 self._schedule.lead = self._values["command_lead"]
-        if "status_period" in names:
-            self._status_timer.timer_period_ns = round(self._values["status_period"] * NANOSECONDS)
-            self._status_timer.reset()
         if "preview.joints" in names:
             self._preview_indices = self._joint_indices(list(self._values["preview.joints"]))
         if "speed_scaling" in names:
@@ -469,14 +559,17 @@ class CraneReferenceNode(Node):
         """
         clock = self.get_clock()
         try:
-            while not self._stop.is_set() and (self._schedule.made_k < self._schedule.lookahead
-                                               or clock.now().nanoseconds == 0):
-                if self._schedule.made_k >= self._schedule.lookahead:
-                    self._starting = "starting: waiting for /clock (use_sim_time is true and ROS time is 0)"
-                self._stop.wait(1.0 / self._rate)
-            self._start_ns = clock.now().nanoseconds
-            self._diagnostics_reference = (0, 0.0, 0.0, self._start_ns)
-            while not self._stop.is_set():
+            ready = self._schedule.next_k + self._schedule.lookahead  # the look-ahead of frames from the next one
+            while not self._quiet.is_set() and (self._schedule.made_k < ready or clock.now().nanoseconds == 0):
+                if self._schedule.made_k >= ready:
+                    self._starting = "activating: waiting for /clock (use_sim_time is true and ROS time is 0)"
+                self._quiet.wait(1.0 / self._rate)
+            now = clock.now().nanoseconds
+            start = max(now, self._last_stamp + NANOSECONDS // self._rate)  # stamps go on increasing
+            self._start_ns = start - self._schedule.next_k * NANOSECONDS // self._rate
+            self._diagnostics_reference = (self._schedule.counters.published, self._schedule.compute_wall,
+                                           self._schedule.compute_motion, now)
+            while not self._quiet.is_set():
                 now = clock.now().nanoseconds
                 next_k = self._schedule.next_k
                 if now < messages.stamp_at(self._start_ns, next_k - 1, self._rate):
@@ -484,7 +577,7 @@ class CraneReferenceNode(Node):
                 self._publish(now)
                 left = messages.stamp_at(self._start_ns, self._schedule.next_k, self._rate) - clock.now().nanoseconds
                 if left > 0:
-                    self._stop.wait(left / NANOSECONDS)
+                    self._quiet.wait(left / NANOSECONDS)
         except RCLError:
             if self.context.ok():
                 raise  # not a shutdown: let the thread report it
@@ -586,7 +679,7 @@ class CraneReferenceNode(Node):
 
     def _log_status(self) -> None:
         """One-line status: stream time, E, residual, achieved rate, state."""
-        sample = self._schedule.last
+        sample = self._schedule.last if self._stream is not None else None
         if sample is None:
             return
         x, y, z = sample.ee_position
@@ -597,10 +690,13 @@ class CraneReferenceNode(Node):
     def destroy_node(self) -> None:
         """Stop the solver and publisher threads, then destroy the node."""
         self._stop.set()
-        with self._lock:
-            self._lock.notify_all()
-        for thread in self._threads:
-            thread.join()
+        self._stop_publishing()
+        self._halt.set()
+        if hasattr(self, "_lock"):
+            with self._lock:
+                self._lock.notify_all()
+        for name in list(self._threads):
+            self._join_thread(name)
         super().destroy_node()
 
 

@@ -173,8 +173,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "(0: at rest); changes are C2 ramps over speed_scaling.ramp_time", "", (0.0, 1.0)),
     ParameterSpec("speed_scaling.ramp_time", DOUBLE, 1.0, "Duration of a speed-scaling ramp (also of "
                   "~/pause, resume and the stop before ~/restart)", "s", (0.01, 60.0), read_only=True),
-    ParameterSpec("autostart", BOOL, True, "Start the motion at once; if false, hold the static-equilibrium "
-                  "start until ~/pause is called with data: false", read_only=True),
+    ParameterSpec("autostart", BOOL, True, "Configure and activate the (lifecycle) node at once; if false, it "
+                  "waits unconfigured for a lifecycle manager or `ros2 lifecycle set`", read_only=True),
     ParameterSpec("status_period", DOUBLE, 5.0, "Period of the one-line status log", "s", (0.1, 3600.0)),
 )
 SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PARAMETERS}

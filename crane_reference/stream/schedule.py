@@ -170,10 +170,11 @@ class FrameSchedule:
 
     # -- commands -------------------------------------------------------------------------------------
 
-    def command_point(self) -> tuple[int, float]:
-        """The frame a command takes effect at, and its stream time."""
+    def command_point(self, lead: bool = True) -> tuple[int, float]:
+        """The frame a command takes effect at, and its stream time: ``lead`` after the next one to publish,
+        or (``lead`` False, nothing being published) the next one itself."""
         free = max(self.made_k, self.next_k)  # the next frame the worker makes
-        k = min(self.next_k + math.ceil(self.lead * self.rate), free)
+        k = min(self.next_k + (math.ceil(self.lead * self.rate) if lead else 0), free)
         tau = self.made_tau if k == free else next(f.tau for f in self.frames if f.k == k)
         return k, tau
 

@@ -15,7 +15,6 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
-from numba.core.registry import CPUDispatcher
 
 from ..model.chain import VARIANTS
 from ..model.config import load_config
@@ -47,9 +46,10 @@ def _cache_counts() -> tuple[int, int]:
     for name, module in list(sys.modules.items()):
         if name.startswith("crane_reference."):
             for value in vars(module).values():
-                if isinstance(value, CPUDispatcher) and value.__module__ == name:
-                    compiled += sum(value.stats.cache_misses.values())
-                    loaded += sum(value.stats.cache_hits.values())
+                stats = getattr(value, "stats", None)  # a compiled kernel (numba dispatcher) defined here
+                if hasattr(stats, "cache_misses") and getattr(value, "__module__", None) == name:
+                    compiled += sum(stats.cache_misses.values())
+                    loaded += sum(stats.cache_hits.values())
     return compiled, loaded
 
 
