@@ -9,7 +9,7 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
   |period - 1 / rate| (the period error);
 * delivery lag: reception time - stamp (both system time), mean and p99;
 * missed samples: stamps absent from the received sequence, plus the samples the node itself held
-  or skipped because it ran late (from /diagnostics: held_late, skipped);
+  because it ran late and the times its stamps leapt (from /diagnostics: held_late, stamp_leaps);
 * CPU share of the node process (user + system time / wall time, 100 % = one core) and the solver's
   real-time factor it reports;
 * latency from a parameter change (``ellipse.a``, through the parameter service) to the reception of
@@ -220,7 +220,7 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
             raise RuntimeError(f"no joint_states within 60 s: {node.stderr.read() if node.poll() is not None else ''}")
         spin_for(executor, WARM_UP)
         first, cpu0, t0 = len(recorder.stamps), cpu_seconds(node.pid), time.monotonic()
-        before = {k: float(recorder.diagnostics.get(k, 0)) for k in ("held_late", "skipped")}
+        before = {k: float(recorder.diagnostics.get(k, 0)) for k in ("held_late", "stamp_leaps")}
         spin_for(executor, duration)
         wall, cpu = time.monotonic() - t0, cpu_seconds(node.pid) - cpu0
         last = len(recorder.stamps)
@@ -248,7 +248,8 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         "rate_hz": rate, "achieved_hz": len(received) / wall, "period_std_ms": 1e3 * periods.std(),
         "period_error_p99_ms": 1e3 * np.percentile(error, 99), "period_error_max_ms": 1e3 * error.max(),
         "lag_mean_ms": 1e3 * lag.mean(), "lag_p99_ms": 1e3 * np.percentile(lag, 99),
-        "missed": int(expected - len(stamps)), "held_late": int(late["held_late"]), "skipped": int(late["skipped"]),
+        "missed": int(expected - len(stamps)), "held_late": int(late["held_late"]),
+        "stamp_leaps": int(late["stamp_leaps"]),
         "cpu_percent": 100.0 * cpu / wall, "real_time_factor": float(factor),
         "latency_median_ms": 1e3 * float(np.median(latencies)), "latency_max_ms": 1e3 * float(np.max(latencies)),
         "effect_after_acceptance_max_ms": 1e3 * float(np.max(after_acceptance)),

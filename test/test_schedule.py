@@ -1,5 +1,5 @@
 """The publishing schedule (:mod:`crane_reference.stream.schedule`) without ROS: which sample goes out
-when, commands, held and skipped samples, and frames made from a real stream."""
+when, commands, held samples, leaps of the stamps after a clock jump, and frames made from a real stream."""
 
 from __future__ import annotations
 
@@ -29,18 +29,27 @@ def schedule_with(sample, frames: int = 0, lookahead: int = 100) -> FrameSchedul
     return schedule
 
 
-def test_due_samples_are_consecutive_and_skipped_beyond_the_catch_up(stream_factory):
+def test_due_samples_are_consecutive_and_the_stamps_leap_with_a_clock_jump(stream_factory):
     sample = stream_factory().sample(0.0)
     schedule = schedule_with(sample, frames=300, lookahead=300)
     # at 25 ms after the start samples 0, 1, 2 are due (stamps 0, 10, 20 ms)
+    assert schedule.anchored(25_000_000, 0) == 0
     assert [k for k, _ in schedule.due(25_000_000, 0)] == [0, 1, 2]
     assert [k for k, _ in schedule.due(25_000_000, 0)] == []
-    # 2.5 s later: only the last second (100 samples) is published, the rest is skipped
-    batch = schedule.due(2_500_000_000, 0)
-    assert [k for k, _ in batch] == list(range(151, 251))
-    assert schedule.counters.skipped == 151 - 3
-    assert all(frame.k == k for k, frame in batch)  # the frames of the samples, older ones dropped
-    assert [frame is None for _, frame in schedule.due(3_050_000_000, 0)][-7:] == [False] + [True] * 6  # 300..305
+    # within the catch-up limit (1 s) a late publisher catches up: every sample, none skipped
+    assert schedule.anchored(1_025_000_000, 0) == 0
+    assert [k for k, _ in schedule.due(1_025_000_000, 0)] == list(range(3, 103))
+    # the clock jumps 60 s ahead: sample 103 is stamped now, the motion goes on from frame 103
+    now = 61_025_000_000
+    start = schedule.anchored(now, 0)
+    assert start + 103 * NANOSECONDS // RATE == now and schedule.counters.stamp_leaps == 1
+    batch = schedule.due(now, start)
+    assert [(k, frame.k) for k, frame in batch] == [(103, 103)]
+    # the clock goes back 120 s: the start stays (stamps never go back) and nothing is due until it returns
+    assert schedule.anchored(now - 120 * NANOSECONDS, start) == start
+    assert schedule.due(now - 120 * NANOSECONDS, start) == []
+    assert [k for k, _ in schedule.due(now + 10_000_000, start)] == [104]
+    assert schedule.counters.stamp_leaps == 1
 
 
 def test_a_missing_frame_holds_the_last_published_sample(stream_factory):

@@ -283,7 +283,7 @@ def export_reference(bag: BagWriter, stream: ReferenceStream, rate: int, duratio
             last_wall, last_motion = wall, sample.t
             level, message = ((messages.ERROR, f"{ERROR}: {stream.last_error}") if stream.state == ERROR
                               else (messages.OK, stream.state))
-            counters = {"published": k + 1, "held_late": 0, "skipped": 0, "held_non_finite": 0}
+            counters = {"published": k + 1, "held_late": 0, "stamp_leaps": 0, "held_non_finite": 0}
             values = messages.diagnostic_values(stream.state, sample, factor, rate, float(rate), counters,
                                                 stream.targets, stream.rate, stream.last_error)
             reference.write_diagnostics(stamp, f"{node_name}: reference", f"/{node_name}", level, message, values)

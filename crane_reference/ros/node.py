@@ -109,7 +109,8 @@ LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
 COMPUTE_SLICE = 0.005  # [s] of wall time the worker holds the stream per compute call
 FRAME_BATCH = 20  # frames sampled per hold of the stream lock, and the room the worker waits for to refill
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to compute (for commands)
-MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, older samples are skipped
+MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, the stamps leap (re-anchored)
+MAX_WAIT = 0.1  # [s] of wall time the publisher sleeps at most before reading the clock again
 MARKER_RATE = 10.0  # [Hz]
 DEACTIVATE_MARGIN = 1.0  # [s] a deactivation waits beyond the ramp and the command lead for the rest sample
 TRAIL_RATE = 50.0  # [Hz] of points added to E's trail
@@ -216,6 +217,8 @@ class CraneReferenceNode(LifecycleNode):
         self._refill = min(FRAME_BATCH, max(1, self._schedule.lookahead // 4))  # frames made per batch at least
         self._last_restart: dict[str, str] = {}
         self._last_stamp = 0
+        self._clock_note = ""  # a re-anchoring after a jump of the clock, reported once
+        self._behind_clock = 0  # [ns] the clock is behind the last stamp (it went back)
         self._achieved_rate = 0.0
         self._late_reported = 0
         self._effective: dict[str, float] = {}  # command -> stamp [s] of the sample it takes effect at
@@ -554,8 +557,11 @@ class CraneReferenceNode(LifecycleNode):
 
         It starts once LOOKAHEAD of frames is ready and the clock runs (ROS time is 0 until the first
         /clock with use_sim_time).  It sleeps in wall time for the time left on the node clock and checks
-        that clock again, so it follows ROS time and stops at once when the node is destroyed.  If the
-        clock goes back (use_sim_time toggled, a bag replayed from its start) the stamps are re-based.
+        that clock again (at least every MAX_WAIT), so it follows ROS time and stops at once when the node is
+        destroyed.  Jumps of the clock (/clock jumping, use_sim_time switched, a bag replayed from its start)
+        never make stamps go back or skip motion (:meth:`FrameSchedule.anchored`): forward, the stamps leap
+        with the clock; back, publishing waits until the clock reaches the next stamp again.  Diagnostics
+        WARN about both.
         """
         clock = self.get_clock()
         try:
@@ -571,13 +577,17 @@ class CraneReferenceNode(LifecycleNode):
                                            self._schedule.compute_motion, now)
             while not self._quiet.is_set():
                 now = clock.now().nanoseconds
-                next_k = self._schedule.next_k
-                if now < messages.stamp_at(self._start_ns, next_k - 1, self._rate):
-                    self._start_ns = now - next_k * NANOSECONDS // self._rate
+                start = self._schedule.anchored(now, self._start_ns)
+                if start != self._start_ns:
+                    self._clock_note = (f"ROS time jumped {(start - self._start_ns) / NANOSECONDS:.3f} s ahead of the "
+                                        "schedule: the stamps leap with it, no sample skipped")
+                    self._start_ns = start
+                behind = self._last_stamp - now
+                self._behind_clock = behind if behind > NANOSECONDS // self._rate else 0
                 self._publish(now)
                 left = messages.stamp_at(self._start_ns, self._schedule.next_k, self._rate) - clock.now().nanoseconds
                 if left > 0:
-                    self._quiet.wait(left / NANOSECONDS)
+                    self._quiet.wait(min(left / NANOSECONDS, MAX_WAIT))
         except RCLError:
             if self.context.ok():
                 raise  # not a shutdown: let the thread report it
@@ -654,16 +664,21 @@ class CraneReferenceNode(LifecycleNode):
         rate, factor = self._rates()
         self._achieved_rate = rate
         counters, fault = self._schedule.counters, self._schedule.fault
-        late, self._late_reported = (counters.held_late + counters.skipped - self._late_reported,
-                                     counters.held_late + counters.skipped)
+        late, self._late_reported = counters.held_late - self._late_reported, counters.held_late
         stream = self._stream
         sample = self._schedule.last
         level = messages.OK
         message = stream.state
         if stream.state == ERROR or fault:
             level, message = messages.ERROR, f"{stream.state}: {stream.last_error or fault}"
+        elif self._behind_clock:
+            level, message = messages.WARN, (f"{stream.state}: ROS time went back: waiting until it reaches the last "
+                                             f"stamp again ({self._behind_clock / NANOSECONDS:.3f} s ahead)")
+        elif self._clock_note:
+            level, message = messages.WARN, f"{stream.state}: {self._clock_note}"
+            self._clock_note = ""
         elif late > 0:
-            level, message = messages.WARN, f"{stream.state}: {late} samples held or skipped (solver or publisher late)"
+            level, message = messages.WARN, f"{stream.state}: {late} samples held (solver late)"
         values = messages.diagnostic_values(
             stream.state, sample, factor, self._rate, rate, counters.as_dict(), stream.targets, stream.rate,
             stream.last_error or fault,

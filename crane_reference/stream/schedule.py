@@ -59,16 +59,17 @@ class Plan:
 
 @dataclass
 class Counters:
-    """Samples published, held because no frame was ready (solver late), skipped (publisher more than
-    the catch-up limit behind) and held because a frame was not finite."""
+    """Samples published, held because no frame was ready (solver late) and held because a frame was not
+    finite; times the stamps leapt forward (:meth:`FrameSchedule.anchored`: the clock jumped, or publishing
+    fell more than the catch-up limit behind)."""
 
     published: int = 0
     held_late: int = 0
-    skipped: int = 0
+    stamp_leaps: int = 0
     held_non_finite: int = 0
 
     def as_dict(self) -> dict[str, int]:
-        return {"published": self.published, "held_late": self.held_late, "skipped": self.skipped,
+        return {"published": self.published, "held_late": self.held_late, "stamp_leaps": self.stamp_leaps,
                 "held_non_finite": self.held_non_finite}
 
 
@@ -187,14 +188,21 @@ class FrameSchedule:
 
     # -- publishing -----------------------------------------------------------------------------------
 
+    def anchored(self, now_ns: int, start_ns: int) -> int:
+        """The start [ns] (sample k stamped start + k / rate) for the clock reading ``now_ns``: the same, unless
+        the next sample is more than the catch-up limit late (the clock jumped forward, or publishing stalled),
+        then the one that stamps the next sample ``now_ns``: the stamps leap forward with the clock and no
+        sample is skipped, so the motion goes on without a jump.  A clock that went back keeps the start:
+        stamps never go back, and nothing is due until the clock reaches the next stamp again."""
+        if now_ns - (start_ns + self.next_k * NANOSECONDS // self.rate) > self.max_catch_up * NANOSECONDS:
+            self.counters.stamp_leaps += 1
+            return now_ns - self.next_k * NANOSECONDS // self.rate
+        return start_ns
+
     def due(self, now_ns: int, start_ns: int) -> list[tuple[int, Frame | None]]:
-        """Every sample due by ``now_ns`` with its frame (None: not ready), the oldest first; samples more
-        than the catch-up limit late are skipped."""
+        """Every sample due by ``now_ns`` with its frame (None: not ready), the oldest first (at most the
+        catch-up limit of them with ``start_ns`` from :meth:`anchored`)."""
         due = (now_ns - start_ns) * self.rate // NANOSECONDS
-        oldest = due - math.ceil(self.max_catch_up * self.rate) + 1
-        if self.next_k < oldest:
-            self.counters.skipped += oldest - self.next_k
-            self.next_k = oldest
         batch: list[tuple[int, Frame | None]] = []
         while self.next_k <= due:
             while self.frames and self.frames[0].k < self.next_k:
