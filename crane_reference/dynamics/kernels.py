@@ -267,9 +267,9 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
         for i in range(n_ic):
             for j in range(n_ic):
                 physical[i, j] = chain.damping[independent[i], independent[j]]
-        Phi = L_inverse.T @ V
+        modes = np.ascontiguousarray((L_inverse.T @ V).T)  # row i: phi_i
         for i in range(n_ic):
-            modal_damping[i] = Phi[:, i] @ physical @ Phi[:, i]
+            modal_damping[i] = modes[i] @ (physical @ modes[i])
     c = np.zeros(n_ic)
     d = np.zeros(n_ic)
     for i in range(n_ic):
