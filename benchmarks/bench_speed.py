@@ -186,10 +186,10 @@ def _repeat_residual(q, qd, a, k, drive, partition, chain, n):
 
 
 @njit
-def _repeat_factor(M, B, correction, partition, chain, n):
+def _repeat_factor(M, B, correction, drive, partition, chain, n):
     total = 0.0
     for _ in range(n):
-        total += kernels.iteration_factor(M, B, 1e-3, correction, partition, chain)[0, 0]
+        total += kernels.iteration_factor(M, B, 1e-3, correction, drive, partition, chain)[0, 0]
     return total
 
 
@@ -235,7 +235,7 @@ def component_times(params: CraneParameters, repeat: int = 3000) -> None:
              ("modal correction (eigenproblem, every 5 ms)", _repeat_correction,
               (reduced_mass, drive, partition, chain, settings)),
              ("iteration matrix and its Cholesky factor", _repeat_factor,
-              (acc.M, acc.velocity_map, correction, partition, chain)),
+              (acc.M, acc.velocity_map, correction, drive, partition, chain)),
              ("qdd from (8) solved (accelerations_at)", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
              ("full evaluation (+ residuals, reactions, accounts)", _repeat_evaluation,
               (q, qd, k, drive, partition, chain)))

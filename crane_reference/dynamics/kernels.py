@@ -301,12 +301,13 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
 
 
 @njit(cache=True, nogil=True)
-def iteration_factor(M, B, h, correction: ModalCorrection, partition: Partition, chain: ChainData):
+def iteration_factor(M, B, h, correction: ModalCorrection, drive, partition: Partition, chain: ChainData):
     """The factor of the Newton iteration matrix P^T (M + h^2/4 K + h/2 D) B - Delta M_r + h/2 D_u for the
-    step h: its Cholesky factor for ideal constraints (P = B, symmetric positive definite), its inverse for
-    servo-constraints (P = E_ic)."""
+    step h (K with the drive's spring s_dr on psi2): its Cholesky factor for ideal constraints (P = B,
+    symmetric positive definite), its inverse for servo-constraints (P = E_ic)."""
     independent, dependent, servo = partition.independent, partition.dependent, partition.servo
     matrix = M + (0.25 * h * h) * chain.stiffness
+    matrix[chain.drive_joint, chain.drive_joint] += 0.25 * h * h * drive[1]
     if chain.damped:
         matrix += (0.5 * h) * chain.damping
     reduced = map_columns(project_rows(matrix, B, independent, dependent, servo), B, independent, dependent)
@@ -400,7 +401,7 @@ def integration_step(q0, qd0, qdd0, M0, B0, correction: ModalCorrection, t0, h, 
                      + matvec(correction.damping - fresh.damping, v0[:n_ic]))
             a0[:n_ic] = cholesky_solve(cholesky(reduced_mass - fresh.inertia), force)
         correction = fresh
-    factor = iteration_factor(M0, B0, h, correction, partition, chain)
+    factor = iteration_factor(M0, B0, h, correction, drive, partition, chain)
     q1 = q0 + h * qd0 + 0.5 * h * h * qdd0
     a1 = a0.copy()
     status = NOT_CONVERGED
