@@ -11,12 +11,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from crane_reference.dynamics.kinematics import forward_kinematics
 from crane_reference.model.chain import build_model
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import Task
 from crane_reference.model.profiles import Constant, QuinticRise
 from crane_reference.motion.constraints import ArealRate, ConstraintSet, EllipseXY, HeightZ
+from crane_reference.motion.simulation import Scenario
 from crane_reference.stream.reference_stream import CHUNK_STEPS, ReferenceStream
+from crane_reference.stream.targets import reach
 
 STEP = 1e-3  # [s]
 RETARGET_AT = 0.2037  # [s], inside a run of CHUNK_STEPS steps
@@ -125,3 +128,25 @@ def test_samples_between_steps_are_the_hermite_spline_and_the_kinematics_there()
         rotation = dynamics.terms(s.t, s.q, s.qd).ee_rotation
         np.testing.assert_allclose(Rotation.from_quat(s.ee_quaternion).as_matrix(), rotation, rtol=0, atol=1e-12)
     assert [s.t for s in samples] == at.tolist()
+
+
+def test_reach_is_the_arms_geometric_reach(params):
+    """E's reach from the column's axis at a height z, found by continuation on the position constraints,
+    equals plane geometry for the rigid crane: the boom and the knuckle arm turn in the vertical plane of the
+    column's axis about the luff pivot (r_p, z_p), so E at height z lies at r = r_p + sqrt(L^2 - (z - z_p)^2)
+    for a pivot-to-E distance L between the folded and the stretched arm (L_min, L_max: forward kinematics
+    over the knuckle angle).  To within the 1 mm resolution plus what the singular-value margin 1e-3 cuts
+    off near the fold and the stretch."""
+    scenario = Scenario(params, "rigid")
+    model, chain = scenario.model, scenario.dynamics.chain
+    q = model.initial_q.copy()
+    q[model.drive_joint] = 0.0
+    pivot = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)[0][model.index("boom_luff")][:3, 3]
+    arm = np.repeat(q[None], 20001, axis=0)
+    arm[:, model.index("knuckle")] = np.linspace(-np.pi, np.pi, 20001)
+    distance = np.linalg.norm(scenario.dynamics.end_effector_poses(arm)[0] - pivot, axis=1)
+    for z in (scenario.z_static, scenario.z_static + 0.2):
+        near, far = (pivot[0] + np.sqrt(length ** 2 - (z - pivot[2]) ** 2)
+                     for length in (distance.min(), distance.max()))
+        low, high = reach(scenario, params.task.ellipse_b, [z], 1e-3)
+        assert near <= low <= near + 5e-3 and far - 5e-3 <= high <= far

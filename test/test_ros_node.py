@@ -407,6 +407,22 @@ def test_parameters_are_declared_from_one_table(ros: Harness) -> None:
         assert bool(descriptor.floating_point_range or descriptor.integer_range) == (spec.bounds is not None)
 
 
+def test_ellipse_ranges_are_the_cranes_reach(ros: Harness) -> None:
+    """At configure the ranges of ellipse.a and ellipse.b narrow from the table's [0.1, 20] m to E's reach from
+    the column's axis (:func:`reach`, tested against plane geometry): a value beyond it is refused naming the
+    parameter and the range, one inside is taken."""
+    node = ros.start(publish_rate=100)
+    for name in ("ellipse.a", "ellipse.b"):
+        descriptor = node.describe_parameter(name)
+        (allowed,) = descriptor.floating_point_range
+        assert 0.1 < allowed.from_value < 2.0 < 3.0 < allowed.to_value < 20.0
+        assert f"[{allowed.from_value:g}, {allowed.to_value:g}] m" in descriptor.additional_constraints
+    (refused,) = ros.set_parameters(Parameter("ellipse.a", value=10.0))
+    assert not refused.successful and "ellipse.a" in refused.reason and "out of range" in refused.reason
+    (taken,) = ros.set_parameters(Parameter("ellipse.a", value=3.2))
+    assert taken.successful, taken.reason
+
+
 def test_node_yaml_lists_the_table_defaults() -> None:
     data = yaml.safe_load((Path(__file__).resolve().parent.parent / "config" / "node.yaml").read_text())
     values = data["/**"]["ros__parameters"]  # any node name or namespace
@@ -437,8 +453,10 @@ def test_rejected_changes_leave_the_stream_untouched(ros: Harness) -> None:
         assert not result.successful, case
         assert parameter.name in result.reason or "type" in result.reason, (case, result.reason)
         assert node.get_parameter(parameter.name).value == before, case
-    (result,) = ros.set_parameters(Parameter("ellipse.a", value=15.0))
-    assert "reach" in result.reason
+    (result,) = ros.set_parameters(Parameter("ellipse.a", value=15.0))  # beyond the reach offered as its range
+    assert "ellipse.a out of range" in result.reason
+    (result,) = ros.set_parameters(Parameter("z.increment", value=-5.0))  # the project's reachability check
+    assert "z.increment" in result.reason and "reach" in result.reason, result.reason
     (result,) = ros.set_parameters(Parameter("elipse.a", value=3.2))  # a typo: named, with the valid names
     assert not result.successful and "elipse.a" in result.reason and "ellipse.a" in result.reason, result.reason
     (result,) = ros.set_parameters(Parameter("ellipse.a", value=3))  # the current value: no re-target

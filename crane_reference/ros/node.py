@@ -78,7 +78,7 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
-from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.msg import FloatingPointRange, SetParametersResult
 from rclpy.exceptions import ParameterNotDeclaredException
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation
@@ -99,7 +99,7 @@ from ..model.urdf import model_to_urdf
 from ..motion.simulation import SOLVER_FAILURES
 from ..stream.reference_stream import ERROR, PAUSED, ReferenceStream
 from ..stream.schedule import Frame, FrameSchedule
-from ..stream.targets import UnreachableTargetError
+from ..stream.targets import UnreachableTargetError, reach
 from ..stream.warmup import warm_up
 from .message_types import rclpy_types
 from .parameters import PARAMETERS, SPECS, TARGET_PARAMETERS, ParameterError, check, coerce_parameters, declare
@@ -212,6 +212,7 @@ class CraneReferenceNode(LifecycleNode):
             self.get_logger().error(self._starting)
             return TransitionCallbackReturn.FAILURE
         self._stream = stream
+        self._offer_reach(stream)
         self._schedule = FrameSchedule(self._rate, max(2, math.ceil(LOOKAHEAD * self._rate)),
                                        self._values["command_lead"], MAX_CATCH_UP, stream.sample(0.0))
         self._refill = min(FRAME_BATCH, max(1, self._schedule.lookahead // 4))  # frames made per batch at least
@@ -244,6 +245,21 @@ class CraneReferenceNode(LifecycleNode):
         self.get_logger().info(f"configured: the {self._values['model']} crane ({len(self._joint_names)} joints, "
                                f"config {config_file or 'packaged default'})")
         return TransitionCallbackReturn.SUCCESS
+
+    def _offer_reach(self, stream: ReferenceStream) -> None:
+        """Narrow the ranges of ellipse.a and ellipse.b (what rqt_reconfigure's sliders and rclpy's range check
+        use) to the crane's reach at its start and target heights (:func:`~crane_reference.stream.targets.reach`);
+        every change is still checked around the whole ellipse."""
+        heights = (stream.scenario.z_static, stream.scenario.z_static + self._values["z.increment"])
+        low, high = reach(stream.scenario, self._values["ellipse.b"], heights, stream.singular_value_margin)
+        for name in ("ellipse.a", "ellipse.b"):
+            spec = SPECS[name]
+            descriptor = spec.descriptor()
+            descriptor.floating_point_range = [FloatingPointRange(from_value=low, to_value=high, step=0.0)]
+            descriptor.additional_constraints = (
+                f"must be a number in [{low:g}, {high:g}] m: E's reach from the column's axis at the start and "
+                "target heights (computed at configure); the whole ellipse is checked when it is set")
+            self.set_descriptor(name, descriptor)
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Publish from the next sample on (stamps continue from the clock's present time); a reference

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -35,24 +36,72 @@ def check_task(scenario: Scenario, task: Task, z_now: float, margin: float) -> N
             raise UnreachableTargetError(f"{field.name} = {value}: must be a finite number")
     if task.ellipse_a <= 0 or task.ellipse_b <= 0 or task.rise_time <= 0:
         raise UnreachableTargetError("ellipse_a, ellipse_b and rise_time must be > 0")
-    model = scenario.model
-    q = model.initial_q.copy()
+    q = scenario.model.initial_q.copy()
     for z in np.linspace(z_now, scenario.z_static + task.z_increment, CHECK_HEIGHTS):
-        check = ProgrammedMotion(scenario.dynamics, paper_constraints(
-            Constant(task.ellipse_a), Constant(task.ellipse_b), Constant(z)), min_singular_value=0.0)
+        check = _motion(scenario, task.ellipse_a, task.ellipse_b, z)
         for phi in np.linspace(-0.5 * np.pi, 1.5 * np.pi, ELLIPSE_POINTS):
-            x, y = task.ellipse_a * np.cos(phi), task.ellipse_b * np.sin(phi)
-            q[model.drive_joint] = np.arctan2(y, x)
-            where = f"ellipse point ({x:.3f}, {y:.3f}) m at z = {z:.3f} m"
-            try:
-                q, (p, C) = check.project_positions(0.0, q)
-            except (ProjectionError, np.linalg.LinAlgError) as failure:
-                raise UnreachableTargetError(f"{where} is out of the crane's reach") from failure
-            grads = check.constraints.position_jacobian(0.0, p)
-            sigma = smallest_singular_value(np.ascontiguousarray(grads @ C[:, check.dependent]))
-            if not sigma >= margin:
-                raise UnreachableTargetError(f"{where} is too near a stretch/fold singularity (smallest singular "
-                                             f"value of K_dc {sigma:.3g} < {margin:g})")
+            q = _hold(check, scenario, q, task.ellipse_a * np.cos(phi), task.ellipse_b * np.sin(phi), z, margin)
+
+
+def _motion(scenario: Scenario, a: float, b: float, z: float) -> ProgrammedMotion:
+    """The paper's constraints for the ellipse (a, b) at the constant height z."""
+    return ProgrammedMotion(scenario.dynamics, paper_constraints(Constant(a), Constant(b), Constant(z)),
+                            min_singular_value=0.0)
+
+
+def _hold(check: ProgrammedMotion, scenario: Scenario, q: np.ndarray, x: float, y: float, z: float,
+          margin: float) -> np.ndarray:
+    """q with E at (x, y, z) [m] on ``check``'s constraints, solved from ``q`` (continuation) with the column
+    azimuth atan2(y, x); :class:`UnreachableTargetError` if E cannot be held there, or only with the smallest
+    singular value of K_dc below ``margin``."""
+    q = q.copy()
+    q[scenario.model.drive_joint] = np.arctan2(y, x)
+    where = f"ellipse point ({x:.3f}, {y:.3f}) m at z = {z:.3f} m"
+    try:
+        q, (p, C) = check.project_positions(0.0, q)
+    except (ProjectionError, np.linalg.LinAlgError) as failure:
+        raise UnreachableTargetError(f"{where} is out of the crane's reach") from failure
+    if math.hypot(p[0] - x, p[1] - y) > POINT_TOLERANCE:  # the constraints also hold with E across the axis
+        raise UnreachableTargetError(f"{where} is out of the crane's reach on the boom's side (the constraints "
+                                     f"hold only with E at ({p[0]:.3f}, {p[1]:.3f}) m)")
+    grads = check.constraints.position_jacobian(0.0, p)
+    sigma = smallest_singular_value(np.ascontiguousarray(grads @ C[:, check.dependent]))
+    if not sigma >= margin:
+        raise UnreachableTargetError(f"{where} is too near a stretch/fold singularity (smallest singular "
+                                     f"value of K_dc {sigma:.3g} < {margin:g})")
+    return q
+
+
+POINT_TOLERANCE = 1e-6  # [m]
+REACH_RESOLUTION = 1e-3  # [m]
+REACH_FIRST_STEP = 0.5  # [m]
+
+
+def reach(scenario: Scenario, radius: float, heights: Iterable[float], margin: float) -> tuple[float, float]:
+    """[r_min, r_max] [m]: the distances from the column's axis at which E can be held at every one of
+    ``heights`` (with the margin of :func:`check_task`), found from ``radius`` (reachable) outwards and
+    inwards by continuation with halving steps, to :data:`REACH_RESOLUTION` (rounded inwards).  A circle of
+    radius r in that range is then reachable point by point; an ellipse with both semi-axes in it needs
+    :func:`check_task` still (this bounds the parameter ranges a user is offered)."""
+    low, high = 0.0, math.inf
+    for z in heights:
+        bounds = []
+        for direction in (-1.0, 1.0):
+            q = _hold(_motion(scenario, radius, radius, z), scenario, scenario.model.initial_q, radius, 0.0, z,
+                      margin)
+            r, step = radius, REACH_FIRST_STEP
+            while step >= REACH_RESOLUTION:
+                trial = r + direction * step
+                try:
+                    if trial <= 0.0:
+                        raise UnreachableTargetError("E on the column's axis")
+                    q = _hold(_motion(scenario, trial, trial, z), scenario, q, trial, 0.0, z, margin)
+                    r = trial
+                except UnreachableTargetError:
+                    step *= 0.5
+            bounds.append(r)
+        low, high = max(low, bounds[0]), min(high, bounds[1])
+    return math.ceil(low / REACH_RESOLUTION) * REACH_RESOLUTION, math.floor(high / REACH_RESOLUTION) * REACH_RESOLUTION
 
 
 def settled(profile: Profile, t: float) -> Profile:
