@@ -25,26 +25,35 @@ def start(*ros_args: str) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM])
-def test_publishes_and_exits_cleanly_on_a_signal(signal_number: int) -> None:
-    process = start("--params-file", str(NODE_YAML), "-p", "publish_rate:=50", "-p", "ellipse.a:=3")
+def listen_then_signal(process: subprocess.Popen, msg_type: type, topic: str, count: int,
+                       signal_number: int) -> tuple[list, str, str]:
+    """Messages of ``topic`` from the node ``process`` until ``count`` arrived (60 s at most), then
+    ``signal_number`` to it; the messages and its stdout and stderr once it ended."""
     context = rclpy.Context()
     rclpy.init(context=context)
-    received: list[JointState] = []
+    received: list = []
     try:
         node = Node("listener", context=context)
-        node.create_subscription(JointState, "/crane_reference/joint_states", received.append, 100)
+        node.create_subscription(msg_type, topic, received.append, 100)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         deadline = time.monotonic() + 60.0
-        while len(received) < 20 and time.monotonic() < deadline and process.poll() is None:
+        while len(received) < count and time.monotonic() < deadline and process.poll() is None:
             executor.spin_once(timeout_sec=0.1)
         node.destroy_node()
     finally:
         context.try_shutdown()
         process.send_signal(signal_number)
         stdout, stderr = process.communicate(timeout=30)
+    return received, stdout, stderr
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM])
+def test_publishes_and_exits_cleanly_on_a_signal(signal_number: int) -> None:
+    process = start("--params-file", str(NODE_YAML), "-p", "publish_rate:=50", "-p", "ellipse.a:=3")
+    received, stdout, stderr = listen_then_signal(process, JointState, "/crane_reference/joint_states", 20,
+                                                  signal_number)
     assert len(received) >= 20, stderr
     assert len(received[-1].name) == len(received[-1].position) == 24
     assert process.returncode == 0, stderr
@@ -74,22 +83,7 @@ def test_an_unconfigured_node_reports_itself_and_exits_cleanly_on_a_signal(signa
     """autostart false: the node publishes /diagnostics while unconfigured (a lifecycle manager would
     configure it) and ends with exit code 0 on SIGINT or SIGTERM."""
     process = start("-p", "autostart:=false")
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    received: list[DiagnosticArray] = []
-    try:
-        node = Node("listener", context=context)
-        node.create_subscription(DiagnosticArray, "/diagnostics", received.append, 100)
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        deadline = time.monotonic() + 60.0
-        while not received and time.monotonic() < deadline and process.poll() is None:
-            executor.spin_once(timeout_sec=0.1)
-        node.destroy_node()
-    finally:
-        context.try_shutdown()
-        process.send_signal(signal_number)
-        stdout, stderr = process.communicate(timeout=30)
+    received, stdout, stderr = listen_then_signal(process, DiagnosticArray, "/diagnostics", 1, signal_number)
     assert received and received[0].status[0].message == "unconfigured", stderr
     assert process.returncode == 0, stderr
     assert "Traceback" not in stderr and "Traceback" not in stdout, stderr
