@@ -8,7 +8,8 @@ For the flexible crane (h = 1 ms), in one process:
 * ``ReferenceStream.samples``: microseconds per sample, one at a time and in batches of 20 (the node's
   FRAME_BATCH), at the computed steps (a 1 kHz grid) and between them (interpolated);
 * a re-target: the reachability check (``check_targets``, run in the node's parameter callback before
-  the change is accepted), ``retarget`` itself (rewind and blend), then the motion of 20 samples after it.
+  the change is accepted), ``retarget`` itself (rewind and blend), then the motion of 20 samples after it;
+* E's reach from the column's axis (the node's ranges of ellipse.a and ellipse.b, found at configure).
 
 Each figure is the median of ``--repeats`` timings.  Run: ``.venv/bin/python benchmarks/bench_stream.py``.
 """
@@ -24,6 +25,7 @@ from scipy.spatial.transform import Rotation
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import Task
 from crane_reference.stream.reference_stream import CHUNK_STEPS, ReferenceStream
+from crane_reference.stream.targets import reach
 
 STEP = 1e-3  # [s]
 BATCH = 20
@@ -83,6 +85,14 @@ def main() -> None:
     print(f"[retarget] reachability check {np.median(checks) * 1e3:6.1f} ms, retarget (rewind, blend) "
           f"{np.median(retargets) * 1e3:6.1f} ms, the first {BATCH} samples after it {np.median(after) * 1e3:6.1f} ms "
           f"(medians of {args.repeats})")
+
+    task, scenario = stream.targets, stream.scenario
+    heights = (scenario.z_static, scenario.z_static + task.z_increment)
+    start = time.perf_counter()
+    low, high = reach(scenario, task.ellipse_b, heights, stream.singular_value_margin)
+    seconds = time.perf_counter() - start
+    print(f"[reach] E's reach from the column's axis at z = {heights[0]:.3f} and {heights[1]:.3f} m (the node's "
+          f"ranges of ellipse.a and ellipse.b): [{low:g}, {high:g}] m, found in {seconds * 1e3:.0f} ms (at configure)")
 
 
 if __name__ == "__main__":

@@ -13,6 +13,8 @@ from pathlib import Path
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -25,10 +27,11 @@ def start(*ros_args: str) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def listen_then_signal(process: subprocess.Popen, msg_type: type, topic: str, count: int,
-                       signal_number: int) -> tuple[list, str, str]:
-    """Messages of ``topic`` from the node ``process`` until ``count`` arrived (60 s at most), then
-    ``signal_number`` to it; the messages and its stdout and stderr once it ended."""
+def listen_then_signal(process: subprocess.Popen, msg_type: type, topic: str, count: int, signal_number: int,
+                       transitions: tuple[int, ...] = ()) -> tuple[list, str, str]:
+    """The lifecycle ``transitions`` requested (as a manager does), then messages of ``topic`` from the node
+    ``process`` until ``count`` arrived (60 s at most), then ``signal_number`` to it; the messages and its
+    stdout and stderr once it ended."""
     context = rclpy.Context()
     rclpy.init(context=context)
     received: list = []
@@ -38,6 +41,13 @@ def listen_then_signal(process: subprocess.Popen, msg_type: type, topic: str, co
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         deadline = time.monotonic() + 60.0
+        change_state = node.create_client(ChangeState, "/crane_reference/change_state")
+        for transition in transitions:
+            assert change_state.wait_for_service(timeout_sec=60.0)
+            future = change_state.call_async(ChangeState.Request(transition=Transition(id=transition)))
+            executor.spin_until_future_complete(future, timeout_sec=60.0)
+            assert future.result().success
+        received.clear()
         while len(received) < count and time.monotonic() < deadline and process.poll() is None:
             executor.spin_once(timeout_sec=0.1)
         node.destroy_node()
@@ -79,11 +89,16 @@ def test_an_unknown_parameter_stops_the_start_naming_it() -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM])
-def test_an_unconfigured_node_reports_itself_and_exits_cleanly_on_a_signal(signal_number: int) -> None:
+@pytest.mark.parametrize(("transitions", "state"), [((), "unconfigured"),
+                                                    ((Transition.TRANSITION_CONFIGURE,), "inactive")])
+def test_a_waiting_node_reports_its_state_and_exits_cleanly_on_a_signal(signal_number: int, transitions: tuple,
+                                                                         state: str) -> None:
     """autostart false: the node publishes /diagnostics while unconfigured (a lifecycle manager would
-    configure it) and ends with exit code 0 on SIGINT or SIGTERM."""
+    configure it) and, once configured, while inactive; in both it ends with exit code 0 on SIGINT or
+    SIGTERM."""
     process = start("-p", "autostart:=false")
-    received, stdout, stderr = listen_then_signal(process, DiagnosticArray, "/diagnostics", 1, signal_number)
-    assert received and received[0].status[0].message == "unconfigured", stderr
+    received, stdout, stderr = listen_then_signal(process, DiagnosticArray, "/diagnostics", 1, signal_number,
+                                                  transitions)
+    assert received and received[0].status[0].message.startswith(state), stderr
     assert process.returncode == 0, stderr
     assert "Traceback" not in stderr and "Traceback" not in stdout, stderr

@@ -135,6 +135,8 @@ class ExactFrequencyTrapezoidal:
         self.motion = motion
         self.modal = modal
         """False: the plain trapezoidal rule (no modal correction), for comparison."""
+        self.refresh_interval = REFRESH_INTERVAL
+        """[s] of motion after which the modal correction is computed again."""
         self.evaluations = evaluations
         self.tolerance = tolerance
         self.max_iterations = max_iterations
@@ -145,7 +147,7 @@ class ExactFrequencyTrapezoidal:
     def settings(self) -> StepSettings:
         """The method and its stopping rules in the layout of the compiled kernels."""
         return StepSettings(self.evaluations, self.tolerance, self.max_iterations, PROJECTION_TOLERANCE,
-                            REFRESH_INTERVAL, CUTOFF, UNRESOLVED_DAMPING, self.modal)
+                            self.refresh_interval, CUTOFF, UNRESOLVED_DAMPING, self.modal)
 
     def _fresh(self) -> ModalCorrection:
         """No modal correction yet: the first step computes it."""

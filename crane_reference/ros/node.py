@@ -451,8 +451,11 @@ class CraneReferenceNode(LifecycleNode):
         return messages.stamp_at(self._start_ns or 0, k, self._rate) / NANOSECONDS
 
     def _lifecycle_state(self) -> str:
-        """The lifecycle state's label ('unconfigured', 'inactive', 'active', ...)."""
-        return self._state_machine.current_state[1]
+        """The primary lifecycle state, from what the transitions set up: a stream after configure, a
+        publisher thread after activate."""
+        if self._stream is None:
+            return "unconfigured"
+        return "active" if "publisher" in self._threads else "inactive"
 
     def _on_restart(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """~/restart (while inactive): back to the static-equilibrium start of the current targets, also out of
