@@ -366,8 +366,7 @@ class CraneReferenceNode(LifecycleNode):
         try:
             stream = ReferenceStream(config, v["model"], v["integrator.step"], v["blend_time"], targets,
                                      column_drive(config, v["drive.torque"], v["drive.duration"]),
-                                     speed_scaling=v["speed_scaling"], ramp_time=v["speed_scaling.ramp_time"],
-                                     at_rest=False)
+                                     speed_scaling=v["speed_scaling"], ramp_time=v["speed_scaling.ramp_time"])
             stream.check_targets(targets)
         except UnreachableTargetError as error:
             raise StartupError(f"ellipse.* / z.* = {targets}: {error}") from error

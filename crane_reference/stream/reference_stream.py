@@ -56,8 +56,7 @@ class ReferenceStream:
                  blend_time: float = 2.0, targets: Task | None = None,
                  drive: TorqueDrive | FlexibleDrive | None = None,
                  singular_value_margin: float = 0.1, task_constraints: TaskConstraints = paper_task_constraints,
-                 dependent: tuple[int, ...] | None = None, speed_scaling: float = 1.0, ramp_time: float = 1.0,
-                 at_rest: bool = False):
+                 dependent: tuple[int, ...] | None = None, speed_scaling: float = 1.0, ramp_time: float = 1.0):
         self.params = replace(params, drive=drive or params.drive)
         self.targets = targets or params.task
         self.task_constraints = task_constraints
@@ -70,7 +69,7 @@ class ReferenceStream:
         self.set_blend_time(blend_time)
         self.speed_scaling = check_rate(speed_scaling)
         self._warp = TimeWarp(ramp_time, self.speed_scaling)
-        self.restart(at_rest=at_rest)
+        self.restart()
 
     # -- clocks and state ---------------------------------------------------------------------------
 
@@ -85,17 +84,17 @@ class ReferenceStream:
                                      tuple(self.dependent[i] for i in rows), MIN_SINGULAR_VALUE)
         return static_equilibrium(holonomic, self.model.initial_q).q
 
-    def restart(self, tau: float = 0.0, at_rest: bool = False) -> None:
+    def restart(self, tau: float = 0.0) -> None:
         """Back to the static-equilibrium start of the current targets; motion time 0 at publish time tau,
-        moving at the speed scaling (or ``at_rest``: PAUSED until :meth:`resume`)."""
+        moving at the speed scaling."""
         constraints = self.task_constraints(self.targets, self.scenario.z_static)
         start = self._static_start(constraints)
         self._stepper = MotionStepper(self._motion(constraints), 0.0, start, np.zeros_like(start), self.step)
         self._history = History(self._stepper.snapshot(),
                                 reference_sample(self._stepper.sample, self.model.drive_joint))
-        self._warp = TimeWarp(self._warp.ramp_time, 0.0 if at_rest else self.speed_scaling, tau)
+        self._warp = TimeWarp(self._warp.ramp_time, self.speed_scaling, tau)
         self._hold: ReferenceSample | None = None
-        self.state = PAUSED if at_rest else RUNNING
+        self.state = RUNNING
         self.last_error = ""
 
     def start_configuration(self) -> np.ndarray:
