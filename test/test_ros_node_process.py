@@ -43,10 +43,16 @@ def listen_then_signal(process: subprocess.Popen, msg_type: type, topic: str, co
         deadline = time.monotonic() + 60.0
         change_state = node.create_client(ChangeState, "/crane_reference/change_state")
         for transition in transitions:
+            # a node of an earlier test may still be known to discovery: hear this one before asking it
+            while not received and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.1)
             assert change_state.wait_for_service(timeout_sec=60.0)
-            future = change_state.call_async(ChangeState.Request(transition=Transition(id=transition)))
-            executor.spin_until_future_complete(future, timeout_sec=60.0)
-            assert future.result().success
+            for _ in range(6):  # a request sent before discovery matched this node's server is lost: ask again
+                future = change_state.call_async(ChangeState.Request(transition=Transition(id=transition)))
+                executor.spin_until_future_complete(future, timeout_sec=10.0)
+                if future.done():
+                    break
+            assert future.done() and future.result().success, "no answer to the lifecycle transition"
         received.clear()
         while len(received) < count and time.monotonic() < deadline and process.poll() is None:
             executor.spin_once(timeout_sec=0.1)
