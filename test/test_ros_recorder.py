@@ -16,6 +16,7 @@ import rclpy
 from mcap.reader import make_reader
 from rclpy.context import Context
 from rclpy.duration import Duration
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from sensor_msgs.msg import JointState
@@ -24,7 +25,6 @@ from test_bag_export import installed_type_hash, metadata, read_bag, stamp_ns
 
 from crane_reference import cli
 from crane_reference.interface.bag import (
-    DEFAULT_TOPICS,
     DIAGNOSTICS,
     END_EFFECTOR_POSE,
     JOINT_STATES,
@@ -233,16 +233,26 @@ def test_live_node_matches_offline_export(context, tmp_path):
         node = subprocess.Popen(python_command("crane_reference.ros.node", "--ros-args", "-p", f"publish_rate:={rate}",
                                                "-p", f"model:={model}"), cwd=ROOT, stdout=log_file, stderr=log_file)
     probe = rclpy.create_node("live_test_probe", context=context)
+    heard: list[JointState] = []
+    probe.create_subscription(JointState, JOINT_STATES, heard.append, 10)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(probe)
     live = tmp_path / "live"
     try:
-        wait_for(lambda: all(probe.get_publishers_info_by_topic(t) for t in DEFAULT_TOPICS), 60.0,
-                 "the node's publishers", period=0.1)
+        try:
+            wait_for(lambda: executor.spin_once(timeout_sec=0.1) or heard, 120.0, "the node's first sample")
+        except TimeoutError as error:
+            raise TimeoutError(f"{error}; node log:\n{log.read_text()}") from None
         publishing = time.monotonic()  # the node publishes from about now on
         recorder = subprocess.Popen(python_command("crane_reference.cli", "record", "-o", str(live)), cwd=ROOT,
                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         status = StatusReader(recorder)
         try:
-            wait_for(lambda: status.count(JOINT_STATES) >= 3 * rate, 60.0, "3 s of joint states", period=0.1)
+            try:
+                wait_for(lambda: status.count(JOINT_STATES) >= 3 * rate, 90.0, "3 s of joint states", period=0.1)
+            except TimeoutError as error:
+                raise TimeoutError(f"{error}; recorder status:\n{status.text()}\nnode log:\n{log.read_text()}") \
+                    from None
             recorder.send_signal(signal.SIGINT)
             recorder.wait(timeout=20)
         finally:
@@ -255,6 +265,7 @@ def test_live_node_matches_offline_export(context, tmp_path):
             node.wait(timeout=20)
         finally:
             node.kill()
+        executor.shutdown()
         probe.destroy_node()
     assert node.returncode == 0, log.read_text()
     connections, by_topic = read_bag(live)
