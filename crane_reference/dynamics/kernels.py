@@ -301,6 +301,30 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
 
 
 @njit(cache=True, nogil=True)
+def converted_accelerations(reduced_mass, a, v, old: ModalCorrection, new: ModalCorrection):
+    """The independent accelerations under the modal correction ``new`` that balance the same force as ``a``
+    under ``old`` (at the velocities v): (M_r - Delta M_new) a_new + D_new v = (M_r - Delta M_old) a + D_old v."""
+    force = matvec(reduced_mass - old.inertia, a) + matvec(old.damping - new.damping, v)
+    return cholesky_solve(cholesky(reduced_mass - new.inertia), force)
+
+
+@njit(cache=True, nogil=True)
+def corrected_accelerations(M, B, qdd, qd, correction: ModalCorrection, partition: Partition):
+    """qdd of the equation corrected by ``correction`` at a state where qdd solves (8) itself (a restart that
+    keeps the modal correction, e.g. after the forces jumped): the independent part converted from no
+    correction (:func:`converted_accelerations`), the dependent part following through B (qdd = B a + e).
+    Servo-constraints have no correction: qdd as it is."""
+    independent, dependent = partition.independent, partition.dependent
+    if partition.servo:
+        return qdd.copy()
+    n_ic = independent.size
+    none = ModalCorrection(np.zeros((n_ic, n_ic)), np.zeros((n_ic, n_ic)), correction.time, correction.step)
+    reduced_mass = map_columns(project_rows(M, B, independent, dependent, False), B, independent, dependent)
+    exact = qdd[independent]
+    return qdd + matvec(B, converted_accelerations(reduced_mass, exact, qd[independent], none, correction) - exact)
+
+
+@njit(cache=True, nogil=True)
 def iteration_factor(M, B, h, correction: ModalCorrection, drive, partition: Partition, chain: ChainData):
     """The factor of the Newton iteration matrix P^T (M + h^2/4 K + h/2 D) B - Delta M_r + h/2 D_u for the
     step h (K with the drive's spring s_dr on psi2): its Cholesky factor for ideal constraints (P = B,
@@ -397,9 +421,7 @@ def integration_step(q0, qd0, qdd0, M0, B0, correction: ModalCorrection, t0, h, 
         reduced_mass = map_columns(project_rows(M0, B0, independent, dependent, False), B0, independent, dependent)
         fresh = modal_correction(reduced_mass, h, t0, drive, partition, chain, settings)
         if not servo:
-            force = (matvec(reduced_mass - correction.inertia, a0[:n_ic])
-                     + matvec(correction.damping - fresh.damping, v0[:n_ic]))
-            a0[:n_ic] = cholesky_solve(cholesky(reduced_mass - fresh.inertia), force)
+            a0[:n_ic] = converted_accelerations(reduced_mass, a0[:n_ic], v0[:n_ic], correction, fresh)
         correction = fresh
     factor = iteration_factor(M0, B0, h, correction, drive, partition, chain)
     q1 = q0 + h * qd0 + 0.5 * h * h * qdd0

@@ -116,7 +116,10 @@ def cholesky_solve(L, b):
 
 @njit(cache=True, nogil=True)
 def smallest_singular_value(K):
-    """Smallest singular value of a square matrix (closed form for 2 x 2, the paper's K_dc)."""
+    """Smallest singular value of a square matrix (closed form for 2 x 2, the paper's K_dc; inf for an empty
+    one: no constraints, nothing that could become singular)."""
+    if K.shape[0] == 0:
+        return np.inf
     if K.shape[0] == 2:
         a, b, c, d = K[0, 0], K[0, 1], K[1, 0], K[1, 1]
         half_trace = 0.5 * (a * a + b * b + c * c + d * d)

@@ -91,6 +91,12 @@ def end_effector_poses(Q, chain: ChainData):
     return positions, rotations
 
 
+DRIVE_PARAMETERS = 4
+"""Length of the drive array (tau0, s_dr, psi_a, dpsi_a/dt) the kernels take; an array with n more entries
+also carries the actuators' generalized forces tau_a [N m or N] on the n coordinates (a closed loop's
+command, :class:`crane_reference.model.drive.Actuated`)."""
+
+
 @njit(cache=True)
 def drive_torque(drive, psi2):
     """t_dr = tau0 + s_dr (psi_a - psi2) for ``drive`` = (tau0, s_dr, psi_a, dpsi_a/dt) (a torque source has
@@ -100,11 +106,15 @@ def drive_torque(drive, psi2):
 
 @njit(cache=True)
 def generalized_forces(q, qd, gravity, chain: ChainData, drive):
-    """Q = Q_g - K q - D qd + t_dr e_psi2 with the gravity forces Q_g (the sign convention above)."""
+    """Q = Q_g - K q - D qd + t_dr e_psi2 + tau_a with the gravity forces Q_g (the sign convention above) and
+    the actuators' generalized forces tau_a = ``drive[4:]`` if ``drive`` carries them (see
+    :data:`DRIVE_PARAMETERS`)."""
     forces = gravity - matvec(chain.stiffness, q)
     if chain.damped:
         forces -= matvec(chain.damping, qd)
     forces[chain.drive_joint] += drive_torque(drive, q[chain.drive_joint])
+    if drive.size > DRIVE_PARAMETERS:
+        forces += drive[DRIVE_PARAMETERS:]
     return forces
 
 
@@ -114,14 +124,18 @@ def energy_accounts(q, qd, M, gravity_potential, chain: ChainData, drive):
 
     E_k = 1/2 qd^T M qd,  E_p = E_p,g + 1/2 q^T K q + 1/2 s_dr (psi_a - psi2)^2,
     t_dr = tau0 + s_dr (psi_a - psi2),
-    P_dr = tau0 dpsi2/dt + s_dr (psi_a - psi2) dpsi_a/dt   (what the torque source or the motor feeds in),
+    P_dr = tau0 dpsi2/dt + s_dr (psi_a - psi2) dpsi_a/dt + tau_a^T qd
+    (what the torque source or the motor feeds in, and the actuators if ``drive`` carries tau_a),
     P_D = -qd^T D qd   (the dampers' power, <= 0).
 
     Returns the array (E_k, E_p, t_dr, P_dr, P_D)."""
     j = chain.drive_joint
     K, D = chain.stiffness, chain.damping
     stretch = drive[2] - q[j]
+    power = drive[0] * qd[j] + drive[1] * stretch * drive[3]
+    if drive.size > DRIVE_PARAMETERS:
+        power += drive[DRIVE_PARAMETERS:] @ qd
     return np.array([0.5 * (qd @ matvec(M, qd)),
                      gravity_potential + 0.5 * (q @ matvec(K, q)) + 0.5 * drive[1] * stretch**2,
-                     drive_torque(drive, q[j]), drive[0] * qd[j] + drive[1] * stretch * drive[3],
+                     drive_torque(drive, q[j]), power,
                      -(qd @ matvec(D, qd))])

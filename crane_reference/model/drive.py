@@ -58,7 +58,53 @@ class SpringDrive:
         return parameters
 
 
-Drive = TorqueSource | SpringDrive
+class Actuated:
+    """A column drive with actuators: generalized forces tau_a (n,) [N m on joints, N on prismatic
+    coordinates] added on the coordinates (positive along +q), commanded over one interval at a time and
+    linear in time on it (equal ends: a zero-order hold).  The kernels get the drive's parameters followed
+    by tau_a (:data:`crane_reference.dynamics.terms.DRIVE_PARAMETERS`); the accounts count tau_a^T qd as
+    power fed in.  A new command jumps the forces at its start time: the integrator must restart there
+    (:meth:`crane_reference.motion.simulation.MotionStepper.forces_changed`).  Before the first command
+    tau_a = 0."""
+
+    def __init__(self, drive: TorqueSource | SpringDrive, dof: int):
+        self.drive = drive
+        self.dof = dof
+        self._interval = (-np.inf, np.inf)
+        self._ends = (np.zeros(dof), np.zeros(dof))
+
+    @property
+    def breakpoints(self) -> tuple[float, ...]:
+        return self.drive.breakpoints
+
+    def command(self, start: float, end: float, forces_start: np.ndarray, forces_end: np.ndarray) -> None:
+        """tau_a over [start, end] [s]: ``forces_start`` at start, ``forces_end`` at end, linear between."""
+        if not end > start:
+            raise ValueError(f"actuation interval [{start}, {end}] s: the end must be after the start")
+        ends = (np.asarray(forces_start, dtype=float), np.asarray(forces_end, dtype=float))
+        for name, forces in zip(("forces_start", "forces_end"), ends, strict=True):
+            if forces.shape != (self.dof,) or not np.all(np.isfinite(forces)):
+                raise ValueError(f"actuation {name}: must be {self.dof} finite generalized forces, got {forces}")
+        self._interval, self._ends = (start, end), ends
+
+    def forces(self, t: float | np.ndarray) -> np.ndarray:
+        """tau_a at t (shape (n,), or (N, n) for N times) inside the commanded interval."""
+        (start, end), (first, last) = self._interval, self._ends
+        t = np.asarray(t, dtype=float)
+        slack = 1e-9 * max(1.0, abs(end))
+        if np.any(t < start - slack) or np.any(t > end + slack):
+            raise ValueError(f"actuation asked at t = {t} s, outside its commanded interval [{start}, {end}] s")
+        if not np.isfinite(end - start):
+            return np.broadcast_to(first, (*t.shape, self.dof)).copy()
+        share = ((t - start) / (end - start))[..., None]
+        return (1.0 - share) * first + share * last
+
+    def kernel_parameters(self, t: float | np.ndarray, left_limit: bool = False) -> np.ndarray:
+        """The drive's (tau0, s_dr, psi_a, dpsi_a/dt) followed by tau_a at t (shape (4 + n,) or (N, 4 + n))."""
+        return np.concatenate((self.drive.kernel_parameters(t, left_limit), self.forces(t)), axis=-1)
+
+
+Drive = TorqueSource | SpringDrive | Actuated
 
 
 def column_drive(config: CraneParameters, torque: float | None = None,

@@ -66,7 +66,7 @@ loose :data:`ONLINE_TOLERANCE`, and a converged iteration (``tolerance`` 1e-9 or
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -161,11 +161,17 @@ class ExactFrequencyTrapezoidal:
         solution = self.motion.solve(t, q, qd)
         return StepState(t, q, qd, solution, self._fresh())
 
-    def restart(self, state: StepState) -> StepState:
+    def restart(self, state: StepState, keep_modes: bool = False) -> StepState:
         """Re-solve (8) at ``state`` with the drive's value from t on (after a jump) or under new
-        constraints, as at a start."""
+        constraints, as at a start; with ``keep_modes`` (the configuration did not move, only the forces
+        jumped, e.g. a controller's new command) the modal correction in use is kept and the accelerations
+        are those of the corrected equation under the new forces, which saves its eigenproblem."""
         solution = self.motion.solve(state.t, state.q, state.qd)
-        return StepState(state.t, state.q, state.qd, solution, self._fresh())
+        if not keep_modes or not math.isfinite(state.correction.time):
+            return StepState(state.t, state.q, state.qd, solution, self._fresh())
+        qdd = kernels.corrected_accelerations(solution.dynamics.M, solution.velocity_map, solution.qdd, state.qd,
+                                              state.correction, self.motion.partition)
+        return StepState(state.t, state.q, state.qd, replace(solution, qdd=qdd), state.correction)
 
     def step(self, state: StepState, t1: float, ends_on_jump: bool = False) -> StepState:
         """Advance ``state`` to time t1 > state.t [s] (one step of :meth:`run`).  A step ending on a drive

@@ -157,6 +157,13 @@ class MotionStepper:
                     residual=rows.residual, residual_distance=rows.residual_distance, **columns,
                     work_drive=work[:, 0], work_constraints=work[:, 1], work_damping=work[:, 2])
 
+    def forces_changed(self) -> None:
+        """The forces jumped at the current time (a new command of an :class:`~crane_reference.model.drive.Actuated`
+        drive): re-solve (8) there under the forces from now on, keeping the modal correction (the
+        configuration did not move); the sample shows the motion from now on."""
+        self.state = self.integrator.restart(self.state, keep_modes=True)
+        self.sample = make_sample(self.state.t, self.state.q, self.state.qd, self.state.solution, self._work)
+
     def snapshot(self) -> StepperSnapshot:
         """Everything needed to continue from the current step later (see :meth:`rewind`)."""
         return StepperSnapshot(self.state, self._k, self._work.copy(), self.sample, self.integrator.motion)

@@ -1,0 +1,1 @@
+"""Closed-loop runs of the actuated crane following the reference (controller design on the reference)."""

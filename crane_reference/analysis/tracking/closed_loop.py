@@ -1,0 +1,222 @@
+"""A closed-loop run: the actuated crane (:mod:`.plant`) made to follow the reference by joint-space feedback
+(:mod:`.controller`) with optional feedforward (:mod:`.feedforward`).
+
+The reference is the programmed motion the node publishes (ideal constraints; or realised by the luff
+and knuckle torques, ``realisation="servo"``) of the same crane, integrated with the same step; the
+controller reads it as a downstream controller does, one sample per tick: q_ref, qd_ref of the actuated
+joints at t_k.  Its feedback torque holds over the period (zero-order hold), the feedforward runs linearly
+from its value at t_k to that at t_k+1 (the reference is known ahead, as a joint_trajectory_controller
+interpolates its points).  The plant starts at rest, held by its actuators with E on the task's start
+point (:func:`.plant.held_start`).
+
+Results (:class:`TrackingRun`): E's deviation from the programmed path (its distance to the ellipse in
+XY and its height error, first order in the constraint residuals: Phi / |Phi_p|), the joint tracking
+errors, the boom tip deflection (flexible boom) and its 40-250 Hz RMS over the run's second half, the
+actuator torques and powers, the saturated share of ticks, and the plant's energy balance.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...model.chain import VARIANTS
+from ...model.parameters import CraneParameters
+from ...motion.programmed_motion import REALISATIONS, ProgrammedMotion
+from ...motion.simulation import Scenario, simulate
+from ...motion.trajectory import Trajectory
+from ..bands import vibration_band
+from ..vibration import boom_tip_deflection
+from .controller import CONTROLLERS, JointController, JointGains, bandwidth_gains
+from .feedforward import FEEDFORWARDS, RigidInverseDynamics
+from .plant import ACTUATED_JOINTS, Plant, held_start, servo_motion
+
+
+@dataclass(frozen=True)
+class TrackingSpec:
+    """What to run: the crane ``variant``, the reference's ``realisation``, the ``controller`` (pd or pid) with
+    gains from the closed-loop ``bandwidth`` [Hz] and ``damping_ratio`` per joint unless ``gains`` gives
+    them by joint name, ``feedforward`` (none or rigid), torque ``limits`` [N m] by joint name (none: no
+    limit), the controller ``rate`` [Hz], ``duration`` [s] and the plant's integrator ``step`` [s]; the
+    reference is integrated with ``reference_step`` [s] (default: ``step``; a divisor of it)."""
+
+    variant: str = "flexible"
+    realisation: str = "ideal"
+    controller: str = "pd"
+    bandwidth: float = 2.0
+    damping_ratio: float = 0.7
+    gains: dict[str, JointGains] = field(default_factory=dict)
+    feedforward: str = "rigid"
+    limits: dict[str, float] = field(default_factory=dict)
+    rate: float = 1000.0
+    duration: float = 5.0
+    step: float = 1e-3
+    reference_step: float | None = None
+
+    def __post_init__(self) -> None:
+        for name, value, allowed in (("variant", self.variant, VARIANTS), ("realisation", self.realisation,
+                                     REALISATIONS), ("controller", self.controller, CONTROLLERS),
+                                     ("feedforward", self.feedforward, FEEDFORWARDS)):
+            if value not in allowed:
+                raise ValueError(f"{name} = {value!r}: must be one of {', '.join(allowed)}")
+        for name in (*self.gains, *self.limits):
+            if name not in ACTUATED_JOINTS:
+                raise ValueError(f"joint {name!r} in gains or limits: must be one of {', '.join(ACTUATED_JOINTS)}")
+        for name in ("rate", "duration", "step"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} = {value}: must be a finite number > 0")
+        if self.reference_step is not None and not (self.reference_step > 0.0 and abs(
+                self.reference_stride * self.reference_step / self.step - 1.0) <= 1e-9):
+            raise ValueError(f"reference_step = {self.reference_step} s: must divide step = {self.step} s")
+        if not abs(self.steps_per_tick * self.step * self.rate - 1.0) <= 1e-9:
+            raise ValueError(f"rate = {self.rate} Hz with step = {self.step} s: the controller period must be a "
+                             "whole number of integrator steps")
+
+    @property
+    def steps_per_tick(self) -> int:
+        return max(1, round(1.0 / (self.rate * self.step)))
+
+    @property
+    def reference_stride(self) -> int:
+        """Reference steps per plant step."""
+        return 1 if self.reference_step is None else max(1, round(self.step / self.reference_step))
+
+    def joint_gains(self, inertia: np.ndarray) -> list[JointGains]:
+        """The gains per actuated joint: given, or from the bandwidth with J = ``inertia`` (diagonal of M)."""
+        out = []
+        for name, J in zip(ACTUATED_JOINTS, inertia, strict=True):
+            limit = self.limits.get(name, math.inf)
+            gains = self.gains.get(name) or bandwidth_gains(J, self.bandwidth, self.damping_ratio,
+                                                            self.controller == "pid")
+            out.append(JointGains(gains.kp, gains.kd, gains.ki if self.controller == "pid" else 0.0, limit))
+        return out
+
+
+@dataclass(frozen=True)
+class TrackingRun:
+    """A closed-loop run: the spec, the gains used, the plant's trajectory and actuator torques (N, 3) [N m]
+    per step, the reference on the same times, E's distance to the programmed path (N, 2) [m] (ellipse in
+    XY, height), the boom tip deflection (N, 3) [m] (zeros for the rigid boom), the saturated share of
+    ticks per joint and the wall time [s]."""
+
+    spec: TrackingSpec
+    gains: list[JointGains]
+    plant: Trajectory
+    torques: np.ndarray
+    reference: Trajectory
+    path_error: np.ndarray
+    tip_deflection: np.ndarray
+    saturated_share: np.ndarray
+    wall: float
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.plant.t
+
+    def joint_errors(self) -> np.ndarray:
+        """q_ref - q of the actuated joints (N, 3) [rad]."""
+        columns = [self.plant.joint_names.index(name) for name in ACTUATED_JOINTS]
+        return self.reference.q[:, columns] - self.plant.q[:, columns]
+
+    def powers(self) -> np.ndarray:
+        """tau qd of each actuator (N, 3) [W]."""
+        columns = [self.plant.joint_names.index(name) for name in ACTUATED_JOINTS]
+        return self.torques * self.plant.qd[:, columns]
+
+    def summary(self) -> dict[str, float]:
+        """The metrics of the module docstring, by name (SI units in the names)."""
+        late = self.t >= 0.5 * self.t[-1]
+        out = {"ellipse_distance_max_m": float(np.abs(self.path_error[:, 0]).max()),
+               "ellipse_distance_rms_m": float(np.sqrt(np.mean(self.path_error[:, 0] ** 2))),
+               "height_error_max_m": float(np.abs(self.path_error[:, 1]).max()),
+               "height_error_rms_m": float(np.sqrt(np.mean(self.path_error[:, 1] ** 2)))}
+        errors, powers = self.joint_errors(), self.powers()
+        for k, name in enumerate(ACTUATED_JOINTS):
+            out[f"{name}_error_max_rad"] = float(np.abs(errors[:, k]).max())
+            out[f"{name}_error_rms_rad"] = float(np.sqrt(np.mean(errors[:, k] ** 2)))
+            out[f"{name}_torque_peak_nm"] = float(np.abs(self.torques[:, k]).max())
+            out[f"{name}_power_peak_w"] = float(np.abs(powers[:, k]).max())
+            out[f"{name}_saturated_share"] = float(self.saturated_share[k])
+        deflection = np.linalg.norm(self.tip_deflection, axis=1)
+        out["tip_deflection_max_m"] = float(deflection.max())
+        vibration = vibration_band(self.tip_deflection, self.spec.step)[late]
+        out["tip_vibration_rms_m"] = float(np.sqrt(np.mean(np.sum(vibration**2, axis=1))))
+        out["energy_balance_error_j"] = float(np.abs(self.plant.energy_balance_error).max())
+        out["real_time_factor"] = float(self.t[-1] / self.wall)
+        return out
+
+
+Progress = Callable[[float], None]
+
+
+def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress | None = None) -> TrackingRun:
+    """The closed-loop run of ``spec`` on the crane ``params`` (``progress`` gets the simulated time)."""
+    started = time.perf_counter()
+    scenario = Scenario(params, spec.variant)
+    start = held_start(scenario)
+    if spec.realisation == "servo":
+        reference_motion, reference_start = servo_motion(scenario), start.q
+    else:
+        reference_motion, reference_start = scenario.motion, scenario.equilibrium.q
+    reference = simulate(reference_motion, reference_start, spec.duration, step=spec.reference_step or spec.step)
+    reference = _every(reference, spec.reference_stride)
+    plant = Plant(params, spec.variant, start, spec.step)
+    actuated = plant.actuated
+    inertia = plant.dynamics.terms(0.0, start.q, np.zeros_like(start.q)).M[actuated, actuated]
+    gains = spec.joint_gains(inertia)
+    controller = JointController(gains, 1.0 / spec.rate)
+    per = spec.steps_per_tick
+    ticks = (len(reference.t) - 1) // per
+    starts, ends = _feedforward(params, spec, reference, reference_motion, per, ticks)
+    limits = np.array([g.limit for g in gains])
+    for k in range(ticks):
+        i = k * per
+        torque = controller(reference.q[i, actuated] - plant.q[actuated],
+                            reference.qd[i, actuated] - plant.qd[actuated], starts[k])
+        end = np.clip(torque + ends[k + 1] - starts[k], -limits, limits)
+        plant.actuate(reference.t[i + per], torque, end)
+        if progress is not None and (k + 1) % max(1, round(0.25 * spec.rate)) == 0:
+            progress(plant.t)
+    trajectory, torques = plant.trajectory()
+    reference = _every(reference, 1, len(trajectory.t))
+    constraints = scenario.motion.constraints
+    path_error = np.array([constraints.residual(t, p) / np.linalg.norm(constraints.position_jacobian(t, p), axis=1)
+                           for t, p in zip(trajectory.t, trajectory.ee_position, strict=True)])
+    deflection = (boom_tip_deflection(plant.model, plant.dynamics.chain, trajectory.q)
+                  if spec.variant == "flexible" else np.zeros((len(trajectory.t), 3)))
+    return TrackingRun(spec, gains, trajectory, torques, reference, path_error, deflection,
+                       controller.saturated_ticks / max(1, controller.ticks), time.perf_counter() - started)
+
+
+def _feedforward(params: CraneParameters, spec: TrackingSpec, reference: Trajectory, motion: ProgrammedMotion,
+                 per: int, ticks: int) -> tuple[np.ndarray, np.ndarray]:
+    """tau_ff at the ticks (ticks + 1, 3) [N m] as a command starts there and as one ends there: they differ
+    at a jump of the drive's torque, where the end takes the drive and the reference's qdd from before it.
+    (A jump between ticks reaches the feedforward at the next tick.)"""
+    starts = np.zeros((ticks + 1, len(ACTUATED_JOINTS)))
+    if spec.feedforward == "none":
+        return starts, starts
+    inverse = RigidInverseDynamics(params, reference.joint_names)
+    jumps = motion.dynamics.drive.breakpoints
+    ends = starts.copy()
+    for k, i in enumerate(range(0, ticks * per + 1, per)):
+        t, q, qd = reference.t[i], reference.q[i], reference.qd[i]
+        starts[k] = ends[k] = inverse(t, q, qd, reference.qdd[i])
+        if any(abs(t - jump) <= 1e-9 * spec.step for jump in jumps):
+            ends[k] = inverse(t, q, qd, motion.solve(t, q, qd, left_limit=True).qdd, left_limit=True)
+    return starts, ends
+
+
+def _every(trajectory: Trajectory, stride: int, count: int | None = None) -> Trajectory:
+    """Every ``stride``-th sample of ``trajectory`` (the first ``count`` of them)."""
+    return Trajectory(trajectory.variant, trajectory.joint_names, trajectory.drive_joint,
+                      *(getattr(trajectory, name)[::stride][:count] for name in _ARRAYS))
+
+
+_ARRAYS = tuple(name for name in Trajectory.__dataclass_fields__ if name not in ("variant", "joint_names",
+                                                                                  "drive_joint"))

@@ -1,0 +1,41 @@
+"""Feedforward along the reference: inverse dynamics of the rigid crane.
+
+    tau_ff = (M qdd + h - Q)[actuated joints]
+
+of the rigid crane at the reference's values of its coordinates (base, column, luff, knuckle; a flexible
+reference's RFE angles are left out), with Q holding gravity, the support springs, damping and the column
+drive as the plant has it.  These are the torques that move the rigid crane as the reference does, as far
+as actuators on these joints can: for a reference realised by the luff and knuckle torques
+(servo-constraints) on the rigid crane the other rows balance and tau_ff is exact; for the ideal
+constraints the force at E also acts on the base, which no actuator here reproduces.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...dynamics.chain_dynamics import CraneDynamics
+from ...model.chain import build_model
+from ...model.drive import make_drive
+from ...model.parameters import CraneParameters
+from .plant import ACTUATED_JOINTS
+
+FEEDFORWARDS = ("none", "rigid")
+
+
+class RigidInverseDynamics:
+    """tau_ff of the module docstring for references over the coordinates ``joint_names``."""
+
+    def __init__(self, params: CraneParameters, joint_names: tuple[str, ...]):
+        model = build_model(params, "rigid")
+        self.dynamics = CraneDynamics(model, make_drive(params.drive, params.initial.column), params.damping)
+        self._columns = np.array([joint_names.index(name) for name in model.joint_names], dtype=np.int64)
+        self._actuated = np.array([model.index(name) for name in ACTUATED_JOINTS], dtype=np.int64)
+
+    def __call__(self, t: float, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                 left_limit: bool = False) -> np.ndarray:
+        """tau_ff [N m] (order of :data:`~.plant.ACTUATED_JOINTS`) at the reference's (q, qd, qdd) at t [s]
+        (with ``left_limit`` the drive just before t: at a jump of its torque, with the qdd from before it)."""
+        columns = self._columns
+        terms = self.dynamics.terms(t, q[columns], qd[columns], left_limit)
+        return (terms.M @ qdd[columns] + terms.h - terms.Q)[self._actuated]

@@ -1,0 +1,109 @@
+"""The actuated crane: the plant a controller makes follow the reference.
+
+The crane of a config (supports, RFE boom, payload, damping, column drive) without programmed
+constraints: every coordinate is independent and nothing holds E but the crane itself, so the payload
+loads the boom and the base.  Actuators add torques tau [N m] on :data:`ACTUATED_JOINTS` (positive along
++q); on the column they act beside its drive (for a flexible drive that is the same as offsetting the
+motor angle by tau / s_dr).  The plant is integrated with the package's integrator
+(:mod:`crane_reference.motion.integration`) through an :class:`~crane_reference.model.drive.Actuated`
+drive: a command holds over one controller period, linear in time on it, and the integrator restarts at
+its start, where the forces jump (keeping its modal correction).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...dynamics.chain_dynamics import CraneDynamics
+from ...model.chain import build_model
+from ...model.drive import Actuated, make_drive
+from ...model.parameters import CraneParameters
+from ...motion.constraints import ConstraintSet
+from ...motion.equilibrium import static_equilibrium
+from ...motion.programmed_motion import ProgrammedMotion
+from ...motion.simulation import MotionStepper, Scenario
+from ...motion.trajectory import Trajectory, stack_samples
+
+ACTUATED_JOINTS = ("column_slew", "boom_luff", "knuckle")
+"""The joints with actuators, in the order of every torque vector here (psi2, psi(3,0), psi4)."""
+
+
+def servo_motion(scenario: Scenario) -> ProgrammedMotion:
+    """The scenario's task realised by the luff and knuckle torques (servo-constraints) instead of a force
+    at E: the motion an actuated crane can follow exactly where that motion exists (the rigid boom)."""
+    return ProgrammedMotion(scenario.dynamics, scenario.motion.constraints, realisation="servo")
+
+
+@dataclass(frozen=True)
+class HeldStart:
+    """A start of the plant at rest: q and the actuator torques [N m] (order of :data:`ACTUATED_JOINTS`)
+    that hold it."""
+
+    q: np.ndarray
+    torques: np.ndarray
+
+
+def held_start(scenario: Scenario) -> HeldStart:
+    """Static equilibrium with E on the task's start point, the payload carried by the crane: the luff and
+    knuckle torques of the servo-constraint equilibrium and the column's holding torque."""
+    motion = servo_motion(scenario)
+    equilibrium = static_equilibrium(motion, scenario.model.initial_q)
+    solution = motion.solve(0.0, equilibrium.q, np.zeros_like(equilibrium.q), left_limit=True)
+    names = scenario.model.joint_names
+    torques = {names[j]: float(tau) for j, tau in zip(motion.dependent, solution.reactions, strict=True)}
+    torques[names[scenario.model.drive_joint]] = equilibrium.holding_torque
+    return HeldStart(equilibrium.q, np.array([torques[name] for name in ACTUATED_JOINTS]))
+
+
+class Plant:
+    """The actuated crane of ``params`` (``variant`` flexible or rigid) from ``start`` at t0, integrated with
+    the step ``step`` [s]."""
+
+    def __init__(self, params: CraneParameters, variant: str, start: HeldStart, step: float, t0: float = 0.0):
+        self.model = build_model(params, variant)
+        self.drive = Actuated(make_drive(params.drive, params.initial.column), self.model.dof)
+        self.dynamics = CraneDynamics(self.model, self.drive, params.damping)
+        self.actuated = np.array([self.model.index(name) for name in ACTUATED_JOINTS], dtype=np.int64)
+        motion = ProgrammedMotion(self.dynamics, ConstraintSet(()), dependent=())
+        self.stepper = MotionStepper(motion, t0, start.q, np.zeros(self.model.dof), step)
+        self._samples = [stack_samples([self.stepper.sample])]
+        self._torque_rows = [np.zeros((1, len(ACTUATED_JOINTS)))]
+
+    def actuate(self, end: float, torque_start: np.ndarray, torque_end: np.ndarray) -> None:
+        """Apply the actuator torques [N m] from now to ``end`` [s] (on the step grid), linear from
+        ``torque_start`` to ``torque_end``, and advance there."""
+        start = self.stepper.state.t
+        self.drive.command(start, end, self._forces(torque_start), self._forces(torque_end))
+        self.stepper.forces_changed()
+        if len(self._samples) == 1:  # the start's sample under the first command
+            self._samples[0] = stack_samples([self.stepper.sample])
+            self._torque_rows[0] = np.asarray(torque_start, dtype=float)[None, :]
+        rows = self.stepper.advance_until(end)
+        self._samples.append(rows)
+        self._torque_rows.append(self.drive.forces(rows["t"])[:, self.actuated])
+
+    def _forces(self, torques: np.ndarray) -> np.ndarray:
+        forces = np.zeros(self.model.dof)
+        forces[self.actuated] = torques
+        return forces
+
+    @property
+    def t(self) -> float:
+        return self.stepper.state.t
+
+    @property
+    def q(self) -> np.ndarray:
+        return self.stepper.state.q
+
+    @property
+    def qd(self) -> np.ndarray:
+        return self.stepper.state.qd
+
+    def trajectory(self) -> tuple[Trajectory, np.ndarray]:
+        """The run so far, one sample per step (work_drive includes the actuators' work), and the actuator
+        torques at the samples (N, 3) [N m] (at a command's start: the new command's)."""
+        arrays = {name: np.concatenate([part[name] for part in self._samples]) for name in self._samples[0]}
+        return (Trajectory.from_arrays(self.model.variant, list(self.model.joint_names), self.model.drive_joint,
+                                       arrays), np.concatenate(self._torque_rows))
