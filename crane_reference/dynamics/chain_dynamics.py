@@ -46,13 +46,17 @@ def chain_data(model: ChainModel, damping_matrix: np.ndarray) -> ChainData:
 
 class CraneDynamics:
     """Evaluates M, h, Q and the end-effector kinematics of a :class:`ChainModel` driven by ``drive``,
-    with Rayleigh ``damping`` (D = beta_sup K_sup + beta_boom K_boom)."""
+    with Rayleigh ``damping`` (D = beta_sup K_sup + beta_boom K_boom) plus ``joint_damping`` (n,)
+    [N m s/rad or N s/m] on the diagonal (e.g. the velocity loops of joint drives; none by default)."""
 
-    def __init__(self, model: ChainModel, drive: Drive, damping: Damping | None = None):
+    def __init__(self, model: ChainModel, drive: Drive, damping: Damping | None = None,
+                 joint_damping: np.ndarray | None = None):
         self.model = model
         self.drive = drive
         damping = damping or Damping()
         self.damping_matrix = damping.support * model.support_stiffness + damping.boom * model.boom_stiffness
+        if joint_damping is not None:
+            self.damping_matrix = self.damping_matrix + np.diag(joint_damping)
         self.chain = chain_data(model, self.damping_matrix)
         """Model data in the layout of the compiled kernels."""
 

@@ -4,10 +4,10 @@
 The reference is the programmed motion the node publishes (ideal constraints; or realised by the luff
 and knuckle torques, ``realisation="servo"``) of the same crane, integrated with the same step; the
 controller reads it as a downstream controller does, one sample per tick: q_ref, qd_ref of the actuated
-joints at t_k.  Its feedback torque holds over the period (zero-order hold), the feedforward runs linearly
-from its value at t_k to that at t_k+1 (the reference is known ahead, as a joint_trajectory_controller
-interpolates its points).  The plant starts at rest, held by its actuators with E on the task's start
-point (:func:`.plant.held_start`).
+joints at t_k.  Its command holds over the period (zero-order hold; the D action acts in the joint
+drives, see :mod:`.controller`), the feedforward runs linearly from its value at t_k to that at t_k+1
+(the reference is known ahead, as a joint_trajectory_controller interpolates its points).  The plant
+starts at rest, held by its actuators with E on the task's start point (:func:`.plant.held_start`).
 
 Results (:class:`TrackingRun`): E's deviation from the programmed path (its distance to the ellipse in
 XY and its height error, first order in the constraint residuals: Phi / |Phi_p|), the joint tracking
@@ -33,7 +33,7 @@ from ..bands import vibration_band
 from ..vibration import boom_tip_deflection
 from .controller import CONTROLLERS, JointController, JointGains, bandwidth_gains
 from .feedforward import FEEDFORWARDS, RigidInverseDynamics
-from .plant import ACTUATED_JOINTS, Plant, held_start, servo_motion
+from .plant import ACTUATED_JOINTS, HeldStart, Plant, held_start, servo_motion
 
 
 @dataclass(frozen=True)
@@ -159,25 +159,24 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
     started = time.perf_counter()
     scenario = Scenario(params, spec.variant)
     start = held_start(scenario)
-    if spec.realisation == "servo":
-        reference_motion, reference_start = servo_motion(scenario), start.q
-    else:
-        reference_motion, reference_start = scenario.motion, scenario.equilibrium.q
-    reference = simulate(reference_motion, reference_start, spec.duration, step=spec.reference_step or spec.step)
-    reference = _every(reference, spec.reference_stride)
-    plant = Plant(params, spec.variant, start, spec.step)
-    actuated = plant.actuated
-    inertia = plant.dynamics.terms(0.0, start.q, np.zeros_like(start.q)).M[actuated, actuated]
-    gains = spec.joint_gains(inertia)
+    reference, reference_motion = _reference(scenario, spec, start)
+    inertia = scenario.dynamics.terms(0.0, start.q, np.zeros_like(start.q)).M
+    gains = spec.joint_gains(np.array([inertia[j, j] for j in map(scenario.model.index, ACTUATED_JOINTS)]))
     controller = JointController(gains, 1.0 / spec.rate)
+    plant = Plant(params, spec.variant, start, spec.step, controller.damping)
+    actuated = plant.actuated
     per = spec.steps_per_tick
     ticks = (len(reference.t) - 1) // per
-    starts, ends = _feedforward(params, spec, reference, reference_motion, per, ticks)
+    if spec.feedforward == "rigid" and spec.variant != "rigid":
+        rigid = Scenario(params, "rigid")
+        starts, ends = _feedforward(params, spec, *_reference(rigid, spec, held_start(rigid)), per, ticks)
+    else:
+        starts, ends = _feedforward(params, spec, reference, reference_motion, per, ticks)
     limits = np.array([g.limit for g in gains])
     for k in range(ticks):
         i = k * per
-        torque = controller(reference.q[i, actuated] - plant.q[actuated],
-                            reference.qd[i, actuated] - plant.qd[actuated], starts[k])
+        torque = controller(reference.q[i, actuated] - plant.q[actuated], reference.qd[i, actuated],
+                            plant.qd[actuated], starts[k])
         end = np.clip(torque + ends[k + 1] - starts[k], -limits, limits)
         plant.actuate(reference.t[i + per], torque, end)
         if progress is not None and (k + 1) % max(1, round(0.25 * spec.rate)) == 0:
@@ -191,6 +190,17 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
                   if spec.variant == "flexible" else np.zeros((len(trajectory.t), 3)))
     return TrackingRun(spec, gains, trajectory, torques, reference, path_error, deflection,
                        controller.saturated_ticks / max(1, controller.ticks), time.perf_counter() - started)
+
+
+def _reference(scenario: Scenario, spec: TrackingSpec, start: HeldStart) -> tuple[Trajectory, ProgrammedMotion]:
+    """The programmed motion of ``scenario`` in the spec's realisation, on the plant's step grid, and its
+    motion equations."""
+    if spec.realisation == "servo":
+        motion, q0 = servo_motion(scenario), start.q
+    else:
+        motion, q0 = scenario.motion, scenario.equilibrium.q
+    reference = simulate(motion, q0, spec.duration, step=spec.reference_step or spec.step)
+    return _every(reference, spec.reference_stride), motion
 
 
 def _feedforward(params: CraneParameters, spec: TrackingSpec, reference: Trajectory, motion: ProgrammedMotion,

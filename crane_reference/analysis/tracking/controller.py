@@ -1,15 +1,19 @@
-"""Joint-space feedback: a digital PID per actuated joint with torque limits.
+"""Joint-space feedback: PID per actuated joint, the D action in the joint drive, with torque limits.
 
-At each tick t_k of the controller (rate f_c) the joint errors e = q_ref - q and de = qd_ref - qd of the
-reference sample at t_k give
+A joint drive closes a fast velocity loop, so its D action acts continuously on the measured joint
+velocity: the plant gets the damping kd on the joint (:class:`~.plant.Plant` ``joint_damping``, exact in
+the integrator).  The rest runs at the controller's ticks t_k (rate f_c) on the reference sample there:
 
-    tau_k = tau_ff + kp e + kd de + ki I_k,    I_k+1 = I_k + e / f_c,
+    tau = u_k - kd qd,    u_k = tau_ff + kp e + kd qd_ref + ki I_k,    I_k+1 = I_k + e / f_c,
 
-held over the period (the feedforward tau_ff may vary linearly over it, see
-:mod:`.closed_loop`).  A torque beyond its limit is cut to +-limit and counted (never silently): the
-saturated ticks are reported, and the integral does not grow while its joint is saturated (conditional
-integration, the usual anti-windup).  Gains follow from a closed-loop bandwidth by :func:`bandwidth_gains`
-or are given per joint.
+with e = q_ref - q; u_k holds over the period (the feedforward part may run linearly over it, see
+:mod:`.closed_loop`).  A torque-controlled joint with a 1 kHz zero-order-held D term on the flexible boom
+is unstable: the luff and knuckle joints carry only the first rigid element's inertia at high frequency
+(about 1 kg m^2 against the whole boom's 2300), so kd h / J far exceeds 2.  Torques beyond a limit
+are cut to +-limit at the tick and counted (never silently): the saturated ticks are reported, and the
+integral does not grow while its joint is saturated (conditional integration, the usual anti-windup);
+between ticks the drive's D action may move the torque past the limit by kd |delta qd|.  Gains follow
+from a closed-loop bandwidth by :func:`bandwidth_gains` or are given per joint.
 """
 
 from __future__ import annotations
@@ -57,24 +61,27 @@ def bandwidth_gains(inertia: float, bandwidth: float, damping_ratio: float, inte
 
 
 class JointController:
-    """The digital PID of the module docstring for the joints of ``gains``, ticking every ``period`` [s]."""
+    """The loop of the module docstring for the joints of ``gains``, ticking every ``period`` [s]."""
 
     def __init__(self, gains: Sequence[JointGains], period: float):
         self.gains = tuple(gains)
         self.period = period
-        self._kp, self._kd, self._ki, self._limit = (np.array([getattr(g, name) for g in self.gains])
-                                                     for name in ("kp", "kd", "ki", "limit"))
+        self._kp, self.damping, self._ki, self._limit = (np.array([getattr(g, name) for g in self.gains])
+                                                         for name in ("kp", "kd", "ki", "limit"))
+        """``damping``: kd per joint [N m s/rad], the D action the plant's joint drives apply."""
         self._integral = np.zeros(len(self.gains))
         self.saturated_ticks = np.zeros(len(self.gains), dtype=np.int64)
         """Ticks at which each joint's torque was cut to its limit."""
         self.ticks = 0
 
-    def __call__(self, error: np.ndarray, error_rate: np.ndarray, feedforward: np.ndarray) -> np.ndarray:
-        """The torques [N m] of this tick (within the limits); advances the integral."""
-        wanted = feedforward + self._kp * error + self._kd * error_rate + self._ki * self._integral
+    def __call__(self, error: np.ndarray, reference_rate: np.ndarray, rate: np.ndarray,
+                 feedforward: np.ndarray) -> np.ndarray:
+        """u_k [N m] of this tick for the joint errors e, the reference's and the measured joint velocities
+        and the feedforward (the torque u_k - kd qd within the limits); advances the integral."""
+        wanted = feedforward + self._kp * error + self._ki * self._integral + self.damping * (reference_rate - rate)
         torque = np.clip(wanted, -self._limit, self._limit)
         saturated = torque != wanted
         self.saturated_ticks += saturated
         self.ticks += 1
         self._integral += np.where(saturated, 0.0, error * self.period)
-        return torque
+        return torque + self.damping * rate

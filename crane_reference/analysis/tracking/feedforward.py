@@ -2,12 +2,13 @@
 
     tau_ff = (M qdd + h - Q)[actuated joints]
 
-of the rigid crane at the reference's values of its coordinates (base, column, luff, knuckle; a flexible
-reference's RFE angles are left out), with Q holding gravity, the support springs, damping and the column
-drive as the plant has it.  These are the torques that move the rigid crane as the reference does, as far
-as actuators on these joints can: for a reference realised by the luff and knuckle torques
-(servo-constraints) on the rigid crane the other rows balance and tau_ff is exact; for the ideal
-constraints the force at E also acts on the base, which no actuator here reproduces.
+of the rigid crane along its programmed motion (the same task and realisation as the reference; for a
+flexible crane the rigid crane's own reference, whose accelerations carry no boom vibration), with Q
+holding gravity, the support springs, damping and the column drive as the plant has it.  These are the
+torques that move the rigid crane as the reference does, as far as actuators on these joints can: for
+a reference realised by the luff and knuckle torques (servo-constraints) the other rows balance and
+tau_ff is exact on the rigid crane; under the ideal constraints the force at E also acts on the base,
+which no actuator here reproduces.
 """
 
 from __future__ import annotations

@@ -59,30 +59,37 @@ def held_start(scenario: Scenario) -> HeldStart:
 
 class Plant:
     """The actuated crane of ``params`` (``variant`` flexible or rigid) from ``start`` at t0, integrated with
-    the step ``step`` [s]."""
+    the step ``step`` [s]; the joint drives' velocity loops add ``joint_damping`` kd [N m s/rad] (order of
+    :data:`ACTUATED_JOINTS`): the actuator torque is the command minus kd qd."""
 
-    def __init__(self, params: CraneParameters, variant: str, start: HeldStart, step: float, t0: float = 0.0):
+    def __init__(self, params: CraneParameters, variant: str, start: HeldStart, step: float,
+                 joint_damping: np.ndarray | None = None, t0: float = 0.0):
         self.model = build_model(params, variant)
         self.drive = Actuated(make_drive(params.drive, params.initial.column), self.model.dof)
-        self.dynamics = CraneDynamics(self.model, self.drive, params.damping)
         self.actuated = np.array([self.model.index(name) for name in ACTUATED_JOINTS], dtype=np.int64)
+        self.joint_damping = np.zeros(len(ACTUATED_JOINTS)) if joint_damping is None else np.asarray(joint_damping)
+        damping = np.zeros(self.model.dof)
+        damping[self.actuated] = self.joint_damping
+        self.dynamics = CraneDynamics(self.model, self.drive, params.damping, damping)
         motion = ProgrammedMotion(self.dynamics, ConstraintSet(()), dependent=())
         self.stepper = MotionStepper(motion, t0, start.q, np.zeros(self.model.dof), step)
         self._samples = [stack_samples([self.stepper.sample])]
         self._torque_rows = [np.zeros((1, len(ACTUATED_JOINTS)))]
 
     def actuate(self, end: float, torque_start: np.ndarray, torque_end: np.ndarray) -> None:
-        """Apply the actuator torques [N m] from now to ``end`` [s] (on the step grid), linear from
-        ``torque_start`` to ``torque_end``, and advance there."""
+        """Command the joint drives [N m] from now to ``end`` [s] (on the step grid), linear from
+        ``torque_start`` to ``torque_end`` (their torques are these minus kd qd), and advance there."""
         start = self.stepper.state.t
         self.drive.command(start, end, self._forces(torque_start), self._forces(torque_end))
         self.stepper.forces_changed()
         if len(self._samples) == 1:  # the start's sample under the first command
             self._samples[0] = stack_samples([self.stepper.sample])
-            self._torque_rows[0] = np.asarray(torque_start, dtype=float)[None, :]
+            self._torque_rows[0] = (np.asarray(torque_start, dtype=float)
+                                    - self.joint_damping * self.stepper.state.qd[self.actuated])[None, :]
         rows = self.stepper.advance_until(end)
         self._samples.append(rows)
-        self._torque_rows.append(self.drive.forces(rows["t"])[:, self.actuated])
+        self._torque_rows.append(self.drive.forces(rows["t"])[:, self.actuated]
+                                 - self.joint_damping * rows["qd"][:, self.actuated])
 
     def _forces(self, torques: np.ndarray) -> np.ndarray:
         forces = np.zeros(self.model.dof)
@@ -102,8 +109,9 @@ class Plant:
         return self.stepper.state.qd
 
     def trajectory(self) -> tuple[Trajectory, np.ndarray]:
-        """The run so far, one sample per step (work_drive includes the actuators' work), and the actuator
-        torques at the samples (N, 3) [N m] (at a command's start: the new command's)."""
+        """The run so far, one sample per step (work_drive includes the commands' work, work_damping the
+        drives' velocity loops'), and the actuator torques at the samples (N, 3) [N m] (at a command's
+        start: under the new command)."""
         arrays = {name: np.concatenate([part[name] for part in self._samples]) for name in self._samples[0]}
         return (Trajectory.from_arrays(self.model.variant, list(self.model.joint_names), self.model.drive_joint,
                                        arrays), np.concatenate(self._torque_rows))
