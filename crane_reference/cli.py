@@ -1,4 +1,4 @@
-"""Command line: ``crane-reference simulate | compile | study | urdf | node | record | modes | analyze``."""
+"""Command line: ``crane-reference simulate | compile | study | track | urdf | node | record | modes | analyze``."""
 
 from __future__ import annotations
 
@@ -122,6 +122,67 @@ def study_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def _by_joint(values: list[str], option: str, size: int) -> dict[str, tuple[float, ...]]:
+    """``JOINT=V1,V2,...`` items (or bare ``V1,...`` for every actuated joint) as floats by joint name."""
+    from .analysis.tracking.plant import ACTUATED_JOINTS
+
+    out: dict[str, tuple[float, ...]] = {}
+    for item in values:
+        joint, _, numbers = item.rpartition("=")
+        try:
+            parsed = tuple(float(x) for x in numbers.split(","))
+        except ValueError:
+            parsed = ()
+        if not 1 <= len(parsed) <= size:
+            raise ValueError(f"{option} {item}: expected [JOINT=]V1[,...] with 1 to {size} numbers")
+        for name in [joint] if joint else ACTUATED_JOINTS:
+            if name not in ACTUATED_JOINTS:
+                raise ValueError(f"{option} {item}: joint {name!r} must be one of {', '.join(ACTUATED_JOINTS)}")
+            out[name] = parsed
+    return out
+
+
+def track_command(args: argparse.Namespace) -> int:
+    from .analysis.tracking.closed_loop import TrackingSpec, run_tracking
+    from .analysis.tracking.controller import JointGains
+    from .analysis.tracking.report import write_report
+    from .motion.simulation import SOLVER_FAILURES
+
+    try:
+        given = _by_joint(args.gains, "--gains", 3)
+        if any(len(values) < 2 for values in given.values()):
+            raise ValueError(f"--gains {' '.join(args.gains)}: give KP,KD[,KI] for each joint")
+        gains = {name: JointGains(*values) for name, values in given.items()}
+        limits = {name: values[0] for name, values in _by_joint(args.torque_limit, "--torque-limit", 1).items()}
+        specs = [TrackingSpec(variant=args.model, realisation=args.realisation, controller=args.controller,
+                              bandwidth=args.bandwidth, damping_ratio=args.damping_ratio, gains=gains,
+                              feedforward=feedforward, limits=limits, rate=args.rate, duration=args.duration,
+                              step=args.step) for feedforward in args.feedforward]
+    except ValueError as error:
+        print(f"crane-reference track: {error}", file=sys.stderr)
+        return 2
+    params = load_config(args.config)
+    runs = []
+    for spec in specs:
+        with progress_bar(f"ff {spec.feedforward}", spec.duration) as bar:
+            try:
+                runs.append(run_tracking(params, spec, progress=advance_to(bar)))
+            except SOLVER_FAILURES as failure:
+                print(f"crane-reference track: feedforward {spec.feedforward}: the closed loop could not be "
+                      f"computed ({type(failure).__name__}: {failure}); an unstable loop makes the torques "
+                      "grow until the integrator fails: lower the gains or the bandwidth", file=sys.stderr)
+                return 1
+    files = write_report(runs, args.out)
+    for run in runs:
+        s = run.summary()
+        print(f"{run.spec.controller} ff {run.spec.feedforward}: E off the ellipse <= "
+              f"{s['ellipse_distance_max_m']:.2e} m, height error <= {s['height_error_max_m']:.2e} m, "
+              f"tip 40-250 Hz RMS {s['tip_vibration_rms_m']:.2e} m, "
+              f"{s['real_time_factor']:.2f}x real time")
+    print(f"wrote {', '.join(f.name for f in files)} to {args.out}")
+    return 0
+
+
 def compile_command(args: argparse.Namespace) -> int:
     from .stream.warmup import warm_up
 
@@ -191,6 +252,24 @@ def parser() -> argparse.ArgumentParser:
     st.add_argument("--out", default="results/study", help="output directory (default ./results/study)")
     st.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
     st.add_argument("--scheduler", metavar="ADDRESS", help="run the cases on this Dask distributed scheduler")
+    tr = sub.add_parser("track", help="closed loop: the actuated crane (no programmed constraints) following the "
+                        "reference under joint PD/PID with optional rigid inverse-dynamics feedforward")
+    tr.add_argument("--config", help="crane YAML (default: the packaged config/crane.yaml)")
+    tr.add_argument("--model", choices=VARIANTS, default="flexible", help="crane (plant and reference)")
+    tr.add_argument("--realisation", choices=["ideal", "servo"], default="ideal",
+                    help="the reference's constraint realisation (ideal: what the node publishes)")
+    tr.add_argument("--controller", choices=["pd", "pid"], default="pd")
+    tr.add_argument("--bandwidth", type=float, default=2.0, help="closed-loop bandwidth per joint [Hz] (default 2)")
+    tr.add_argument("--damping-ratio", type=float, default=0.7, help="closed-loop damping ratio (default 0.7)")
+    tr.add_argument("--gains", nargs="*", default=[], metavar="[JOINT=]KP,KD[,KI]",
+                    help="gains instead of the bandwidth's, per joint (column_slew, boom_luff, knuckle) or for all")
+    tr.add_argument("--feedforward", nargs="+", choices=["none", "rigid"], default=["none", "rigid"],
+                    help="one run per choice (default: both)")
+    tr.add_argument("--torque-limit", nargs="*", default=[], metavar="[JOINT=]N_M", help="actuator torque limits")
+    tr.add_argument("--rate", type=float, default=1000.0, help="controller rate [Hz] (default 1000)")
+    tr.add_argument("--duration", type=float, default=5.0, help="simulated time [s] (default 5)")
+    tr.add_argument("--step", type=float, default=1e-3, help="integrator step [s] (default 1e-3)")
+    tr.add_argument("--out", default="results/tracking", help="output directory (default ./results/tracking)")
     sub.add_parser("compile", help="compile the numba kernels ahead of the first run (fills the cache; run it "
                    "after installing, e.g. after colcon build)")
     u = sub.add_parser("urdf", help="print the URDF of a model variant")
@@ -233,7 +312,8 @@ def main(argv: list[str] | None = None) -> int:
         parser().error(f"--duration {args.duration}: must be a finite number of seconds > 0")
     try:
         return {"simulate": simulate_command, "urdf": urdf_command, "record": record_command, "modes": modes_command,
-                "analyze": analyze_command, "compile": compile_command, "study": study_command}[args.command](args)
+                "analyze": analyze_command, "compile": compile_command, "study": study_command,
+                "track": track_command}[args.command](args)
     except ConfigError as error:
         print(f"crane-reference: {error}", file=sys.stderr)
         return 2

@@ -170,3 +170,18 @@ def test_a_bad_spec_names_the_field(changes, message):
         TrackingSpec(**changes)
     with pytest.raises(ValueError, match="gain kd"):
         JointGains(1.0, -1.0)
+
+
+@pytest.mark.slow
+def test_cli_track_writes_series_summary_and_figure(tmp_path, capsys):
+    from crane_reference import cli
+
+    assert cli.main(["track", "--model", "rigid", "--duration", "0.3", "--out", str(tmp_path),
+                     "--gains", "boom_luff=2e5,1e4", "--torque-limit", "3e4"]) == 0
+    for name in ("tracking_pd_ff-none.csv", "tracking_pd_ff-rigid.npz", "summary.json", "summary.md", "tracking.png"):
+        assert (tmp_path / name).stat().st_size > 0
+    table = np.genfromtxt(tmp_path / "tracking_pd_ff-rigid.csv", delimiter=",", names=True)
+    assert table["t_s"][-1] == pytest.approx(0.3) and np.all(np.abs(table["boom_luff_torque_nm"]) <= 3e4 + 1e-6)
+    assert "E off the ellipse" in capsys.readouterr().out
+    assert cli.main(["track", "--gains", "wrist=1,2", "--out", str(tmp_path)]) == 2
+    assert "joint 'wrist' must be one of column_slew, boom_luff, knuckle" in capsys.readouterr().err
