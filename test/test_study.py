@@ -6,11 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from test_simulation import quintic_z
 
 from crane_reference.analysis.study.case import run_case
 from crane_reference.analysis.study.report import write_report
 from crane_reference.analysis.study.runner import load_results, run_study
 from crane_reference.analysis.study.spec import StudyError, parse_spec
+from crane_reference.analysis.tracking.closed_loop import TrackingSpec, run_tracking
 from crane_reference.model.chain import build_model
 from crane_reference.model.config import load_config
 from crane_reference.motion.simulation import Scenario, simulate
@@ -33,6 +35,10 @@ def deterministic(table: pd.DataFrame) -> pd.DataFrame:
     ({"vary": {"ellipse_a": {"low": 2.0, "high": 3.0}}}, "samples = 0: must be an integer in [1, 100000]"),
     ({"limits": {"speed": 1.0}}, "limits = {'speed': 1.0}: must map some of"),
     ({"colour": "red"}, "unknown field(s) colour"),
+    ({"tracking": {"controller": "lqr"}}, "tracking.controller = 'lqr': must be one of pd, pid"),
+    ({"tracking": {"rate": 300.0}}, "tracking.rate = 300 Hz: its period must be a whole number of steps"),
+    ({"tracking": {"gain": 3}}, "tracking = {'gain': 3}: must map some of controller, feedforward"),
+    ({"vary": {"feedforward": {"values": [2]}}}, "vary.feedforward.values[0] = 2: must be an integer in [0, 1]"),
 ])
 def test_bad_specs_name_the_field(change, fragment):
     with pytest.raises(StudyError) as error:
@@ -118,3 +124,23 @@ def test_case_metrics_against_a_direct_simulation():
     assert row["constraint_force_n"] == pytest.approx(np.linalg.norm(forces, axis=1).max(), rel=1e-9)
     assert row["kdc_min_singular_value"] == trajectory.kdc_min_singular_value.min()
     assert row["residual_m"] == trajectory.residual_distance.max() and row["feasible"]
+
+
+@pytest.mark.slow
+def test_tracking_columns_of_a_case_against_the_closed_loop_run_here():
+    """A study that varies the feedforward switches the closed loop on; its height error column is the
+    largest |z_E - z_a(t)| of the plant's E, with eq. (5.2) written out here, and the rigid feedforward
+    holds the payload where the PD alone lets it sag."""
+    spec = parse_spec({"variant": "rigid", "duration": 0.5, "step": 0.001,
+                       "vary": {"feedforward": {"values": [0, 1]}}, "tracking": {"bandwidth": 1.5}})
+    rows = {int(case.values["feedforward"]): run_case(spec, case) for case in spec.cases()}
+    params = load_config()
+    scenario = Scenario(params, "rigid")
+    for switch, feedforward in ((0, "none"), (1, "rigid")):
+        run = run_tracking(params, TrackingSpec(variant="rigid", bandwidth=1.5, feedforward=feedforward,
+                                                duration=0.5))
+        z_a = quintic_z(run.t, scenario.z_static, params.task.z_increment, params.task.rise_time)
+        assert rows[switch]["track_height_error_max_m"] == pytest.approx(
+            np.abs(run.plant.ee_position[:, 2] - z_a).max(), rel=1e-9, abs=1e-12)
+        assert rows[switch]["feasible"]
+    assert rows[1]["track_height_error_max_m"] < 0.2 * rows[0]["track_height_error_max_m"]

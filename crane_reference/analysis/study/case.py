@@ -14,7 +14,10 @@ Metrics (SI units), per case:
 * ``diff_<joint>_rad`` (variant both): the largest flexible-minus-rigid difference of psi2, psi(3,0), psi4
   below :data:`BAND` Hz (4th-order Butterworth, forward-backward);
 * ``residual_m`` the largest constraint distance, ``energy_error_j`` the largest energy-balance error,
-  ``wall_s`` the wall time.
+  ``wall_s`` the wall time;
+* with tracking (a spec's ``tracking`` block or a varied closed-loop parameter), ``track_<metric>``: the
+  metrics of the actuated crane following the case's reference under the spec's controller (for the first
+  variant; :data:`TRACKED`).  A closed loop that cannot be computed (unstable) makes the case infeasible.
 """
 
 from __future__ import annotations
@@ -36,15 +39,23 @@ from ...motion.simulation import SOLVER_FAILURES, Scenario, simulate
 from ...motion.trajectory import Trajectory
 from ...stream.targets import UnreachableTargetError, check_task
 from ..bands import CONTROLLER_BAND, controller_band
+from ..tracking.closed_loop import SUMMARY, TrackingSpec, run_tracking
+from ..tracking.plant import ACTUATED_JOINTS
 from ..vibration import boom_tip_deflection
 from .spec import PATH_SPEED_RISE, Case, StudySpec
 
 BAND = CONTROLLER_BAND  # [Hz]
 SINGULARITY_MARGIN = 0.1  # smallest sigma_min(K_dc) accepted by the reachability check (the node's)
 COMPARED = ("column_slew", "boom_luff", "knuckle")
+TRACKED = tuple(f"track_{name}" for name in SUMMARY if name != "real_time_factor")
+"""The closed loop's metrics as columns (a spec with tracking)."""
 METRICS = ("feasible", "reason", "kdc_min_singular_value", "tip_deflection_m", "vibration_rms_m", "constraint_force_n",
            "drive_power_w", "ee_speed_m_s", *(f"diff_{joint}_rad" for joint in COMPARED), "residual_m",
-           "energy_error_j", "wall_s")
+           "energy_error_j", *TRACKED, "wall_s")
+
+
+class ClosedLoopError(RuntimeError):
+    """The case's reference exists, but the closed loop following it failed (e.g. it is unstable)."""
 
 
 def case_parameters(base: CraneParameters, values: dict[str, float]) -> CraneParameters:
@@ -110,6 +121,23 @@ def _metrics(scenario: Scenario, motion: ProgrammedMotion, trajectory: Trajector
     return out
 
 
+def _tracking(spec: StudySpec, params: CraneParameters, values: dict[str, float], variant: str) -> dict[str, float]:
+    """The closed loop of the spec's tracking settings (the case's values where it varies them) following
+    the case's reference: its metrics as ``track_*`` columns."""
+    settings = spec.tracking
+    limit = values.get("torque_limit", settings["torque_limit"])
+    feedforward = ("none", "rigid")[int(values["feedforward"])] if "feedforward" in values else settings["feedforward"]
+    tracking = TrackingSpec(
+        variant=variant, realisation=spec.realisation, controller=settings["controller"],
+        bandwidth=values.get("bandwidth", settings["bandwidth"]),
+        damping_ratio=values.get("damping_ratio", settings["damping_ratio"]),
+        joint_bandwidths={j: values[f"bandwidth_{j}"] for j in ACTUATED_JOINTS if f"bandwidth_{j}" in values},
+        feedforward=feedforward, limits=dict.fromkeys(ACTUATED_JOINTS, limit) if math.isfinite(limit) else {},
+        rate=settings["rate"], duration=spec.duration, step=spec.step)
+    run = run_tracking(params, tracking, task=lambda scenario: _motion(scenario, values, spec.realisation))
+    return {f"track_{name}": value for name, value in run.summary().items() if name != "real_time_factor"}
+
+
 def run_case(spec: StudySpec, case: Case) -> dict[str, object]:
     """The metrics of one case (never raises for a solver failure or an unreachable target: the case is
     then infeasible and ``reason`` says why)."""
@@ -128,7 +156,13 @@ def run_case(spec: StudySpec, case: Case) -> dict[str, object]:
             runs[variant] = trajectory
             if variant == variants[0]:
                 row.update(_metrics(scenario, motion, trajectory, spec.step))
-    except (UnreachableTargetError, *SOLVER_FAILURES) as failure:
+                if spec.tracking:
+                    try:
+                        row.update(_tracking(spec, params, case.values, variant))
+                    except SOLVER_FAILURES as failure:
+                        raise ClosedLoopError(f"the closed loop could not be computed ({type(failure).__name__}: "
+                                                f"{failure}); an unstable loop makes the torques grow") from failure
+    except (UnreachableTargetError, ClosedLoopError, *SOLVER_FAILURES) as failure:
         row["reason"] = f"{type(failure).__name__}: {failure}"
     else:
         row["feasible"] = True

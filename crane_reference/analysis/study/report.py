@@ -1,6 +1,7 @@
 """What a study shows: the table as Parquet, plots and ``summary.md``.
 
-* Two varied parameters: a heat map of each metric over them, infeasible cases hatched and labelled.
+* Two varied parameters: a heat map of each metric over them, infeasible cases hatched and labelled, and
+  cells beyond the spec's design limit of the metric outlined and labelled.
   Otherwise: each metric against each varied parameter, infeasible cases marked with crosses.
 * ``summary.md``: the cases, how many are feasible and why not, and for each design limit of the spec
   and each varied parameter the largest value up to which every feasible case stays within the limit.
@@ -31,7 +32,7 @@ def write_report(spec: StudySpec, table: pd.DataFrame, out: str | Path) -> list[
     table.to_parquet(written[0], index=False)
     metrics = [m for m in PLOTTED if m in table and table[m].notna().any()]
     if len(spec.varied) == 2:
-        written.append(_heat_maps(table, spec.varied, metrics, out / "heatmaps.png"))
+        written.append(_heat_maps(table, spec.varied, metrics, out / "heatmaps.png", spec.limits))
     else:
         written.append(_curves(table, spec.varied, metrics, out / "metrics.png"))
     written.append(out / "summary.md")
@@ -39,7 +40,8 @@ def write_report(spec: StudySpec, table: pd.DataFrame, out: str | Path) -> list[
     return written
 
 
-def _heat_maps(table: pd.DataFrame, varied: list[str], metrics: list[str], path: Path) -> Path:
+def _heat_maps(table: pd.DataFrame, varied: list[str], metrics: list[str], path: Path,
+               limits: dict[str, float]) -> Path:
     x_name, y_name = varied
     xs, ys = np.unique(table[x_name]), np.unique(table[y_name])
     columns = 3
@@ -56,6 +58,11 @@ def _heat_maps(table: pd.DataFrame, varied: list[str], metrics: list[str], path:
         for i, j in zip(*np.nonzero(infeasible), strict=True):
             ax.add_patch(plt.Rectangle((j, i), 1, 1, fill=False, hatch="xx", edgecolor="red"))
             ax.text(j + 0.5, i + 0.5, "infeasible", ha="center", va="center", color="red", fontsize=7)
+        if metric in limits:
+            for i, j in zip(*np.nonzero(grid > limits[metric]), strict=True):
+                ax.add_patch(plt.Rectangle((j, i), 1, 1, fill=False, linewidth=2.5, edgecolor="orange"))
+                ax.text(j + 0.5, i + 0.5, f"> {limits[metric]:g}", ha="center", va="center", color="orange",
+                        fontsize=7)
         ax.set_xticks(np.arange(xs.size) + 0.5, [f"{x:g}" for x in xs])
         ax.set_yticks(np.arange(ys.size) + 0.5, [f"{y:g}" for y in ys])
         ax.set_xlabel(x_name)

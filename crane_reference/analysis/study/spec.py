@@ -14,11 +14,18 @@ A study spec (YAML) names the crane, the run and the parameters to vary::
     limits:                 # design limits answered in summary.md: the largest value of each varied
       tip_deflection_m: 0.05    # parameter for which every case up to it stays below them
     realisation: ideal
+    tracking:               # optional: a closed loop follows each case's reference (crane-reference track)
+      controller: pd        # pd | pid; feedforward none | rigid; rate [Hz]; bandwidth [Hz];
+      feedforward: rigid    # damping_ratio; torque_limit [N m] (all actuated joints; omitted: none)
 
 Parameters that can vary (:data:`PARAMETERS`): the ellipse semi-axes, E's height rise and rise time, the
 column torque and its duration, the payload mass, the number of rigid finite elements, the boom's
 stiffness-proportional damping and the path speed (E's parametric-angle rate along the ellipse, rising
-along a quintic over :data:`PATH_SPEED_RISE`, imposed by the first-order areal-rate constraint).
+along a quintic over :data:`PATH_SPEED_RISE`, imposed by the first-order areal-rate constraint); and of the
+closed loop (:data:`TRACKING_PARAMETERS`, which switch the tracking on): the bandwidth of every actuated
+joint or of one, the damping ratio, the torque limit and the feedforward (0 none, 1 rigid inverse dynamics).
+With tracking, the metrics of :class:`~crane_reference.analysis.tracking.closed_loop.TrackingRun` become
+columns ``track_*``.
 Grids combine as a full factorial; random ranges are sampled uniformly with the seed (integers for
 ``n_rfe``).  Every error names the field and what is allowed.
 """
@@ -53,8 +60,21 @@ PARAMETERS: dict[str, tuple[str, float, float, bool]] = {
     "n_rfe": ("", 1, 48, True),
     "damping_boom": ("s", 0.0, 1.0, False),
     "path_speed": ("rad/s", 0.0, 10.0, False),
+    "bandwidth": ("Hz", 0.05, 50.0, False),
+    "bandwidth_column_slew": ("Hz", 0.05, 50.0, False),
+    "bandwidth_boom_luff": ("Hz", 0.05, 50.0, False),
+    "bandwidth_knuckle": ("Hz", 0.05, 50.0, False),
+    "damping_ratio": ("", 0.05, 5.0, False),
+    "torque_limit": ("N m", 1.0, 1e8, False),
+    "feedforward": ("", 0, 1, True),
 }
-LIMITS = ("tip_deflection_m", "vibration_rms_m", "constraint_force_n", "drive_power_w", "ee_speed_m_s")
+TRACKING_PARAMETERS = ("bandwidth", "bandwidth_column_slew", "bandwidth_boom_luff", "bandwidth_knuckle",
+                       "damping_ratio", "torque_limit", "feedforward")
+TRACKING_DEFAULTS = {"controller": "pd", "feedforward": "rigid", "rate": 1000.0, "bandwidth": 2.0,
+                     "damping_ratio": 0.7, "torque_limit": math.inf}
+LIMITS = ("tip_deflection_m", "vibration_rms_m", "constraint_force_n", "drive_power_w", "ee_speed_m_s",
+          "track_ellipse_distance_max_m", "track_height_error_max_m", "track_tip_vibration_rms_m",
+          "track_column_slew_torque_peak_nm", "track_boom_luff_torque_peak_nm", "track_knuckle_torque_peak_nm")
 CHOICES = (*VARIANTS, "both")
 
 
@@ -84,6 +104,7 @@ class StudySpec:
     seed: int
     limits: dict[str, float] = field(default_factory=dict)
     realisation: str = "ideal"
+    tracking: dict[str, Any] | None = None
 
     @property
     def varied(self) -> list[str]:
@@ -105,7 +126,7 @@ class StudySpec:
 
     def _key(self, values: dict[str, float]) -> str:
         fixed = {"config": self.config, "variant": self.variant, "duration": self.duration, "step": self.step,
-                 "realisation": self.realisation}
+                 "realisation": self.realisation, **({"tracking": self.tracking} if self.tracking else {})}
         text = json.dumps({"fixed": fixed, "values": values}, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -123,7 +144,7 @@ def parse_spec(data: Any, source: str = "study spec") -> StudySpec:
     """Validate a study spec (the parsed YAML); :class:`StudyError` names the field and what is allowed."""
     if not isinstance(data, dict):
         raise StudyError(f"{source}: must be a mapping with the fields config, variant, duration, step, vary")
-    known = {"config", "variant", "duration", "step", "vary", "samples", "seed", "limits", "realisation"}
+    known = {"config", "variant", "duration", "step", "vary", "samples", "seed", "limits", "realisation", "tracking"}
     unknown = sorted(set(data) - known)
     if unknown:
         raise StudyError(f"{source}: unknown field(s) {', '.join(unknown)}; allowed: {', '.join(sorted(known))}")
@@ -174,8 +195,31 @@ def parse_spec(data: Any, source: str = "study spec") -> StudySpec:
     if drive_varied and not isinstance(base.drive, TorqueDrive):
         raise StudyError(f"vary.{drive_varied[0]}: the crane of config = {config or 'the packaged default'!r} has a "
                          "flexible drive; drive_torque and drive_duration apply to a torque drive only")
+    tracking = _tracking(data.get("tracking"), set(vary))
+    if tracking and not abs(round(1.0 / (tracking["rate"] * step)) * tracking["rate"] * step - 1.0) <= 1e-9:
+        raise StudyError(f"tracking.rate = {tracking['rate']:g} Hz: its period must be a whole number of steps "
+                         f"(step = {step:g} s)")
     return StudySpec(config, variant, duration, step, grid, ranges, samples if ranges else 0, seed, limits,
-                     realisation)
+                     realisation, tracking)
+
+
+def _tracking(block: Any, varied: set[str]) -> dict[str, Any] | None:
+    """The closed loop's fixed settings (:data:`TRACKING_DEFAULTS` for those not given), or None without a
+    ``tracking`` block and with no tracking parameter varied."""
+    if block is None and not varied & set(TRACKING_PARAMETERS):
+        return None
+    block = {} if block is None else block
+    if not isinstance(block, dict) or set(block) - set(TRACKING_DEFAULTS):
+        raise StudyError(f"tracking = {block!r}: must map some of {', '.join(TRACKING_DEFAULTS)} to values")
+    settings = {**TRACKING_DEFAULTS, **block}
+    for name, allowed in (("controller", ("pd", "pid")), ("feedforward", ("none", "rigid"))):
+        if settings[name] not in allowed:
+            raise StudyError(f"tracking.{name} = {settings[name]!r}: must be one of {', '.join(allowed)}")
+    for name, low, high in (("rate", 1.0, 1e5), ("bandwidth", 0.05, 50.0), ("damping_ratio", 0.05, 5.0),
+                            ("torque_limit", 1.0, 1e8)):
+        if not (name == "torque_limit" and settings[name] == math.inf):  # the default: no limit
+            settings[name] = _number(settings[name], f"tracking.{name}", low, high)
+    return settings
 
 
 def load_spec(path: str | Path) -> StudySpec:

@@ -10,7 +10,8 @@ drives, see :mod:`.controller`), the feedforward runs linearly from its value at
 starts at rest, held by its actuators with E on the task's start point (:func:`.plant.held_start`).
 
 Results (:class:`TrackingRun`): E's deviation from the programmed path (its distance to the ellipse in
-XY and its height error, first order in the constraint residuals: Phi / |Phi_p|), the joint tracking
+XY and its height error, the task's holonomic constraints in that order, first order in their residuals:
+Phi / |Phi_p|), the joint tracking
 errors, the boom tip deflection (flexible boom) and its 40-250 Hz RMS over the run's second half, the
 actuator torques and powers, the saturated share of ticks, and the plant's energy balance.
 """
@@ -26,6 +27,7 @@ import numpy as np
 
 from ...model.chain import VARIANTS
 from ...model.parameters import CraneParameters
+from ...motion.constraints import ConstraintSet
 from ...motion.programmed_motion import REALISATIONS, ProgrammedMotion
 from ...motion.simulation import Scenario, simulate
 from ...motion.trajectory import Trajectory
@@ -33,22 +35,24 @@ from ..bands import vibration_band
 from ..vibration import boom_tip_deflection
 from .controller import CONTROLLERS, JointController, JointGains, bandwidth_gains
 from .feedforward import FEEDFORWARDS, RigidInverseDynamics
-from .plant import ACTUATED_JOINTS, HeldStart, Plant, held_start, servo_motion
+from .plant import ACTUATED_JOINTS, Plant, held_start, servo_motion
 
 
 @dataclass(frozen=True)
 class TrackingSpec:
     """What to run: the crane ``variant``, the reference's ``realisation``, the ``controller`` (pd or pid) with
-    gains from the closed-loop ``bandwidth`` [Hz] and ``damping_ratio`` per joint unless ``gains`` gives
-    them by joint name, ``feedforward`` (none or rigid), torque ``limits`` [N m] by joint name (none: no
-    limit), the controller ``rate`` [Hz], ``duration`` [s] and the plant's integrator ``step`` [s]; the
-    reference is integrated with ``reference_step`` [s] (default: ``step``; a divisor of it)."""
+    gains from the closed-loop ``bandwidth`` [Hz] (or ``joint_bandwidths`` by joint name) and
+    ``damping_ratio`` per joint unless ``gains`` gives them by joint name, ``feedforward`` (none or
+    rigid), torque ``limits`` [N m] by joint name (none: no limit), the controller ``rate`` [Hz],
+    ``duration`` [s] and the plant's integrator ``step`` [s]; the reference is integrated with
+    ``reference_step`` [s] (default: ``step``; a divisor of it)."""
 
     variant: str = "flexible"
     realisation: str = "ideal"
     controller: str = "pd"
     bandwidth: float = 2.0
     damping_ratio: float = 0.7
+    joint_bandwidths: dict[str, float] = field(default_factory=dict)
     gains: dict[str, JointGains] = field(default_factory=dict)
     feedforward: str = "rigid"
     limits: dict[str, float] = field(default_factory=dict)
@@ -63,7 +67,7 @@ class TrackingSpec:
                                      ("feedforward", self.feedforward, FEEDFORWARDS)):
             if value not in allowed:
                 raise ValueError(f"{name} = {value!r}: must be one of {', '.join(allowed)}")
-        for name in (*self.gains, *self.limits):
+        for name in (*self.gains, *self.limits, *self.joint_bandwidths):
             if name not in ACTUATED_JOINTS:
                 raise ValueError(f"joint {name!r} in gains or limits: must be one of {', '.join(ACTUATED_JOINTS)}")
         for name in ("rate", "duration", "step"):
@@ -91,10 +95,17 @@ class TrackingSpec:
         out = []
         for name, J in zip(ACTUATED_JOINTS, inertia, strict=True):
             limit = self.limits.get(name, math.inf)
-            gains = self.gains.get(name) or bandwidth_gains(J, self.bandwidth, self.damping_ratio,
-                                                            self.controller == "pid")
+            gains = self.gains.get(name) or bandwidth_gains(J, self.joint_bandwidths.get(name, self.bandwidth),
+                                                            self.damping_ratio, self.controller == "pid")
             out.append(JointGains(gains.kp, gains.kd, gains.ki if self.controller == "pid" else 0.0, limit))
         return out
+
+
+SUMMARY = ("ellipse_distance_max_m", "ellipse_distance_rms_m", "height_error_max_m", "height_error_rms_m",
+           *(f"{joint}_{metric}" for joint in ACTUATED_JOINTS
+             for metric in ("error_max_rad", "error_rms_rad", "torque_peak_nm", "power_peak_w", "saturated_share")),
+           "tip_deflection_max_m", "tip_vibration_rms_m", "energy_balance_error_j", "real_time_factor")
+"""The names of :meth:`TrackingRun.summary`, in order."""
 
 
 @dataclass(frozen=True)
@@ -148,18 +159,23 @@ class TrackingRun:
         out["tip_vibration_rms_m"] = float(np.sqrt(np.mean(np.sum(vibration**2, axis=1))))
         out["energy_balance_error_j"] = float(np.abs(self.plant.energy_balance_error).max())
         out["real_time_factor"] = float(self.t[-1] / self.wall)
-        return out
+        return {name: out[name] for name in SUMMARY}
 
 
 Progress = Callable[[float], None]
+TaskMotion = Callable[[Scenario], tuple[ProgrammedMotion, np.ndarray]]
+"""The programmed motion of a scenario in the spec's realisation and its start q (e.g. a study case's)."""
 
 
-def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress | None = None) -> TrackingRun:
-    """The closed-loop run of ``spec`` on the crane ``params`` (``progress`` gets the simulated time)."""
+def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress | None = None,
+                 task: TaskMotion | None = None) -> TrackingRun:
+    """The closed-loop run of ``spec`` on the crane ``params`` (``progress`` gets the simulated time); the
+    reference is the programmed motion ``task`` gives (default: the scenario's paper task)."""
     started = time.perf_counter()
+    task = task or (lambda scenario: _paper_task(scenario, spec.realisation))
     scenario = Scenario(params, spec.variant)
     start = held_start(scenario)
-    reference, reference_motion = _reference(scenario, spec, start)
+    reference, reference_motion = _reference(scenario, spec, task)
     inertia = scenario.dynamics.terms(0.0, start.q, np.zeros_like(start.q)).M
     gains = spec.joint_gains(np.array([inertia[j, j] for j in map(scenario.model.index, ACTUATED_JOINTS)]))
     controller = JointController(gains, 1.0 / spec.rate)
@@ -169,7 +185,7 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
     ticks = (len(reference.t) - 1) // per
     if spec.feedforward == "rigid" and spec.variant != "rigid":
         rigid = Scenario(params, "rigid")
-        starts, ends = _feedforward(params, spec, *_reference(rigid, spec, held_start(rigid)), per, ticks)
+        starts, ends = _feedforward(params, spec, *_reference(rigid, spec, task), per, ticks)
     else:
         starts, ends = _feedforward(params, spec, reference, reference_motion, per, ticks)
     limits = np.array([g.limit for g in gains])
@@ -183,7 +199,7 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
             progress(plant.t)
     trajectory, torques = plant.trajectory()
     reference = _every(reference, 1, len(trajectory.t))
-    constraints = scenario.motion.constraints
+    constraints = ConstraintSet(tuple(c for c in reference_motion.constraints.constraints if c.order == 0))
     path_error = np.array([constraints.residual(t, p) / np.linalg.norm(constraints.position_jacobian(t, p), axis=1)
                            for t, p in zip(trajectory.t, trajectory.ee_position, strict=True)])
     deflection = (boom_tip_deflection(plant.model, plant.dynamics.chain, trajectory.q)
@@ -192,13 +208,16 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
                        controller.saturated_ticks / max(1, controller.ticks), time.perf_counter() - started)
 
 
-def _reference(scenario: Scenario, spec: TrackingSpec, start: HeldStart) -> tuple[Trajectory, ProgrammedMotion]:
-    """The programmed motion of ``scenario`` in the spec's realisation, on the plant's step grid, and its
-    motion equations."""
-    if spec.realisation == "servo":
-        motion, q0 = servo_motion(scenario), start.q
-    else:
-        motion, q0 = scenario.motion, scenario.equilibrium.q
+def _paper_task(scenario: Scenario, realisation: str) -> tuple[ProgrammedMotion, np.ndarray]:
+    """The scenario's own task in ``realisation`` and its start (for servo-constraints the held start)."""
+    if realisation == "servo":
+        return servo_motion(scenario), held_start(scenario).q
+    return scenario.motion, scenario.equilibrium.q
+
+
+def _reference(scenario: Scenario, spec: TrackingSpec, task: TaskMotion) -> tuple[Trajectory, ProgrammedMotion]:
+    """The programmed motion ``task`` gives ``scenario``, on the plant's step grid, and its motion equations."""
+    motion, q0 = task(scenario)
     reference = simulate(motion, q0, spec.duration, step=spec.reference_step or spec.step)
     return _every(reference, spec.reference_stride), motion
 
