@@ -1,7 +1,8 @@
 """What a study shows: the table as Parquet, plots and ``summary.md``.
 
 * Two varied parameters: a heat map of each metric over them, infeasible cases hatched and labelled, and
-  cells beyond the spec's design limit of the metric outlined and labelled.
+  cells beyond the spec's design limit of the metric outlined and labelled (``heatmaps_limits.png``: the
+  metrics with a limit only).
   Otherwise: each metric against each varied parameter, infeasible cases marked with crosses.
 * ``summary.md``: the cases, how many are feasible and why not, and for each design limit of the spec
   and each varied parameter the largest value up to which every feasible case stays within the limit.
@@ -33,6 +34,9 @@ def write_report(spec: StudySpec, table: pd.DataFrame, out: str | Path) -> list[
     metrics = [m for m in PLOTTED if m in table and table[m].notna().any()]
     if len(spec.varied) == 2:
         written.append(_heat_maps(table, spec.varied, metrics, out / "heatmaps.png", spec.limits))
+        limited = [m for m in metrics if m in spec.limits]
+        if limited:
+            written.append(_heat_maps(table, spec.varied, limited, out / "heatmaps_limits.png", spec.limits))
     else:
         written.append(_curves(table, spec.varied, metrics, out / "metrics.png"))
     written.append(out / "summary.md")
@@ -44,7 +48,7 @@ def _heat_maps(table: pd.DataFrame, varied: list[str], metrics: list[str], path:
                limits: dict[str, float]) -> Path:
     x_name, y_name = varied
     xs, ys = np.unique(table[x_name]), np.unique(table[y_name])
-    columns = 3
+    columns = min(3, len(metrics))
     rows = math.ceil(len(metrics) / columns)
     fig, axes = plt.subplots(rows, columns, figsize=(5 * columns, 4 * rows), squeeze=False)
     for ax, metric in zip(axes.flat, metrics, strict=False):
@@ -97,12 +101,15 @@ def _curves(table: pd.DataFrame, varied: list[str], metrics: list[str], path: Pa
     return path
 
 
-def largest_within(table: pd.DataFrame, parameter: str, metric: str, limit: float) -> float | None:
+def largest_within(table: pd.DataFrame, parameter: str, metric: str, limit: float,
+                   descending: bool = False) -> float | None:
     """The largest value of ``parameter`` up to which every feasible case has ``metric`` <= ``limit``
-    (None if a case at the smallest value already exceeds it)."""
+    (None if a case at the smallest value already exceeds it); with ``descending`` the smallest value from
+    which on every feasible case stays within (for a parameter such as a gain, where more is better)."""
     best = None
     feasible = table[table["feasible"].astype(bool)]
-    for value in np.unique(feasible[parameter]):
+    values = np.unique(feasible[parameter])
+    for value in values[::-1] if descending else values:
         if (feasible.loc[feasible[parameter] == value, metric] > limit).any():
             break
         best = float(value)
@@ -123,17 +130,22 @@ def summary(spec: StudySpec, table: pd.DataFrame) -> str:
         lines += ["## Design limits", ""]
         for metric, limit in spec.limits.items():
             for name in spec.varied:
-                best = largest_within(table, name, metric, limit)
-                lines.append(f"- {metric} <= {limit:g}: " + (
-                    f"every feasible case with {name} <= {best:g} stays within it" if best is not None
-                    else f"already exceeded at the smallest {name}"))
+                up, down = (largest_within(table, name, metric, limit, descending) for descending in (False, True))
+                said = [f"every feasible case with {name} <= {up:g} stays within it"] if up is not None else []
+                if down is not None and down != np.min(table[name]):
+                    said.append(f"every feasible case with {name} >= {down:g} stays within it")
+                lines.append(f"- {metric} <= {limit:g}: " + ("; ".join(said) or
+                                                            f"no range of {name} keeps every case within it"))
             if len(spec.varied) == 2:
                 first, second = spec.varied
-                lines += ["", f"  Largest {first} within {metric} <= {limit:g}, for each {second}:", "",
-                          f"  | {second} | largest {first} |", "  |---|---|"]
+                lines += ["", f"  Range of {first} within {metric} <= {limit:g}, for each {second}:", "",
+                          f"  | {second} | largest {first} up to which | smallest {first} from which |",
+                          "  |---|---|---|"]
                 for value in np.unique(table[second]):
-                    best = largest_within(table[table[second] == value], first, metric, limit)
-                    lines.append(f"  | {value:g} | {'none' if best is None else f'{best:g}'} |")
+                    part = table[table[second] == value]
+                    up, down = (largest_within(part, first, metric, limit, descending) for descending in (False, True))
+                    lines.append(f"  | {value:g} | {'none' if up is None else f'{up:g}'} | "
+                                 f"{'none' if down is None else f'{down:g}'} |")
                 lines.append("")
         lines.append("")
     lines += ["## Ranges of the metrics (feasible cases)", "", "| metric | min | max |", "|---|---|---|"]

@@ -12,8 +12,9 @@ starts at rest, held by its actuators with E on the task's start point (:func:`.
 Results (:class:`TrackingRun`): E's deviation from the programmed path (its distance to the ellipse in
 XY and its height error, the task's holonomic constraints in that order, first order in their residuals:
 Phi / |Phi_p|), the joint tracking
-errors, the boom tip deflection (flexible boom) and its 40-250 Hz RMS over the run's second half, the
-actuator torques and powers, the saturated share of ticks, and the plant's energy balance.
+errors, the boom tip deflection (flexible boom) and its 40-250 Hz RMS over the run's second half (and
+the reference's own, for comparison), the actuator torques and powers, the saturated share of ticks, and
+the plant's energy balance.
 """
 
 from __future__ import annotations
@@ -104,7 +105,8 @@ class TrackingSpec:
 SUMMARY = ("ellipse_distance_max_m", "ellipse_distance_rms_m", "height_error_max_m", "height_error_rms_m",
            *(f"{joint}_{metric}" for joint in ACTUATED_JOINTS
              for metric in ("error_max_rad", "error_rms_rad", "torque_peak_nm", "power_peak_w", "saturated_share")),
-           "tip_deflection_max_m", "tip_vibration_rms_m", "energy_balance_error_j", "real_time_factor")
+           "tip_deflection_max_m", "tip_vibration_rms_m", "reference_tip_vibration_rms_m", "energy_balance_error_j",
+           "real_time_factor")
 """The names of :meth:`TrackingRun.summary`, in order."""
 
 
@@ -112,8 +114,8 @@ SUMMARY = ("ellipse_distance_max_m", "ellipse_distance_rms_m", "height_error_max
 class TrackingRun:
     """A closed-loop run: the spec, the gains used, the plant's trajectory and actuator torques (N, 3) [N m]
     per step, the reference on the same times, E's distance to the programmed path (N, 2) [m] (ellipse in
-    XY, height), the boom tip deflection (N, 3) [m] (zeros for the rigid boom), the saturated share of
-    ticks per joint and the wall time [s]."""
+    XY, height), the boom tip deflection of the plant and of the reference (N, 3) [m] (zeros for the rigid
+    boom), the saturated share of ticks per joint and the wall time [s]."""
 
     spec: TrackingSpec
     gains: list[JointGains]
@@ -122,6 +124,7 @@ class TrackingRun:
     reference: Trajectory
     path_error: np.ndarray
     tip_deflection: np.ndarray
+    reference_tip_deflection: np.ndarray
     saturated_share: np.ndarray
     wall: float
 
@@ -155,8 +158,9 @@ class TrackingRun:
             out[f"{name}_saturated_share"] = float(self.saturated_share[k])
         deflection = np.linalg.norm(self.tip_deflection, axis=1)
         out["tip_deflection_max_m"] = float(deflection.max())
-        vibration = vibration_band(self.tip_deflection, self.spec.step)[late]
-        out["tip_vibration_rms_m"] = float(np.sqrt(np.mean(np.sum(vibration**2, axis=1))))
+        for name, deflection in (("tip", self.tip_deflection), ("reference_tip", self.reference_tip_deflection)):
+            vibration = vibration_band(deflection, self.spec.step)[late]
+            out[f"{name}_vibration_rms_m"] = float(np.sqrt(np.mean(np.sum(vibration**2, axis=1))))
         out["energy_balance_error_j"] = float(np.abs(self.plant.energy_balance_error).max())
         out["real_time_factor"] = float(self.t[-1] / self.wall)
         return {name: out[name] for name in SUMMARY}
@@ -202,9 +206,9 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
     constraints = ConstraintSet(tuple(c for c in reference_motion.constraints.constraints if c.order == 0))
     path_error = np.array([constraints.residual(t, p) / np.linalg.norm(constraints.position_jacobian(t, p), axis=1)
                            for t, p in zip(trajectory.t, trajectory.ee_position, strict=True)])
-    deflection = (boom_tip_deflection(plant.model, plant.dynamics.chain, trajectory.q)
-                  if spec.variant == "flexible" else np.zeros((len(trajectory.t), 3)))
-    return TrackingRun(spec, gains, trajectory, torques, reference, path_error, deflection,
+    deflections = [boom_tip_deflection(plant.model, plant.dynamics.chain, q) if spec.variant == "flexible"
+                   else np.zeros((len(trajectory.t), 3)) for q in (trajectory.q, reference.q)]
+    return TrackingRun(spec, gains, trajectory, torques, reference, path_error, *deflections,
                        controller.saturated_ticks / max(1, controller.ticks), time.perf_counter() - started)
 
 
