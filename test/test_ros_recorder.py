@@ -343,3 +343,34 @@ def test_records_the_topics_of_a_renamed_node(context, tmp_path):
     assert set(result["recorder"].topics) == {"/site_a/renamed/joint_states"}
     publisher_node.destroy_node()
     other.destroy_node()
+
+
+def test_records_every_node_of_the_name(context, tmp_path):
+    """Two nodes share the name, each in its own participant (a stale one left by an earlier test or process,
+    and the running one): the topics of both are recorded, not only those of the one rclpy's by-node query
+    answers for."""
+    elsewhere = Context()
+    rclpy.init(context=elsewhere)
+    stale = rclpy.create_node("twin", context=elsewhere)
+    running = rclpy.create_node("twin", context=context)
+    events = stale.create_publisher(String, "~/transition_event", 10)
+    joints = running.create_publisher(JointState, "~/joint_states", 10)
+    stop = threading.Event()
+    result = {}
+    with BagWriter(tmp_path / "bag") as bag:
+        thread = threading.Thread(target=lambda: result.update(recorder=record(bag, [], stop, context=context,
+                                                                               source="/twin")))
+        thread.start()
+        try:
+            wait_for(lambda: joints.get_subscription_count() > 0, 20.0, "the recorder's subscription")
+            for k in range(3):
+                joints.publish(joint_state(k))
+            wait_for(lambda: bag.counts.get("/twin/joint_states") == 3, 5.0, "the messages")
+            wait_for(lambda: events.get_subscription_count() > 0, 20.0, "the recorder's subscription to the twin")
+        finally:
+            stop.set()
+            thread.join()
+    assert set(result["recorder"].topics) == {"/twin/joint_states", "/twin/transition_event"}
+    stale.destroy_node()
+    running.destroy_node()
+    rclpy.try_shutdown(context=elsewhere)

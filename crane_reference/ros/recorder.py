@@ -40,7 +40,6 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.expand_topic_name import expand_topic_name
-from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -56,7 +55,6 @@ DISCOVERY_PERIOD = 0.2  # [s] between two looks at the ROS graph for topics not 
 STATUS_PERIOD = 1.0  # [s] between two status lines
 SPIN_TIMEOUT = 0.05  # [s], longest wait for a message before the loop looks at signals, discovery and status
 DRAIN_TIME = 0.2  # [s], longest time spent taking the messages already queued when stopping
-NodeNameNonExistentError = rclpy_implementation.NodeNameNonExistentError
 IGNORED_TOPICS = ("/rosout", "/parameter_events")  # published by every node
 DEFAULT_NODE = f"/{NODE_NAME}"
 
@@ -147,13 +145,15 @@ class Recorder:
         return added
 
     def _add_source_topics(self) -> None:
+        """Add the topics that a node named ``source`` publishes, from each topic's publishers: with several
+        nodes of that name in the graph (a stale process, a second launch) every one of them counts, where
+        rclpy's by-node query would answer for one of them only."""
         name, namespace = self.source
-        try:
-            published = self.node.get_publisher_names_and_types_by_node(name, namespace)
-        except NodeNameNonExistentError:
-            return
-        for topic, _ in published:
-            if topic not in self.received and topic not in IGNORED_TOPICS:
+        for topic, _ in self.node.get_topic_names_and_types():
+            if topic in self.received or topic in IGNORED_TOPICS:
+                continue
+            if any(p.node_name == name and p.node_namespace == namespace
+                   for p in self.node.get_publishers_info_by_topic(topic)):
                 self.topics.append(topic)
                 self.received[topic] = 0
 
