@@ -8,6 +8,8 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -320,26 +322,32 @@ def test_live_node_matches_offline_export(context, tmp_path):
     assert offline_keys <= set(diagnostics)
 
 
+@contextmanager
+def recording(bag: BagWriter, context: Context, source: str) -> Iterator[dict]:
+    """Record every topic of the node ``source`` into ``bag`` on a thread while the block runs; the dict
+    yielded holds the recorder (``"recorder"``) after the block."""
+    stop, result = threading.Event(), {}
+    thread = threading.Thread(target=lambda: result.update(recorder=record(bag, [], stop, context=context,
+                                                                           source=source)))
+    thread.start()
+    try:
+        yield result
+    finally:
+        stop.set()
+        thread.join()
+
+
 def test_records_the_topics_of_a_renamed_node(context, tmp_path):
     """Without topics, record takes every topic the named node publishes (its actual, remapped names)."""
     publisher_node = rclpy.create_node("renamed", namespace="/site_a", context=context)
     other = rclpy.create_node("other", context=context)
     joints = publisher_node.create_publisher(JointState, "~/joint_states", 10)
     other.create_publisher(JointState, "/joint_states", 10)  # measured state of someone else: not recorded
-    stop = threading.Event()
-    result = {}
-    with BagWriter(tmp_path / "bag") as bag:
-        thread = threading.Thread(target=lambda: result.update(recorder=record(
-            bag, [], stop, context=context, source="/site_a/renamed")))
-        thread.start()
-        try:
-            wait_for(lambda: joints.get_subscription_count() > 0, 20.0, "the recorder's subscription")
-            for k in range(5):
-                joints.publish(joint_state(k))
-            wait_for(lambda: bag.counts.get("/site_a/renamed/joint_states") == 5, 5.0, "the messages")
-        finally:
-            stop.set()
-            thread.join()
+    with BagWriter(tmp_path / "bag") as bag, recording(bag, context, "/site_a/renamed") as result:
+        wait_for(lambda: joints.get_subscription_count() > 0, 20.0, "the recorder's subscription")
+        for k in range(5):
+            joints.publish(joint_state(k))
+        wait_for(lambda: bag.counts.get("/site_a/renamed/joint_states") == 5, 5.0, "the messages")
     assert set(result["recorder"].topics) == {"/site_a/renamed/joint_states"}
     publisher_node.destroy_node()
     other.destroy_node()
@@ -355,21 +363,12 @@ def test_records_every_node_of_the_name(context, tmp_path):
     running = rclpy.create_node("twin", context=context)
     events = stale.create_publisher(String, "~/transition_event", 10)
     joints = running.create_publisher(JointState, "~/joint_states", 10)
-    stop = threading.Event()
-    result = {}
-    with BagWriter(tmp_path / "bag") as bag:
-        thread = threading.Thread(target=lambda: result.update(recorder=record(bag, [], stop, context=context,
-                                                                               source="/twin")))
-        thread.start()
-        try:
-            wait_for(lambda: joints.get_subscription_count() > 0, 20.0, "the recorder's subscription")
-            for k in range(3):
-                joints.publish(joint_state(k))
-            wait_for(lambda: bag.counts.get("/twin/joint_states") == 3, 5.0, "the messages")
-            wait_for(lambda: events.get_subscription_count() > 0, 20.0, "the recorder's subscription to the twin")
-        finally:
-            stop.set()
-            thread.join()
+    with BagWriter(tmp_path / "bag") as bag, recording(bag, context, "/twin") as result:
+        wait_for(lambda: joints.get_subscription_count() > 0, 20.0, "the recorder's subscription")
+        for k in range(3):
+            joints.publish(joint_state(k))
+        wait_for(lambda: bag.counts.get("/twin/joint_states") == 3, 5.0, "the messages")
+        wait_for(lambda: events.get_subscription_count() > 0, 20.0, "the recorder's subscription to the twin")
     assert set(result["recorder"].topics) == {"/twin/joint_states", "/twin/transition_event"}
     stale.destroy_node()
     running.destroy_node()

@@ -145,9 +145,9 @@ class Recorder:
         return added
 
     def _add_source_topics(self) -> None:
-        """Add the topics that a node named ``source`` publishes, from each topic's publishers: with several
-        nodes of that name in the graph (a stale process, a second launch) every one of them counts, where
-        rclpy's by-node query would answer for one of them only."""
+        """Add the topics that a node named ``source`` publishes, from each topic's publishers (every node of
+        that name counts).  rclpy's by-node query answered with the node's lifecycle topic alone after the
+        in-process node tests, while each topic's publishers named the node (CI, 2026-11-24)."""
         name, namespace = self.source
         for topic, _ in self.node.get_topic_names_and_types():
             if topic in self.received or topic in IGNORED_TOPICS:
