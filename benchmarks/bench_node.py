@@ -10,8 +10,8 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
 * delivery lag: reception time - stamp (both system time), mean and p99;
 * missed samples: stamps absent from the received sequence, plus the samples the node itself held
   because it ran late and the times its stamps leapt (from /diagnostics: held_late, stamp_leaps);
-* CPU share of the node process (user + system time / wall time, 100 % = one core) and the solver's
-  real-time factor it reports;
+* CPU share of the node (user + system time of its process and of the solver's process / wall time,
+  100 % = one core) and the solver's real-time factor it reports;
 * latency from a parameter change (``ellipse.a``, through the parameter service) to the reception of
   the first sample that uses it (the node reports that sample's stamp in /diagnostics as
   ``retarget_stamp_s``), over ``--changes`` changes, and from the node's acceptance of the change to that
@@ -82,11 +82,24 @@ class Recorder:
                 self.diagnostics = {kv.key: kv.value for kv in status.values}
 
 
+def descendants(pid: int) -> list[int]:
+    """The process ``pid`` and all its living descendants (the node's solver process)."""
+    found = [pid]
+    for task in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{task}/children", encoding="ascii") as children:
+            for child in children.read().split():
+                found += descendants(int(child))
+    return found
+
+
 def cpu_seconds(pid: int) -> float:
-    """User + system CPU time of a process [s]."""
-    with open(f"/proc/{pid}/stat", encoding="ascii") as stat:
-        fields = stat.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
+    """User + system CPU time [s] of a process and its descendants (all threads of each)."""
+    total = 0.0
+    for process in descendants(pid):
+        with open(f"/proc/{process}/stat", encoding="ascii") as stat:
+            fields = stat.read().rsplit(")", 1)[1].split()
+        total += (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
+    return total
 
 
 def spin_for(executor: SingleThreadedExecutor, seconds: float) -> None:

@@ -45,9 +45,10 @@ from crane_reference.model.drive import make_drive
 from crane_reference.model.parameters import Task
 from crane_reference.motion.programmed_motion import ConstraintSingularityError
 from crane_reference.ros.message_types import rclpy_types
-from crane_reference.ros.node import LOOKAHEAD, CraneReferenceNode, Frame
+from crane_reference.ros.node import CraneReferenceNode
 from crane_reference.ros.parameters import PARAMETERS, SPECS
 from crane_reference.stream.reference_stream import ReferenceStream
+from crane_reference.stream.server import LOOKAHEAD, Outgoing
 
 NS = 10**9
 NODE = "crane_reference"
@@ -164,9 +165,9 @@ def record_stream_times(node: CraneReferenceNode) -> dict[int, float | None]:
     times: dict[int, float | None] = {}
     send = node._send
 
-    def recording(k: int, frame: Frame | None) -> None:
-        times[messages.stamp_at(node._start_ns, k, node._rate)] = None if frame is None else frame.tau
-        send(k, frame)
+    def recording(outgoing: Outgoing) -> None:
+        times[outgoing.stamp_ns] = None if math.isnan(outgoing.frame.tau) else outgoing.frame.tau
+        send(outgoing)
 
     node._send = recording
     return times
@@ -218,7 +219,6 @@ def test_rate_sizes_and_stamps(ros: Harness) -> None:
     names = {tuple(m.name) for _, m in ros.received["joint_states"]}
     assert names == {tuple(load_and_model()[1].joint_names)}
     assert set(np.diff(data["stamp"]).tolist()) == {NS // 200}
-    assert (data["stamp"] - node._start_ns) % (NS // 200) == pytest.approx(0)
     pose_stamps = [stamp_ns(m) for _, m in ros.received["pose"]]
     assert set(np.diff(pose_stamps).tolist()) == {NS // 200}
     assert np.all(np.isfinite(data["q"])) and np.all(np.isfinite(data["qd"])) and np.all(np.isfinite(data["effort"]))
@@ -435,7 +435,7 @@ def test_rejected_changes_leave_the_stream_untouched(ros: Harness) -> None:
     node = ros.start(publish_rate=100)
     times = record_stream_times(node)
     time.sleep(0.3)
-    retargets = spy(node._stream, "retarget")
+    retargets = spy(node, "retarget")
     rejected = {
         "out of range": Parameter("ellipse.a", value=-1.0),
         "NaN": Parameter("ellipse.b", value=math.nan),
@@ -461,7 +461,7 @@ def test_rejected_changes_leave_the_stream_untouched(ros: Harness) -> None:
     assert not result.successful and "elipse.a" in result.reason and "ellipse.a" in result.reason, result.reason
     (result,) = ros.set_parameters(Parameter("ellipse.a", value=3))  # the current value: no re-target
     assert result.successful
-    assert retargets == [] and node._stream.targets == Task(3.0, 2.0, 0.2, 5.0)
+    assert retargets == [] and node._server.stream.targets == Task(3.0, 2.0, 0.2, 5.0)
     # The motion goes on exactly as without the requests (same samples as an independent stream).
     end = ros.samples()["stamp"][-1] + NS // 2
     ros.wait_until_stamp(end)
@@ -473,16 +473,19 @@ def test_rejected_changes_leave_the_stream_untouched(ros: Harness) -> None:
     assert_continuous(data["q"], data["qd"], 0.01)
 
 
-def spy(obj: Any, name: str) -> list[tuple]:
-    """Record the calls of ``obj.name`` (still calling it)."""
+def spy(node: CraneReferenceNode, method: str) -> list[tuple]:
+    """Record the arguments of the requests ``method`` the node's server sends its solver (still sending
+    them): the stream time of a command first."""
     calls: list[tuple] = []
-    original = getattr(obj, name)
+    solver = node._server.solver
+    original = solver.call
 
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        calls.append(args)
-        return original(*args, **kwargs)
+    def call(name: str, *args: Any) -> Any:
+        if name == method:
+            calls.append(args)
+        return original(name, *args)
 
-    setattr(obj, name, wrapper)
+    solver.call = call
     return calls
 
 
@@ -497,7 +500,7 @@ def test_integer_values_for_double_parameters(ros: Harness, tmp_path: Path) -> N
     results = ros.set_parameters(Parameter("blend_time", value=3), Parameter("ellipse.b", value=2))
     assert all(r.successful for r in results), results
     assert node.get_parameter("blend_time").type_ == Parameter.Type.DOUBLE
-    assert node.get_parameter("blend_time").value == 3.0 and node._stream.blend_time == 3.0
+    assert node.get_parameter("blend_time").value == 3.0 and node._server.stream.blend_time == 3.0
 
 
 @pytest.mark.slow
@@ -506,7 +509,7 @@ def test_atomic_ellipse_change_is_smooth_and_converges(ros: Harness) -> None:
     node = ros.start(publish_rate=rate, blend_time=blend)
     times = record_stream_times(node)
     time.sleep(0.5)
-    retargets = spy(node._stream, "retarget")
+    retargets = spy(node, "retarget")
     (result,) = ros.set_parameters(Parameter("ellipse.a", value=3.3), Parameter("ellipse.b", value=2.2),
                                    atomically=True)
     assert result.successful, result.reason
@@ -558,13 +561,13 @@ def test_pause_and_resume(ros: Harness) -> None:
     node = ros.start(publish_rate=rate, speed_scaling__ramp_time=ramp, model="rigid")  # no 70 Hz boom vibration
     times = record_stream_times(node)
     time.sleep(1.2)  # past the drive's torque step at 1 s (a jump of the programmed acceleration)
-    pause = spy(node._stream, "pause")
+    pause = spy(node, "pause")
     response = ros.call(ros.pause, SetBool.Request(data=True))
     assert response.success and "coming to rest" in response.message, response.message
     paused_at = stamp_of(ros, times, pause[0][0])
     ros.wait_until_stamp(paused_at + NS)
     assert ros.call(ros.pause, SetBool.Request(data=True)).message == "already paused"
-    resume = spy(node._stream, "resume")
+    resume = spy(node, "resume")
     assert ros.call(ros.pause, SetBool.Request(data=False)).success
     resumed_at = stamp_of(ros, times, resume[0][0])
     ros.wait_until_stamp(resumed_at + NS // 2)
@@ -621,7 +624,7 @@ def test_lifecycle_deactivate_restart_activate_without_a_jump_while_active(ros: 
     assert_continuous(stopped["q"][-rate:], stopped["qd"][-rate:], 1.0 / rate)  # reached along the ramp
     ros.wait_for(lambda: any(m.startswith("inactive") for m in diagnostic_messages(ros)), "inactive diagnostics")
 
-    restart = spy(node._stream, "restart")
+    restart = spy(node, "restart")
     response = ros.call(ros.restart, Trigger.Request())
     assert response.success and "position jump up to" in response.message, response.message
     assert change_state(ros, Transition.TRANSITION_ACTIVATE)
@@ -663,15 +666,15 @@ def test_without_autostart_the_node_waits_for_a_manager(ros: Harness) -> None:
 
 
 def test_solver_failure_holds_and_reports_error(ros: Harness) -> None:
-    node = ros.start(publish_rate=100)
+    node = ros.start(publish_rate=100, solver_process=False)  # the failure is injected into the stream here
     time.sleep(0.3)
 
     def fail(t_end: float) -> None:
         raise ConstraintSingularityError("injected by the test")
 
-    with node._stream_lock:
-        node._stream._stepper.advance_until = fail
-    ros.wait_for(lambda: node._stream.state == "ERROR", "the stream's ERROR state")
+    with node._server._solver_lock:
+        node._server.solver.solver.stream._stepper.advance_until = fail
+    ros.wait_for(lambda: node._server.stream.state == "ERROR", "the stream's ERROR state")
     ros.wait_for(lambda: any(m.status[0].level == rclpy_types().byte(messages.ERROR)
                              for _, m in list(ros.received["diagnostics"])), "an ERROR diagnostic")
     failed = ros.samples()["stamp"][-1]  # the frames made before the failure (LOOKAHEAD) are published first
@@ -691,17 +694,7 @@ def test_solver_failure_holds_and_reports_error(ros: Harness) -> None:
     assert change_state(ros, Transition.TRANSITION_DEACTIVATE)  # no ramp: the stream holds in ERROR
     assert ros.call(ros.restart, Trigger.Request()).success
     assert change_state(ros, Transition.TRANSITION_ACTIVATE)
-    ros.wait_for(lambda: node._stream.state == "RUNNING", "RUNNING after the restart")
-
-
-def test_non_finite_samples_are_never_published(ros: Harness) -> None:
-    node = ros.start(publish_rate=100)
-    valid = node._schedule.last_valid
-    broken = dataclasses.replace(valid, q=np.full_like(valid.q, np.nan))
-    checked = node._schedule.checked(Frame(7, 0.07, broken, [broken]), valid)
-    assert checked.k == 7 and checked.preview is None and checked.sample.held
-    np.testing.assert_array_equal(checked.sample.q, valid.q)
-    assert np.all(checked.sample.qd == 0.0)
+    ros.wait_for(lambda: node._server.stream.state == "RUNNING", "RUNNING after the restart")
 
 
 # --- message builders -----------------------------------------------------------------------------
@@ -762,7 +755,7 @@ def test_speed_scaling_topic_sets_the_parameter_and_slows_the_reference(ros: Har
     times = record_stream_times(node)
     publisher = ros.probe.create_publisher(Float64, f"/{NODE}/speed_scaling", 10)
     ros.wait_for(lambda: publisher.get_subscription_count() > 0, "the node's ~/speed_scaling subscription")
-    scaling = spy(node._stream, "set_speed_scaling")
+    scaling = spy(node, "set_speed_scaling")
     publisher.publish(Float64(data=0.5))
     ros.wait_for(lambda: scaling, "the speed change")
     assert node.get_parameter("speed_scaling").value == 0.5
@@ -794,11 +787,12 @@ def test_command_lead_sets_when_a_command_takes_effect(ros: Harness) -> None:
     for lead in (node.get_parameter("command_lead").value, 0.4):
         (result,) = ros.set_parameters(Parameter("command_lead", value=lead))
         assert result.successful, result.reason
-        scaling = spy(node._stream, "set_speed_scaling")
+        scaling = spy(node, "set_speed_scaling")
         value = 0.5 if lead != 0.4 else 1.0
         (result,) = ros.set_parameters(Parameter("speed_scaling", value=value))
         assert result.successful and len(scaling) == 1, result.reason
-        effective, accepted = node._effective["speed_scaling"], node._accepted["speed_scaling"]
+        commands = node._server.commands
+        effective, accepted = float(commands["speed_scaling_stamp_s"]), float(commands["speed_scaling_accepted_s"])
         assert lead - 1.0 / rate <= effective - accepted <= lead + 2.0 / rate, (lead, effective - accepted)
         assert abs(stamp_of(ros, times, scaling[0][0]) - effective * NS) < 1e3  # [ns], float seconds
     (result,) = ros.set_parameters(Parameter("command_lead", value=0.0))

@@ -11,7 +11,7 @@ import pytest
 
 from crane_reference.model.parameters import Task
 from crane_reference.stream.reference_stream import ReferenceStream
-from crane_reference.stream.schedule import NANOSECONDS, Frame, FrameSchedule
+from crane_reference.stream.schedule import NANOSECONDS, Frame, FrameBatch, FrameSchedule, checked, make_frames
 
 RATE = 100  # [Hz]
 LEAD = 0.25  # [s]
@@ -25,7 +25,7 @@ def stream_factory(params):
 def schedule_with(sample, frames: int = 0, lookahead: int = 100) -> FrameSchedule:
     schedule = FrameSchedule(RATE, lookahead, LEAD, 1.0, sample)
     plan = schedule.plan()
-    schedule.accept([Frame(k, k / RATE, sample) for k in range(frames)], plan, 0)
+    schedule.accept(FrameBatch([Frame(k, k / RATE, sample) for k in range(frames)], 0, False), plan)
     return schedule
 
 
@@ -76,7 +76,7 @@ def test_commands_take_effect_lead_seconds_ahead_and_replace_the_frames(stream_f
     schedule.after_command(k, tau)
     assert [f.k for f in schedule.frames] == list(range(6, k))
     assert schedule.plan().k == k and schedule.plan().tau == tau
-    assert not schedule.accept([Frame(80, 0.8, sample)], plan, 0)  # made for the old buffer: dropped
+    assert not schedule.accept(FrameBatch([Frame(80, 0.8, sample)], 0, False), plan)  # made for the old buffer: dropped
     # with fewer frames made than the lead, the command applies at the next frame to make
     short = schedule_with(sample, frames=10)
     assert short.command_point() == (10, pytest.approx(0.1))
@@ -86,26 +86,30 @@ def test_frames_are_the_stream_sampled_at_the_rate_with_decimated_previews(strea
     stream, truth = stream_factory(), stream_factory()
     schedule = FrameSchedule(RATE, 100, LEAD, 1.0, stream.sample(0.0))
     plan = schedule.plan()
-    frames, next_preview_k, busy = schedule.make_frames(stream, plan, 20, 0.2, 5, 4, None)
-    assert not busy and [f.k for f in frames] == list(range(20))
-    assert [f.k for f in frames if f.preview is not None] == [0, 4, 8, 12, 16] and next_preview_k == 20
+    batch = make_frames(stream, schedule.request(plan, 20, 0.2, 5, 4, None))
+    frames = batch.frames
+    assert not batch.busy and [f.k for f in frames] == list(range(20))
+    assert [f.k for f in frames if f.preview is not None] == [0, 4, 8, 12, 16] and batch.next_preview_k == 20
     truth.compute(0.5)
     for frame in frames:
         assert frame.tau == pytest.approx(frame.k / RATE, abs=1e-12)
         np.testing.assert_array_equal(frame.sample.q, truth.sample(frame.tau).q)
     preview = frames[4].preview
     np.testing.assert_array_equal([p.t for p in preview], [truth.sample(0.04 + 0.04 * (i + 1)).t for i in range(5)])
-    assert schedule.accept(frames, plan, next_preview_k) and schedule.plan().k == 20
+    assert schedule.accept(batch, plan) and schedule.plan().k == 20
 
 
 def test_a_non_finite_frame_is_replaced_by_the_last_valid_sample_held(stream_factory):
     valid = stream_factory().sample(0.0)
     schedule = schedule_with(valid)
-    broken = dataclasses.replace(valid, qd=np.full_like(valid.qd, np.inf))
-    checked = schedule.checked(Frame(3, 0.03, broken, [broken]), valid)
-    assert checked.k == 3 and checked.preview is None and checked.sample.held
-    np.testing.assert_array_equal(checked.sample.q, valid.q)
-    assert schedule.counters.held_non_finite == 1 and "non-finite" in schedule.fault
+    for field in ("q", "qd"):
+        broken = dataclasses.replace(valid, **{field: np.full_like(valid.qd, np.nan if field == "q" else np.inf)})
+        frame, fault = checked(Frame(3, 0.03, broken, [broken]), valid)
+        assert frame.k == 3 and frame.preview is None and frame.sample.held and "non-finite" in fault
+        np.testing.assert_array_equal(frame.sample.q, valid.q)
+        assert np.all(frame.sample.qd == 0.0)
+        schedule.accept(FrameBatch([frame], 1, False, non_finite=1, fault=fault), schedule.plan())
+    assert schedule.counters.held_non_finite == 2 and "non-finite" in schedule.fault
 
 
 def test_after_a_command_samples_come_first_then_previews_on_their_cadence(stream_factory):
@@ -120,10 +124,9 @@ def test_after_a_command_samples_come_first_then_previews_on_their_cadence(strea
         with_preview = []
         while schedule.room > 0 or stream.computed_until < schedule.made_tau + 1.0:
             plan = schedule.plan()
-            frames, next_preview_k, _ = schedule.make_frames(stream, plan, min(plan.room, 20), 1.0, 5, decimation,
-                                                             budget)
-            schedule.accept(frames, plan, next_preview_k)
-            with_preview += [f.k for f in frames if f.preview is not None]
+            batch = make_frames(stream, schedule.request(plan, min(plan.room, 20), 1.0, 5, decimation, budget))
+            schedule.accept(batch, plan)
+            with_preview += [f.k for f in batch.frames if f.preview is not None]
         return with_preview
 
     fill(None)

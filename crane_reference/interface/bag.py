@@ -17,7 +17,7 @@ junk after the message, which rosbags rejects on reading.)
 :class:`~crane_reference.stream.reference_stream.ReferenceStream` stepped and sampled at the publish rate,
 written through a :class:`ReferenceBag`, so the messages are the node's for the same parameters.
 Time is simulated time: sample k has header stamp and bag timestamp ``start_ns + k * 10**9 // rate``
-(:func:`~crane_reference.interface.messages.stamp_at`).  ``crane-reference simulate --bag DIR [--rate HZ]`` runs
+(:func:`~crane_reference.stream.schedule.stamp_at`).  ``crane-reference simulate --bag DIR [--rate HZ]`` runs
 it (:func:`export_command`).
 """
 
@@ -42,6 +42,7 @@ from ..model.drive import column_drive
 from ..model.parameters import CraneParameters
 from ..stream.reference_stream import ERROR, ReferenceStream
 from ..stream.sample import ReferenceSample
+from ..stream.schedule import stamp_at
 from . import messages
 
 STORAGES = ("mcap", "sqlite3")
@@ -274,7 +275,7 @@ def export_reference(bag: BagWriter, stream: ReferenceStream, rate: int, duratio
         tau = k / rate
         stream.compute(tau)
         sample = stream.sample(tau)
-        stamp = messages.stamp_at(start_ns, k, rate)
+        stamp = stamp_at(start_ns, k, rate)
         reference.write_sample(stamp, stream.joint_names, frame_id, sample)
         if stamp - start_ns >= next_diagnostics:
             next_diagnostics += DIAGNOSTICS_PERIOD_NS

@@ -121,12 +121,6 @@ def rosbags_types(typestore: Any = None) -> MessageTypes:
 # --- basic types ----------------------------------------------------------------------------------
 
 
-def stamp_at(start_ns: int, k: int, rate: int) -> int:
-    """Stamp [ns] of sample k of a stream at ``rate`` Hz that starts at ``start_ns`` (exact when the rate
-    divides 10^9 ns, otherwise rounded down to the nanosecond without accumulating an error)."""
-    return start_ns + k * NANOSECONDS // rate
-
-
 def time_msg(types: MessageTypes, stamp_ns: int) -> Any:
     """builtin_interfaces/Time of a non-negative time in nanoseconds."""
     return types.Time(sec=stamp_ns // NANOSECONDS, nanosec=stamp_ns % NANOSECONDS)

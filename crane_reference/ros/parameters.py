@@ -176,6 +176,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("autostart", BOOL, True, "Configure and activate the (lifecycle) node at once; if false, it "
                   "waits unconfigured for a lifecycle manager or `ros2 lifecycle set`", read_only=True),
     ParameterSpec("status_period", DOUBLE, 5.0, "Period of the one-line status log", "s", (0.1, 3600.0)),
+    ParameterSpec("solver_process", BOOL, True, "Compute the reference in a process of its own (its own Python "
+                  "interpreter, so the solver and the publisher never wait for each other); false: in a thread of "
+                  "the node's process", read_only=True),
 )
 SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PARAMETERS}
 TARGET_PARAMETERS = {"ellipse.a": "ellipse_a", "ellipse.b": "ellipse_b", "z.increment": "z_increment",

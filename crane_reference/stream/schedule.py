@@ -1,14 +1,15 @@
 """Which reference sample goes out when: the publishing schedule of a node, as plain logic.
 
 Sample k of a stream published at ``rate`` Hz is stamped ``start + k / rate``
-(:func:`~crane_reference.interface.messages.stamp_at`) and shows the stream at publish time tau_k.
+(:func:`stamp_at`) and shows the stream at publish time tau_k.
 :class:`FrameSchedule` keeps the buffer of frames [next to publish ... made], made ahead of publishing
-by a worker and taken by a publisher; it has no threads or locks of its own (the ROS node holds them)
+by a worker and taken by a publisher; it has no threads or locks of its own (the reference server holds them)
 and no ROS types, so every rule here is tested without rclpy:
 
-* making frames (:meth:`FrameSchedule.plan`, :meth:`FrameSchedule.make_frames`, :meth:`FrameSchedule.accept`):
-  up to the look-ahead, after one slice of computing ahead, with a preview every ``decimation`` frames;
-  a frame that is not finite is replaced by the last valid sample held;
+* making frames (:meth:`FrameSchedule.plan`, :meth:`FrameSchedule.request`, :func:`make_frames` on the
+  solver's side, :meth:`FrameSchedule.accept`): up to the look-ahead, after one slice of computing ahead,
+  with a preview every ``decimation`` frames; a frame that is not finite is replaced by the last valid
+  sample held;
 * commands (:meth:`FrameSchedule.command_point`, :meth:`FrameSchedule.after_command`): a command takes
   effect at the frame ``lead`` seconds after the next one to publish (or at the next one to make, if
   earlier); frames from there on are dropped and made again;
@@ -33,6 +34,12 @@ URGENT_PART = 4  # frames within lookahead / URGENT_PART of publishing are made 
 NANOSECONDS = 10**9
 
 
+def stamp_at(start_ns: int, k: int, rate: int) -> int:
+    """Stamp [ns] of sample k of a stream at ``rate`` Hz that starts at ``start_ns`` (exact when the rate
+    divides 10^9 ns, otherwise rounded down to the nanosecond without accumulating an error)."""
+    return start_ns + k * NANOSECONDS // rate
+
+
 @dataclass(frozen=True)
 class Frame:
     """Sample k of the reference, at stream publish time ``tau``, with its preview (or None) over
@@ -55,6 +62,93 @@ class Plan:
     generation: int
     next_preview_k: int
     room: int
+
+
+@dataclass(frozen=True)
+class FrameRequest:
+    """What the solver makes for a :class:`Plan` (built by :meth:`FrameSchedule.request`, carried to the
+    solver, which may be another process): up to ``count`` frames at ``rate`` Hz, a ``horizon``-second
+    preview of ``points`` points every ``decimation`` frames, after computing ahead for at most
+    ``compute_budget`` s of wall time (None: unbounded); frames before ``urgent_until`` are made as soon as
+    their own motion is computed; ``last_valid`` is the last finite sample made."""
+
+    plan: Plan
+    count: int
+    rate: int
+    horizon: float
+    points: int
+    decimation: int
+    compute_budget: float | None
+    urgent_until: int
+    last_valid: ReferenceSample
+
+
+@dataclass(frozen=True)
+class FrameBatch:
+    """What the solver made for a :class:`FrameRequest`: the frames, the next frame due a preview, whether
+    the motion is still short of the preview horizon (``busy``), the wall time spent computing and the
+    motion computed in it [s], frames replaced because they were not finite and the fault that says why."""
+
+    frames: list[Frame]
+    next_preview_k: int
+    busy: bool
+    compute_wall: float = 0.0
+    compute_motion: float = 0.0
+    non_finite: int = 0
+    fault: str = ""
+
+
+def make_frames(stream: ReferenceStream, request: FrameRequest) -> FrameBatch:
+    """The frames of ``request`` as far as the motion is computed, after computing ahead far enough for
+    them and for their previews.  A frame due a preview waits until its horizon is computed, so previews
+    keep their cadence; an urgent frame (just after a command) is made as soon as its own motion is
+    computed, and passes a preview due to the first frame after the urgent window.  A frame that is not
+    finite is replaced by the last valid sample held (:func:`checked`)."""
+    plan, count, horizon = request.plan, request.count, request.horizon
+    dt = 1.0 / request.rate
+    tau, next_preview_k = plan.tau, plan.next_preview_k
+    ahead = tau + count * dt + horizon + COMPUTE_MARGIN
+    frames_until = tau + (count - 1) * dt + 2 * TIME_TOLERANCE
+    before = stream.computed_until
+    wall = motion = 0.0
+    if before < ahead:
+        start = time.perf_counter()
+        urgent = plan.k < request.urgent_until and before < frames_until
+        stream.compute(frames_until if urgent else ahead, request.compute_budget)
+        if math.isfinite(stream.computed_until):
+            wall, motion = time.perf_counter() - start, stream.computed_until - before
+    last = request.last_valid  # the last sample of the frames made so far (finite)
+    if stream.state == ERROR:  # hold the last sample made, not the stream's (computed further ahead)
+        return FrameBatch([Frame(plan.k + i, tau + i * dt, last.hold()) for i in range(count)], next_preview_k,
+                          False, wall, motion)
+    times = [tau + i * dt for i in range(count)]
+    times = [t for t in times if t <= stream.computed_until - TIME_TOLERANCE]
+    frames: list[Frame] = []
+    non_finite, fault = 0, ""
+    for i, (t, sample) in enumerate(zip(times, stream.samples(times), strict=True)):
+        k, preview = plan.k + i, None
+        if k >= next_preview_k:
+            if stream.computed_until >= t + horizon:
+                preview = stream.preview(t, horizon, request.points)
+                next_preview_k = k + request.decimation
+            elif k >= request.urgent_until:
+                break  # this frame's preview is not computed yet: make it on a later call
+        frame, why = checked(Frame(k, t, sample, preview, horizon), last)
+        if why:
+            non_finite, fault = non_finite + 1, why
+        frames.append(frame)
+        last = frame.sample
+    return FrameBatch(frames, next_preview_k, stream.computed_until < ahead, wall, motion, non_finite, fault)
+
+
+def checked(frame: Frame, last_valid: ReferenceSample) -> tuple[Frame, str]:
+    """``frame`` if finite (a non-finite preview dropped), else ``last_valid`` held, with the fault that says
+    why ("" if none): NaN is never published."""
+    finite_preview = frame.preview is None or all(sample.is_finite() for sample in frame.preview)
+    if frame.sample.is_finite():
+        return replace(frame, preview=frame.preview if finite_preview else None), ""
+    return (Frame(frame.k, frame.tau, last_valid.hold()),
+            f"non-finite sample at stream time {frame.tau:.3f} s: holding the last valid one")
 
 
 @dataclass
@@ -106,66 +200,33 @@ class FrameSchedule:
         """Frames the buffer lacks to the look-ahead."""
         return self.lookahead - (max(self.made_k, self.next_k) - self.next_k)
 
-    def make_frames(self, stream: ReferenceStream, plan: Plan, count: int, horizon: float, points: int,
-                    decimation: int, compute_budget: float | None) -> tuple[list[Frame], int, bool]:
-        """Up to ``count`` frames of ``plan`` as far as the motion is computed, after computing ahead (for
-        at most ``compute_budget`` s of wall time; unbounded with None) far enough for them and for a
-        ``horizon``-second preview of ``points`` points every ``decimation`` frames.  A frame due a preview
-        waits until its horizon is computed, so previews keep their cadence; only with a budget, frames due
-        within 1 / URGENT_PART of the look-ahead from publishing (those just after a command) are made as
-        soon as their own motion is computed, and pass a preview due to the first frame after that window.
-        Returns the frames, the next frame due a preview and whether the motion is still short of the
-        preview horizon."""
-        dt = 1.0 / self.rate
-        tau, next_preview_k = plan.tau, plan.next_preview_k
-        ahead = tau + count * dt + horizon + COMPUTE_MARGIN
-        frames_until = tau + (count - 1) * dt + 2 * TIME_TOLERANCE
+    def request(self, plan: Plan, count: int, horizon: float, points: int, decimation: int,
+                compute_budget: float | None) -> FrameRequest:
+        """What the solver makes next for ``plan`` (see :func:`make_frames`): up to ``count`` frames, with a
+        ``horizon``-second preview of ``points`` points every ``decimation`` frames, after computing ahead for
+        at most ``compute_budget`` s of wall time (None: unbounded); with a budget, frames within 1 /
+        URGENT_PART of the look-ahead from publishing are urgent."""
         urgent_until = self.next_k + self.lookahead // URGENT_PART if compute_budget is not None else plan.k
-        before = stream.computed_until
-        if before < ahead:
-            start = time.perf_counter()
-            stream.compute(frames_until if plan.k < urgent_until and before < frames_until else ahead, compute_budget)
-            if math.isfinite(stream.computed_until):
-                self.compute_wall += time.perf_counter() - start
-                self.compute_motion += stream.computed_until - before
-        last = self.last_valid  # the last sample of the frames made so far (finite)
-        if stream.state == ERROR:  # hold the last sample made, not the stream's (computed further ahead)
-            return [Frame(plan.k + i, tau + i * dt, last.hold()) for i in range(count)], next_preview_k, False
-        times = [tau + i * dt for i in range(count)]
-        times = [t for t in times if t <= stream.computed_until - TIME_TOLERANCE]
-        frames: list[Frame] = []
-        for i, (t, sample) in enumerate(zip(times, stream.samples(times), strict=True)):
-            k, preview = plan.k + i, None
-            if k >= next_preview_k:
-                if stream.computed_until >= t + horizon:
-                    preview = stream.preview(t, horizon, points)
-                    next_preview_k = k + decimation
-                elif k >= urgent_until:
-                    break  # this frame's preview is not computed yet: make it on a later call
-            frames.append(self.checked(Frame(k, t, sample, preview, horizon), last))
-            last = frames[-1].sample
-        return frames, next_preview_k, stream.computed_until < ahead
+        return FrameRequest(plan, count, self.rate, horizon, points, decimation, compute_budget, urgent_until,
+                            self.last_valid)
 
-    def checked(self, frame: Frame, last_valid: ReferenceSample) -> Frame:
-        """``frame`` if finite, else ``last_valid`` held (never publish NaN, :attr:`fault` says why); a
-        non-finite preview is dropped."""
-        finite_preview = frame.preview is None or all(sample.is_finite() for sample in frame.preview)
-        if frame.sample.is_finite():
-            return replace(frame, preview=frame.preview if finite_preview else None)
-        self.fault = f"non-finite sample at stream time {frame.tau:.3f} s: holding the last valid one"
-        self.counters.held_non_finite += 1
-        return Frame(frame.k, frame.tau, last_valid.hold())
-
-    def accept(self, frames: list[Frame], plan: Plan, next_preview_k: int) -> bool:
-        """Append frames made for ``plan`` unless a command replaced the buffer meanwhile (False)."""
+    def accept(self, batch: FrameBatch, plan: Plan) -> bool:
+        """Count the solver's work and faults of ``batch``; append its frames, made for ``plan``, unless a
+        command replaced the buffer meanwhile (False)."""
+        self.compute_wall += batch.compute_wall
+        self.compute_motion += batch.compute_motion
+        self.counters.held_non_finite += batch.non_finite
+        if batch.fault:
+            self.fault = batch.fault
         if plan.generation != self.generation:
             return False
+        frames = batch.frames
         if frames and frames[0].k < self.next_k:  # publishing held meanwhile: continue after it
             frames = [replace(f, k=f.k + self.next_k - frames[0].k) for f in frames]
         if frames:
             self.frames.extend(frames)
             self.made_k, self.made_tau = frames[-1].k + 1, frames[-1].tau + 1.0 / self.rate
-            self.next_preview_k = next_preview_k
+            self.next_preview_k = batch.next_preview_k
             self.last_valid = frames[-1].sample
         return True
 
@@ -194,7 +255,7 @@ class FrameSchedule:
         then the one that stamps the next sample ``now_ns``: the stamps leap forward with the clock and no
         sample is skipped, so the motion goes on without a jump.  A clock that went back keeps the start:
         stamps never go back, and nothing is due until the clock reaches the next stamp again."""
-        if now_ns - (start_ns + self.next_k * NANOSECONDS // self.rate) > self.max_catch_up * NANOSECONDS:
+        if now_ns - stamp_at(start_ns, self.next_k, self.rate) > self.max_catch_up * NANOSECONDS:
             self.counters.stamp_leaps += 1
             return now_ns - self.next_k * NANOSECONDS // self.rate
         return start_ns

@@ -1,0 +1,353 @@
+"""The reference server: a stream computed ahead, published on a schedule and commanded, without ROS.
+
+A :class:`ReferenceServer` owns the publishing schedule (:class:`~.schedule.FrameSchedule`), a worker
+thread that keeps :data:`LOOKAHEAD` seconds of frames ready, and the stream's solver (:mod:`.solver`: in
+a process of its own, or in the caller's thread).  A publisher (the ROS node, a test, a tool) only asks
+it what is due; a ROS node adds the clock, the messages, parameters and services.
+
+Publishing
+    :meth:`ReferenceServer.begin` at a clock reading starts the stamps (sample k stamped
+    ``start + k / rate``, :func:`~.schedule.stamp_at`, never before the last stamp sent), then
+    :meth:`ReferenceServer.due` gives every sample due by a clock reading, stamped, and
+    :meth:`ReferenceServer.next_stamp` when the next one is.  A frame not ready (the solver late) is the
+    last sample held; a clock that jumps forward makes the stamps leap with it (no sample skipped, the
+    motion goes on), one that goes back makes nothing due until it reaches the next stamp again
+    (:meth:`~.schedule.FrameSchedule.anchored`); :meth:`ReferenceServer.status` reports both.
+
+Computing ahead
+    The worker asks the solver for frames in batches of :data:`FRAME_BATCH` (a quarter of the look-ahead
+    if fewer), each after at most :data:`COMPUTE_SLICE` s of computing while publishing (unbounded before),
+    and forgets motion older than :data:`RELEASE_KEEP` s before them.  The publisher never waits for the
+    solver: the schedule's lock is held only to move frames.
+
+Commands
+    :meth:`ReferenceServer.command` applies a stream command (``pause``, ``resume``,
+    ``set_speed_scaling``, ``retarget``) at the frame ``lead`` seconds after the next one to publish, or at
+    the next frame to make while nothing is published; the frames from there on are dropped at once and
+    made again after it, so no frame of the motion before the command is published past that point.
+    Speed changes and pauses are C2 ramps of the stream's time warp, re-targets C2 blends.
+    :meth:`ReferenceServer.restart` (back to the static-equilibrium start: a position jump) is refused
+    while publishing.  A command that raises leaves the stream as it was (its frames are made again, the
+    same).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from ..model.parameters import Task
+from .reference_stream import RUNNING
+from .sample import ReferenceSample
+from .schedule import NANOSECONDS, Frame, FrameSchedule, stamp_at
+from .solver import SolverStoppedError, StreamInfo, StreamStatus
+
+LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
+COMPUTE_SLICE = 0.005  # [s] of wall time the solver computes per request while publishing
+FRAME_BATCH = 20  # frames made per request, and the room the worker waits for to ask again
+RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to make (for commands)
+MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, the stamps leap (re-anchored)
+REST_MARGIN = 1.0  # [s] :meth:`ReferenceServer.come_to_rest` waits beyond the ramp and the lead
+COMMANDS = ("pause", "resume", "set_speed_scaling", "retarget")
+
+
+class Solver(Protocol):
+    """The solver client a server uses (:class:`~.solver.LocalSolver`, :class:`~.solver.SolverProcess`)."""
+
+    info: StreamInfo
+    status: StreamStatus
+
+    def call(self, method: str, *args: Any) -> Any: ...
+
+    def close(self) -> None: ...
+
+
+class CommandRefusedError(RuntimeError):
+    """A command that the server's state does not allow (the message says why)."""
+
+
+@dataclass(frozen=True)
+class Preview:
+    """A preview of ``points`` samples after the frame's own over ``horizon`` seconds, every ``decimation`` frames."""
+
+    horizon: float
+    points: int
+    decimation: int
+
+
+@dataclass(frozen=True)
+class Outgoing:
+    """Sample k to publish, stamped ``stamp_ns``: a frame made by the solver or the last one held."""
+
+    k: int
+    stamp_ns: int
+    frame: Frame
+
+
+@dataclass(frozen=True)
+class Restart:
+    """A restart at sample k: the largest position change (SI units) and the joint it is on."""
+
+    k: int
+    jump: float
+    joint: str
+
+
+@dataclass(frozen=True)
+class ServerStatus:
+    """A snapshot for diagnostics: the stream's status, whether publishing, the last sample sent, the
+    counters, the fault, frames ready, each command's acceptance time and the stamp it takes effect at
+    [s], the last restart, how far the clock is behind the last stamp [s] (it went back), a note on a
+    forward jump of the clock since the last snapshot, the achieved publish rate [Hz] and the solver's
+    real-time factor since the last snapshot."""
+
+    stream: StreamStatus
+    publishing: bool
+    last: ReferenceSample | None
+    counters: dict[str, int]
+    fault: str
+    frames_ready: int
+    commands: dict[str, str] = field(default_factory=dict)
+    clock_behind: float = 0.0
+    clock_note: str = ""
+    achieved_rate: float = 0.0
+    real_time_factor: float = math.inf
+
+
+class ReferenceServer:
+    """See the module documentation."""
+
+    def __init__(self, solver: Solver, rate: int, lead: float, preview: Preview):
+        """Serve the stream of ``solver`` at ``rate`` Hz with commands ``lead`` seconds ahead and ``preview``;
+        starts computing ahead."""
+        self.solver = solver
+        self.info = solver.info
+        self.rate = rate
+        self.preview = preview
+        self.schedule = FrameSchedule(rate, max(2, math.ceil(LOOKAHEAD * rate)), lead, MAX_CATCH_UP,
+                                      self.info.start)
+        self._refill = min(FRAME_BATCH, max(1, self.schedule.lookahead // 4))
+        self._lock = threading.Condition()  # the schedule and the counters here (never held while solving)
+        self._solver_lock = threading.Lock()  # one request at a time, and commands against frame requests
+        self._halt = threading.Event()
+        self._commands_pending = 0
+        self._start_ns: int | None = None
+        self._last_stamp = 0
+        self._clock_behind = 0
+        self._clock_note = ""
+        self._commands: dict[str, str] = {}
+        self._rates_reference = (0, 0.0, 0.0, 0)
+        self._worker = threading.Thread(target=self._work, name="crane_reference_frames", daemon=True)
+        self._worker.start()
+
+    @property
+    def stream(self) -> StreamStatus:
+        """The stream's status after the last request."""
+        return self.solver.status
+
+    @property
+    def commands(self) -> dict[str, str]:
+        """Each command's acceptance time and the stamp it takes effect at [s] (``{name}_accepted_s``,
+        ``{name}_stamp_s``), and the last restart's jump (``restart_jump_rad``, ``restart_jump_joint``)."""
+        return dict(self._commands)
+
+    @property
+    def publishing(self) -> bool:
+        return self._start_ns is not None
+
+    def close(self) -> None:
+        """Stop computing ahead and end the solver."""
+        self._halt.set()
+        with self._lock:
+            self._lock.notify_all()
+        if self._worker is not threading.current_thread():
+            self._worker.join()
+        self.solver.close()
+
+    # -- computing ahead (worker thread) --------------------------------------------------------------
+
+    def _work(self) -> None:
+        """Keep LOOKAHEAD of frames ready ahead of publishing and the motion computed beyond them."""
+        schedule = self.schedule
+        try:
+            while not self._halt.is_set():
+                with self._lock:
+                    while self._commands_pending and not self._halt.is_set():  # frames after a command once
+                        self._lock.wait(timeout=LOOKAHEAD)  # it is applied
+                    plan = schedule.plan()
+                    # in batches, but up to the whole look-ahead before publishing starts
+                    refill = plan.room >= self._refill or not self.publishing
+                    preview = self.preview
+                    request = schedule.request(plan, min(plan.room, FRAME_BATCH) if refill else 0, preview.horizon,
+                                               preview.points, preview.decimation,
+                                               COMPUTE_SLICE if self.publishing else None)  # all before starting
+                with self._solver_lock:
+                    if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
+                        continue
+                    batch = self.solver.call("frames", request, RELEASE_KEEP + LOOKAHEAD)
+                with self._lock:
+                    if schedule.accept(batch, plan) and not batch.frames and not batch.busy:
+                        self._lock.wait(timeout=LOOKAHEAD)
+        except SolverStoppedError:
+            if not self._halt.is_set():
+                schedule.fault = "the solver process ended"
+        except Exception as error:  # publishing goes on (holding) and reports it
+            schedule.fault = f"solver thread stopped: {type(error).__name__}: {error}"
+
+    # -- publishing -----------------------------------------------------------------------------------
+
+    def ready(self) -> bool:
+        """Whether the look-ahead of frames from the next one to publish is made."""
+        with self._lock:
+            return self.schedule.made_k >= self.schedule.next_k + self.schedule.lookahead
+
+    def begin(self, now_ns: int) -> None:
+        """Publish from the next sample on, stamped ``now_ns`` (or one period after the last stamp sent, if
+        later: stamps only increase)."""
+        with self._lock:
+            start = max(now_ns, self._last_stamp + NANOSECONDS // self.rate)
+            self._start_ns = start - self.schedule.next_k * NANOSECONDS // self.rate
+            self._rates_reference = (self.schedule.counters.published, self.schedule.compute_wall,
+                                     self.schedule.compute_motion, now_ns)
+
+    def end(self) -> None:
+        """Stop publishing (commands then need no lead)."""
+        with self._lock:
+            self._start_ns = None
+
+    def due(self, now_ns: int) -> list[Outgoing]:
+        """Every sample due by the clock reading ``now_ns`` [ns] (normally one), stamped, oldest first."""
+        schedule = self.schedule
+        with self._lock:
+            if self._start_ns is None:
+                return []
+            start = schedule.anchored(now_ns, self._start_ns)
+            if start != self._start_ns:
+                self._clock_note = (f"ROS time jumped {(start - self._start_ns) / NANOSECONDS:.3f} s ahead of the "
+                                    "schedule: the stamps leap with it, no sample skipped")
+                self._start_ns = start
+            behind = self._last_stamp - now_ns
+            self._clock_behind = behind if behind > NANOSECONDS // self.rate else 0
+            batch = schedule.due(now_ns, start)
+            if schedule.room >= self._refill:
+                self._lock.notify()
+            out = []
+            for k, frame in batch:
+                frame = schedule.outgoing(k, frame)
+                if frame is not None:
+                    self._last_stamp = stamp_at(start, k, self.rate)
+                    out.append(Outgoing(k, self._last_stamp, frame))
+            return out
+
+    def next_stamp(self) -> int | None:
+        """Stamp [ns] of the next sample to publish (None while not publishing)."""
+        with self._lock:
+            return None if self._start_ns is None else stamp_at(self._start_ns, self.schedule.next_k, self.rate)
+
+    def last_sample(self) -> tuple[ReferenceSample | None, int]:
+        """The last sample published and its stamp [ns]."""
+        with self._lock:
+            return self.schedule.last, self._last_stamp
+
+    def stamp_of(self, k: int) -> float:
+        """Stamp [s] of sample k (relative to the start while not publishing)."""
+        return stamp_at(self._start_ns or 0, k, self.rate) / NANOSECONDS
+
+    # -- commands -------------------------------------------------------------------------------------
+
+    def _at_command_point(self, name: str, accepted_ns: int, action) -> tuple[int, float]:
+        """Run ``action(tau)`` at the command point (frame k at stream time tau: ``lead`` after the next sample
+        to publish, or the next frame to make while not publishing); the frames from k on are dropped at
+        once and made again after it.  Records the command's acceptance and effect.  Returns k."""
+        with self._lock:
+            k, tau = self.schedule.command_point(lead=self.publishing)
+            self.schedule.after_command(k, tau)
+            self._commands_pending += 1
+        try:
+            with self._solver_lock:
+                action(tau)
+        finally:
+            with self._lock:
+                self._commands_pending -= 1
+                self._lock.notify_all()  # the worker makes the frames from k now, not at the next publish
+        self._commands[f"{name}_stamp_s"] = f"{self.stamp_of(k):.6f}"
+        self._commands[f"{name}_accepted_s"] = f"{accepted_ns / NANOSECONDS:.6f}"
+        return k, tau
+
+    def command(self, name: str, *args: Any, accepted_ns: int = 0) -> int:
+        """Apply the stream command ``name`` (``pause``, ``resume``, ``set_speed_scaling`` (rate),
+        ``retarget`` (targets, checked with :meth:`check_targets`)) at the command point; ``accepted_ns``:
+        when it was accepted (clock reading, for the status).  Returns the sample it takes effect at.
+        Raises what the stream raises (the stream unchanged)."""
+        if name not in COMMANDS:
+            raise ValueError(f"command {name!r}: not one of {', '.join(COMMANDS)}")
+        label = "speed_scaling" if name == "set_speed_scaling" else name
+        return self._at_command_point(label, accepted_ns, lambda tau: self.solver.call(name, tau, *args))[0]
+
+    def check_targets(self, targets: Task) -> None:
+        """Raise :class:`~.targets.UnreachableTargetError` unless ``targets`` can be streamed from here."""
+        with self._solver_lock:
+            self.solver.call("check_targets", targets)
+
+    def set_blend_time(self, seconds: float) -> None:
+        with self._solver_lock:
+            self.solver.call("set_blend_time", seconds)
+
+    def set_lead(self, seconds: float) -> None:
+        with self._lock:
+            self.schedule.lead = seconds
+
+    def reach(self, radius: float, heights: tuple[float, ...]) -> tuple[float, float]:
+        """The crane's reach [m] at heights above E's static one (:meth:`~.solver.StreamSolver.reach`)."""
+        with self._solver_lock:
+            return self.solver.call("reach", radius, heights)
+
+    def restart(self, accepted_ns: int = 0) -> Restart:
+        """Back to the static-equilibrium start of the current targets, also out of ERROR; only while not
+        publishing (:class:`CommandRefusedError`: it is a position jump).  Solver failures propagate with the
+        stream unchanged."""
+        if self.publishing:
+            raise CommandRefusedError("a restart makes the reference jump to the start: stop publishing first")
+        result: list[Any] = []
+        k, _ = self._at_command_point("restart", accepted_ns,
+                                      lambda tau: result.append(self.solver.call("restart", tau)))
+        before, after = result[0]
+        jump = abs(after - before)
+        self.schedule.fault = ""
+        restart = Restart(k, float(jump.max()), self.info.joint_names[int(jump.argmax())])
+        self._commands.update(restart_jump_rad=f"{restart.jump:.6g}", restart_jump_joint=restart.joint)
+        return restart
+
+    def come_to_rest(self, accepted_ns: int = 0, stop: threading.Event | None = None) -> None:
+        """Pause a moving stream (a speed ramp to rest) and wait, while publishing, until its first sample at
+        rest is published (at most the ramp, the lead and REST_MARGIN; sooner if ``stop`` is set)."""
+        stream = self.stream
+        if stream.state != RUNNING or stream.rate <= 0.0:
+            return
+        k, tau = self._at_command_point("pause", accepted_ns, lambda tau: self.solver.call("pause", tau))
+        stream = self.stream
+        rest_k = k + math.ceil((stream.settled_at - tau) * self.rate - 1e-9) + 1
+        deadline = time.monotonic() + stream.ramp_time + self.schedule.lead + REST_MARGIN
+        stop = stop or threading.Event()
+        while self.publishing and self.schedule.next_k <= rest_k and time.monotonic() < deadline:
+            if stop.wait(1.0 / self.rate):
+                return
+
+    # -- status ---------------------------------------------------------------------------------------
+
+    def status(self, now_ns: int) -> ServerStatus:
+        """The server's status at the clock reading ``now_ns``; rates since the previous call."""
+        schedule = self.schedule
+        with self._lock:
+            published, wall, motion = schedule.counters.published, schedule.compute_wall, schedule.compute_motion
+            last_published, last_wall, last_motion, last_now = self._rates_reference
+            self._rates_reference = (published, wall, motion, now_ns)
+            note, self._clock_note = self._clock_note, ""
+            return ServerStatus(
+                self.stream, self.publishing, schedule.last, schedule.counters.as_dict(), schedule.fault,
+                len(schedule.frames), dict(self._commands), self._clock_behind / NANOSECONDS, note,
+                (published - last_published) * NANOSECONDS / (now_ns - last_now) if now_ns > last_now else 0.0,
+                (motion - last_motion) / (wall - last_wall) if wall > last_wall else math.inf)

@@ -1,0 +1,295 @@
+"""The stream's solver side, in the caller's thread or in a process of its own.
+
+:class:`StreamSolver` owns a :class:`~.reference_stream.ReferenceStream` and answers the requests of a
+reference server (:mod:`.server`): frames to make (:func:`~.schedule.make_frames`), commands applied at a
+stream time, target checks, the crane's reach.  Two clients carry the requests to it, with one interface
+(:meth:`call` returns the result and keeps the stream's :class:`StreamStatus` of the reply):
+
+* :class:`LocalSolver` calls it in the caller's thread (tests, tools);
+* :class:`SolverProcess` runs it in a child process (``python -m crane_reference.stream.solver``: a fresh
+  interpreter that imports no ROS and not the caller's main module), so the integrator's Python parts never
+  wait for, or delay, a publisher's thread behind Python's GIL.  Requests and replies are pickled over two
+  pipes; an exception raised by the solver is raised again in the caller.  The child runs in a session of
+  its own and ignores SIGINT (a Ctrl-C is the caller's to handle), and exits when its request pipe closes,
+  also if the caller dies.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import subprocess
+import sys
+import threading
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..model.drive import column_drive
+from ..model.parameters import CraneParameters, Task
+from ..model.urdf import model_to_urdf
+from .reference_stream import ReferenceStream
+from .sample import ReferenceSample
+from .schedule import FrameBatch, FrameRequest, make_frames
+from .targets import reach
+from .warmup import warm_up
+
+POLL_PERIOD = 0.1  # [s] between checks of the caller's stop flag while it waits for the solver process
+
+
+class SolverStoppedError(RuntimeError):
+    """The caller stopped waiting for the solver (shutting down), or the solver process is gone."""
+
+
+@dataclass(frozen=True)
+class StreamSpec:
+    """Everything that makes a :class:`~.reference_stream.ReferenceStream` (picklable): the crane's
+    configuration, model variant, integrator step [s], blend time [s], targets, the column drive's torque
+    [N m] and duration [s] (None: the configuration's), speed scaling and its ramp time [s]; ``warm_up``:
+    make every kernel ready first (and say how)."""
+
+    config: CraneParameters
+    model: str
+    step: float
+    blend_time: float
+    targets: Task
+    drive_torque: float | None = None
+    drive_duration: float | None = None
+    speed_scaling: float = 1.0
+    ramp_time: float = 1.0
+    warm_up: bool = True
+
+
+@dataclass(frozen=True)
+class StreamInfo:
+    """What a server needs to know of the stream once: joint names, the URDF of the model, the sample at
+    the start, E's static height [m], the singular-value margin of target checks, and how the kernels were
+    made ready ("" without warm-up)."""
+
+    joint_names: tuple[str, ...]
+    urdf: str
+    start: ReferenceSample
+    z_static: float
+    singular_value_margin: float
+    kernels: str
+
+
+@dataclass(frozen=True)
+class StreamStatus:
+    """The stream's state after a request: RUNNING / PAUSED / ERROR, targets, the speed scaling it is at or
+    moving to, the last error, the ramp time [s], the publish time [s] it settles at, the blend time [s]."""
+
+    state: str
+    targets: Task
+    rate: float
+    last_error: str
+    ramp_time: float
+    settled_at: float
+    blend_time: float
+
+
+class StreamSolver:
+    """The stream and the requests it answers (see the module)."""
+
+    def __init__(self, spec: StreamSpec):
+        """Build the stream of ``spec`` (after making the kernels ready if ``spec.warm_up``) and check its
+        targets (:class:`~.targets.UnreachableTargetError` or a solver failure if there is no start)."""
+        self.kernels = warm_up((spec.model,)).describe() if spec.warm_up else ""
+        config = spec.config
+        self.stream = ReferenceStream(config, spec.model, spec.step, spec.blend_time, spec.targets,
+                                      column_drive(config, spec.drive_torque, spec.drive_duration),
+                                      speed_scaling=spec.speed_scaling, ramp_time=spec.ramp_time)
+        self.stream.check_targets(spec.targets)
+
+    def info(self) -> StreamInfo:
+        stream = self.stream
+        return StreamInfo(tuple(stream.joint_names), model_to_urdf(stream.model), stream.sample(0.0),
+                          stream.scenario.z_static, stream.singular_value_margin, self.kernels)
+
+    def status(self) -> StreamStatus:
+        stream = self.stream
+        return StreamStatus(stream.state, stream.targets, stream.rate, stream.last_error, stream.ramp_time,
+                            stream.settled_at(), stream.blend_time)
+
+    def frames(self, request: FrameRequest, keep: float) -> FrameBatch:
+        """The frames of ``request`` (:func:`~.schedule.make_frames`); then the motion older than ``keep``
+        seconds before the request's first frame is forgotten."""
+        batch = make_frames(self.stream, request)
+        self.stream.release(request.plan.tau, keep)
+        return batch
+
+    def check_targets(self, targets: Task) -> None:
+        self.stream.check_targets(targets)
+
+    def reach(self, radius: float, heights: tuple[float, ...]) -> tuple[float, float]:
+        """The crane's reach at E's heights ``heights`` [m above its static height] from ``radius``
+        (:func:`~.targets.reach`)."""
+        stream = self.stream
+        return reach(stream.scenario, radius, tuple(stream.scenario.z_static + z for z in heights),
+                     stream.singular_value_margin)
+
+    def set_blend_time(self, seconds: float) -> None:
+        self.stream.set_blend_time(seconds)
+
+    def pause(self, tau: float) -> None:
+        self.stream.pause(tau)
+
+    def resume(self, tau: float) -> None:
+        self.stream.resume(tau)
+
+    def set_speed_scaling(self, tau: float, rate: float) -> None:
+        self.stream.set_speed_scaling(tau, rate)
+
+    def retarget(self, tau: float, targets: Task) -> None:
+        """Re-target at tau to targets already checked (:meth:`check_targets`)."""
+        self.stream.retarget(tau, targets, checked=True)
+
+    def restart(self, tau: float) -> tuple[np.ndarray, np.ndarray]:
+        """Back to the static-equilibrium start at tau; returns q at tau before, and q at the start."""
+        stream = self.stream
+        stream.compute(tau)
+        before = stream.sample(tau).q
+        stream.restart(tau)
+        return before, stream.start_configuration()
+
+
+class LocalSolver:
+    """A :class:`StreamSolver` called in the caller's thread."""
+
+    def __init__(self, spec: StreamSpec):
+        self.solver = StreamSolver(spec)
+        self.info = self.solver.info()
+        self.status = self.solver.status()
+
+    def call(self, method: str, *args: Any) -> Any:
+        """``method(*args)`` of the solver; :attr:`status` is the stream's after it (also if it raised)."""
+        try:
+            return getattr(self.solver, method)(*args)
+        finally:
+            self.status = self.solver.status()
+
+    def close(self) -> None:
+        pass
+
+
+def _serve(requests: Connection, replies: Connection) -> None:
+    """The solver process: read the :class:`StreamSpec`, build the solver, then answer (method, args)
+    requests until the pipe closes or None comes.  Replies are (ok, result or exception, status)."""
+    try:
+        spec = requests.recv()
+        solver = StreamSolver(spec)
+    except (EOFError, OSError):
+        return
+    except Exception as error:  # reported to the caller, which raises it
+        replies.send((False, _portable(error), None))
+        return
+    replies.send((True, solver.info(), solver.status()))
+    while True:
+        try:
+            request = requests.recv()
+        except (EOFError, OSError):
+            return
+        if request is None:
+            return
+        method, args = request
+        try:
+            reply = (True, getattr(solver, method)(*args))
+        except Exception as error:  # reported to the caller, which raises it
+            reply = (False, _portable(error))
+        replies.send((*reply, solver.status()))
+
+
+def _portable(error: Exception) -> Exception:
+    """``error`` if it pickles, else a RuntimeError with its type, message and traceback."""
+    try:
+        pickle.loads(pickle.dumps(error))
+        return error
+    except Exception:  # any pickling failure
+        return RuntimeError(f"{type(error).__name__}: {error}\n{traceback.format_exc()}")
+
+
+class SolverProcess:
+    """A :class:`StreamSolver` in a child process (see the module)."""
+
+    def __init__(self, spec: StreamSpec, stopped: Callable[[], bool] = lambda: False):
+        """Start the process and wait until its stream is built (kernels made ready first: a minute or two
+        with an empty cache).  Raises what building the stream raised, or :class:`SolverStoppedError` if
+        ``stopped()`` turns true meanwhile (checked every POLL_PERIOD) or the process dies."""
+        request_read, request_write = os.pipe()
+        reply_read, reply_write = os.pipe()
+        package_root = str(Path(__file__).resolve().parents[2])
+        path = os.pathsep.join(p for p in (package_root, os.environ.get("PYTHONPATH", "")) if p)
+        self._process = subprocess.Popen(
+            [sys.executable, "-m", __name__, str(request_read), str(reply_write)],
+            pass_fds=(request_read, reply_write), env={**os.environ, "PYTHONPATH": path}, start_new_session=True)
+        os.close(request_read)
+        os.close(reply_write)
+        self._requests = Connection(request_write, readable=False)
+        self._replies = Connection(reply_read, writable=False)
+        self._stopped = stopped
+        self._lock = threading.Lock()
+        try:
+            self._requests.send(spec)
+            self.info = self._reply()
+        except BaseException:
+            self.close()
+            raise
+
+    @property
+    def pid(self) -> int:
+        return self._process.pid
+
+    def _reply(self) -> Any:
+        try:
+            while not self._replies.poll(POLL_PERIOD):
+                if self._stopped():
+                    raise SolverStoppedError("stopped while waiting for the solver process")
+                if self._process.poll() is not None:
+                    raise SolverStoppedError(f"the solver process ended (exit code {self._process.returncode})")
+            ok, result, status = self._replies.recv()
+        except (EOFError, OSError, ValueError) as error:  # closed meanwhile (ValueError: a closed handle)
+            raise SolverStoppedError(f"the solver process ended: {error}") from error
+        if status is not None:
+            self.status = status
+        if not ok:
+            raise result
+        return result
+
+    def call(self, method: str, *args: Any) -> Any:
+        """``method(*args)`` of the solver in the process; :attr:`status` is the stream's after it."""
+        with self._lock:
+            try:
+                self._requests.send((method, args))
+            except (OSError, ValueError) as error:
+                raise SolverStoppedError(f"the solver process ended: {error}") from error
+            return self._reply()
+
+    def close(self, timeout: float = 1.0) -> None:
+        """End the process: ask it, then wait up to ``timeout`` s, then kill it."""
+        if self._lock.acquire(timeout=timeout):
+            try:
+                self._requests.send(None)
+            except (OSError, ValueError):
+                pass
+            finally:
+                self._lock.release()
+        self._requests.close()
+        try:
+            self._process.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self._process.kill()
+            self._process.wait()
+        self._replies.close()
+
+
+if __name__ == "__main__":
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the caller decides when the solver ends (see the module)
+    from crane_reference.stream import solver  # the classes under their importable names (pickled replies)
+
+    solver._serve(Connection(int(sys.argv[1]), writable=False), Connection(int(sys.argv[2]), readable=False))

@@ -1,0 +1,147 @@
+"""The reference server (:mod:`crane_reference.stream.server`) and its solver clients without ROS: a
+clock of plain integers drives it; what it serves is compared with an independent
+:class:`ReferenceStream` sampled at the same stream times."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from crane_reference.model.config import load_config
+from crane_reference.model.parameters import Task
+from crane_reference.stream.reference_stream import PAUSED, ReferenceStream
+from crane_reference.stream.server import CommandRefusedError, Preview, ReferenceServer
+from crane_reference.stream.solver import LocalSolver, SolverProcess, StreamSpec
+from crane_reference.stream.targets import UnreachableTargetError
+
+RATE = 100  # [Hz]
+LEAD = 0.1  # [s]
+NS = 10**9
+PERIOD = NS // RATE
+
+
+def spec(**changes) -> StreamSpec:
+    config = load_config()
+    return StreamSpec(**{"config": config, "model": "rigid", "step": 1e-3, "blend_time": 0.5, "targets": config.task,
+                         "warm_up": False, "ramp_time": 0.3, **changes})
+
+
+def wait_ready(server: ReferenceServer, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not server.ready():
+        assert time.monotonic() < deadline, "the server made no look-ahead of frames"
+        time.sleep(0.01)
+
+
+@pytest.fixture
+def server() -> Iterator[ReferenceServer]:
+    served = ReferenceServer(LocalSolver(spec()), RATE, LEAD, Preview(0.2, 4, 10))
+    try:
+        wait_ready(served)
+        yield served
+    finally:
+        served.close()
+
+
+def publish(server: ReferenceServer, start_ns: int, seconds: float) -> list:
+    """Everything due from start_ns over ``seconds`` on a clock stepped by one period, each step once the
+    frame of the next sample is made (as a publisher on a machine fast enough for the solver sees it)."""
+    out = []
+    for i in range(round(seconds * RATE)):
+        deadline = time.monotonic() + 30.0
+        while server.schedule.made_k <= server.schedule.next_k:
+            assert time.monotonic() < deadline, "no frame for the next sample"
+            time.sleep(0.001)
+        out += server.due(start_ns + i * PERIOD)
+    return out
+
+
+def test_served_samples_are_the_stream_at_consecutive_stamps(server: ReferenceServer) -> None:
+    start = 5 * NS
+    server.begin(start)
+    out = publish(server, start, 1.5)
+    assert [o.k for o in out] == list(range(len(out))) and len(out) == 150
+    assert [o.stamp_ns for o in out] == [start + k * PERIOD for k in range(150)]
+    truth = ReferenceStream(load_config(), "rigid", blend_time=0.5, ramp_time=0.3)
+    truth.compute(1.5)
+    np.testing.assert_array_equal([o.frame.sample.q for o in out], [truth.sample(k / RATE).q for k in range(150)])
+    previews = [o.k for o in out if o.frame.preview is not None]  # the look-ahead made before publishing has all;
+    assert previews[:10] == list(range(0, 100, 10))  # urgent frames later (this publisher drains the buffer)
+    assert all(k % 10 == 0 for k in previews)  # may pass theirs, the cadence stays
+    status = server.status(start + 150 * PERIOD)
+    assert status.counters["held_late"] == 0 and status.achieved_rate == pytest.approx(RATE, rel=0.02)
+    assert server.next_stamp() == start + 150 * PERIOD
+
+
+def test_a_command_takes_effect_lead_after_the_next_sample(server: ReferenceServer) -> None:
+    start = NS
+    server.begin(start)
+    before = publish(server, start, 0.5)
+    targets = Task(3.2, 2.0, 0.2, 5.0)
+    server.check_targets(targets)
+    k = server.command("retarget", targets, accepted_ns=start + 49 * PERIOD)
+    assert k == len(before) + round(LEAD * RATE)
+    assert server.commands["retarget_stamp_s"] == f"{(start + k * PERIOD) / NS:.6f}"
+    after = publish(server, start + len(before) * PERIOD, 1.0)
+    truth = ReferenceStream(load_config(), "rigid", blend_time=0.5, ramp_time=0.3)
+    truth.retarget(k / RATE, targets)
+    truth.compute(1.5)
+    np.testing.assert_array_equal([o.frame.sample.q for o in before + after],
+                                  [truth.sample(i / RATE).q for i in range(len(before + after))])
+    assert server.stream.targets == targets
+
+
+def test_restart_only_while_not_publishing_and_its_jump(server: ReferenceServer) -> None:
+    server.begin(NS)
+    out = publish(server, NS, 1.5)
+    with pytest.raises(CommandRefusedError, match="stop publishing"):
+        server.restart()
+    server.end()
+    restart = server.restart()
+    assert restart.k == len(out)  # while not publishing: at the next sample, the frames made ahead dropped
+    truth = ReferenceStream(load_config(), "rigid", blend_time=0.5, ramp_time=0.3)
+    start = truth.start_configuration()
+    truth.compute(restart.k / RATE)
+    jump = np.abs(truth.sample(restart.k / RATE).q - start)
+    assert restart.jump == pytest.approx(jump.max(), rel=1e-9)
+    assert restart.joint == truth.joint_names[int(jump.argmax())]
+    server.begin(NS + len(out) * PERIOD)
+    resumed = publish(server, NS + len(out) * PERIOD, 0.2)
+    np.testing.assert_allclose(resumed[0].frame.sample.q, start, atol=1e-12)
+    assert resumed[0].stamp_ns > out[-1].stamp_ns
+
+
+def test_coming_to_rest_pauses_along_the_ramp(server: ReferenceServer) -> None:
+    server.begin(NS)
+    publish(server, NS, 0.3)
+    server.end()  # not publishing: the pause is applied at the next frame to make, and nothing to wait for
+    server.come_to_rest()
+    assert server.stream.state == PAUSED and server.stream.rate == 0.0
+
+
+def test_the_solver_process_serves_the_same_frames_and_raises_its_errors() -> None:
+    """Frames from the child process equal those made here, bit for bit; an unreachable target raises
+    UnreachableTargetError through the pipe and leaves the stream as it was; closing ends the process."""
+    here = ReferenceServer(LocalSolver(spec()), RATE, LEAD, Preview(0.2, 4, 10))
+    process = SolverProcess(spec())
+    there = ReferenceServer(process, RATE, LEAD, Preview(0.2, 4, 10))
+    try:
+        with pytest.raises(UnreachableTargetError):
+            there.check_targets(Task(30.0, 2.0, 0.2, 5.0))
+        for served in (here, there):
+            served.begin(NS)
+        a, b = publish(here, NS, 1.2), publish(there, NS, 1.2)
+        assert [o.k for o in a] == [o.k for o in b]
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x.frame.sample.q, y.frame.sample.q)
+            np.testing.assert_array_equal(x.frame.sample.effort, y.frame.sample.effort)
+        assert there.stream.targets == load_config().task
+    finally:
+        here.close()
+        there.close()
+    with pytest.raises(ProcessLookupError):
+        os.kill(process.pid, 0)  # ended and reaped
