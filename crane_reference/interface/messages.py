@@ -152,22 +152,35 @@ def _pose(types: MessageTypes, position: Sequence[float], quaternion: Sequence[f
 # --- published messages ---------------------------------------------------------------------------
 
 
-def joint_state(types: MessageTypes, stamp_ns: int, joint_names: Sequence[str], sample: ReferenceSample) -> Any:
+def joint_state(types: MessageTypes, stamp_ns: int, joint_names: Sequence[str], sample: ReferenceSample,
+                message: Any = None) -> Any:
     """sensor_msgs/JointState: positions, velocities and the generalized efforts of constraints and
-    drive, one entry per joint name (header.frame_id empty, as for every JointState)."""
-    return types.JointState(
-        header=header(types, stamp_ns, ""),
-        name=list(joint_names),
-        position=types.float64_array(sample.q),
-        velocity=types.float64_array(sample.qd),
-        effort=types.float64_array(sample.effort),
-    )
+    drive, one entry per joint name (header.frame_id empty, as for every JointState).  ``message``: a
+    JointState of these joint names made here before, filled again instead of a new one (a publisher
+    serializes a message as it publishes it, so one object serves every sample)."""
+    if message is None:
+        empty = types.float64_array([])
+        message = types.JointState(header=header(types, stamp_ns, ""), name=list(joint_names), position=empty,
+                                   velocity=empty, effort=empty)
+    message.header.stamp = time_msg(types, stamp_ns)
+    message.position = types.float64_array(sample.q)
+    message.velocity = types.float64_array(sample.qd)
+    message.effort = types.float64_array(sample.effort)
+    return message
 
 
-def end_effector_pose(types: MessageTypes, stamp_ns: int, frame_id: str, sample: ReferenceSample) -> Any:
-    """geometry_msgs/PoseStamped of E (position, and orientation of the last link) in ``frame_id``."""
-    return types.PoseStamped(header=header(types, stamp_ns, frame_id),
-                             pose=_pose(types, sample.ee_position, sample.ee_quaternion))
+def end_effector_pose(types: MessageTypes, stamp_ns: int, frame_id: str, sample: ReferenceSample,
+                      message: Any = None) -> Any:
+    """geometry_msgs/PoseStamped of E (position, and orientation of the last link) in ``frame_id``;
+    ``message``: one made here before for ``frame_id``, filled again (see :func:`joint_state`)."""
+    if message is None:
+        message = types.PoseStamped(header=header(types, stamp_ns, frame_id),
+                                    pose=_pose(types, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)))
+    message.header.stamp = time_msg(types, stamp_ns)
+    position, orientation = message.pose.position, message.pose.orientation
+    position.x, position.y, position.z = (float(v) for v in sample.ee_position)
+    orientation.x, orientation.y, orientation.z, orientation.w = (float(v) for v in sample.ee_quaternion)
+    return message
 
 
 def reference_preview(types: MessageTypes, stamp_ns: int, frame_id: str, joint_names: Sequence[str],

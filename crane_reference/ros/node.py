@@ -195,6 +195,7 @@ class CraneReferenceNode(LifecycleNode):
         self.get_logger().info(f"solver {server.info.kernels}")
         self._offer_reach(server)
         self._late_reported = 0
+        self._joint_message = self._pose_message = None  # filled again for every sample (messages.joint_state)
         self._trail: deque[np.ndarray] = deque(maxlen=TRAIL_POINTS)
         depth = messages.PUBLISHER_DEPTH
         self._publishers_managed = [
@@ -477,8 +478,12 @@ class CraneReferenceNode(LifecycleNode):
         frame, stamp = outgoing.frame, outgoing.stamp_ns
         sample = frame.sample
         types, frame_id = self._types, self._values["frame_id"]
-        self._joint_pub.publish(messages.joint_state(types, stamp, self._joint_names, sample))
-        self._pose_pub.publish(messages.end_effector_pose(types, stamp, frame_id, sample))
+        if self._pose_message is not None and self._pose_message.header.frame_id != frame_id:
+            self._pose_message = None  # frame_id changed: a new message
+        self._joint_message = messages.joint_state(types, stamp, self._joint_names, sample, self._joint_message)
+        self._pose_message = messages.end_effector_pose(types, stamp, frame_id, sample, self._pose_message)
+        self._joint_pub.publish(self._joint_message)
+        self._pose_pub.publish(self._pose_message)
         if frame.preview is not None:
             horizon_ns, count = round(frame.horizon * NANOSECONDS), len(frame.preview)
             offsets = [i * horizon_ns // count for i in range(count + 1)]
