@@ -11,7 +11,7 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
 * missed samples: stamps absent from the received sequence, plus the samples the node itself held
   because it ran late and the times its stamps leapt (from /diagnostics: held_late, stamp_leaps);
 * CPU share of the node (user + system time of its process and of the solver's process / wall time,
-  100 % = one core) and the solver's real-time factor it reports;
+  100 % = one core; also each process alone) and the solver's real-time factor it reports;
 * latency from a parameter change (``ellipse.a``, through the parameter service) to the reception of
   the first sample that uses it (the node reports that sample's stamp in /diagnostics as
   ``retarget_stamp_s``), over ``--changes`` changes, and from the node's acceptance of the change to that
@@ -92,14 +92,14 @@ def descendants(pid: int) -> list[int]:
     return found
 
 
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU time [s] of a process and its descendants (all threads of each)."""
-    total = 0.0
+def cpu_seconds(pid: int) -> tuple[float, float]:
+    """User + system CPU time [s] of a process (all its threads) and of its descendants (the solver's)."""
+    times = []
     for process in descendants(pid):
         with open(f"/proc/{process}/stat", encoding="ascii") as stat:
             fields = stat.read().rsplit(")", 1)[1].split()
-        total += (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
-    return total
+        times.append((int(fields[11]) + int(fields[12])) / CLOCK_TICKS)
+    return times[0], sum(times[1:])
 
 
 def spin_for(executor: SingleThreadedExecutor, seconds: float) -> None:
@@ -235,7 +235,7 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         first, cpu0, t0 = len(recorder.stamps), cpu_seconds(node.pid), time.monotonic()
         before = {k: float(recorder.diagnostics.get(k, 0)) for k in ("held_late", "stamp_leaps")}
         spin_for(executor, duration)
-        wall, cpu = time.monotonic() - t0, cpu_seconds(node.pid) - cpu0
+        wall, cpu = time.monotonic() - t0, np.subtract(cpu_seconds(node.pid), cpu0)
         last = len(recorder.stamps)
         spin_until(executor, lambda: float(recorder.diagnostics.get("published", 0)) > 0, 2.0)
         late = {k: float(recorder.diagnostics.get(k, 0)) - before[k] for k in before}
@@ -263,7 +263,8 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         "lag_mean_ms": 1e3 * lag.mean(), "lag_p99_ms": 1e3 * np.percentile(lag, 99),
         "missed": int(expected - len(stamps)), "held_late": int(late["held_late"]),
         "stamp_leaps": int(late["stamp_leaps"]),
-        "cpu_percent": 100.0 * cpu / wall, "real_time_factor": float(factor),
+        "cpu_percent": 100.0 * cpu.sum() / wall, "cpu_node_process_percent": 100.0 * cpu[0] / wall,
+        "cpu_solver_process_percent": 100.0 * cpu[1] / wall, "real_time_factor": float(factor),
         "latency_median_ms": 1e3 * float(np.median(latencies)), "latency_max_ms": 1e3 * float(np.max(latencies)),
         "effect_after_acceptance_max_ms": 1e3 * float(np.max(after_acceptance)),
         "held_late_commands": int(held_in_commands),
