@@ -24,7 +24,9 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
 * with ``--flood N``: N random parameter requests at 50 Hz through the parameter services (valid and
   invalid values of ellipse.*, z.*, speed_scaling and unknown names; single and atomic requests), then
   stamp gaps longer than two periods, non-finite positions or velocities, requests without a response
-  and whether a valid change still takes effect afterwards.
+  and whether a valid change still takes effect afterwards;
+* first, in this process and alone (``--message-costs``): what the node's publisher spends per sample to
+  fill and publish ~/joint_states and ~/end_effector_pose, and to build ~/markers with a full trail.
 
 Run: ``.venv/bin/python benchmarks/bench_node.py [--duration 30] [--rates 100 500 1000] [--model flexible]
 [--flood 300] [-p command_lead:=0.05 ...]``.
@@ -44,6 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -51,6 +54,12 @@ from rclpy.parameter_client import AsyncParameterClient
 from report import print_table
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
+
+from crane_reference.interface import messages
+from crane_reference.model.config import load_config
+from crane_reference.ros.message_types import rclpy_types
+from crane_reference.ros.node import MARKER_RATE, TRAIL_POINTS
+from crane_reference.stream.reference_stream import ReferenceStream
 
 NS = 10**9
 NODE = "crane_reference"
@@ -272,6 +281,43 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
     }
 
 
+def message_costs(model: str) -> None:
+    """Print the publisher's per-sample costs (messages filled again, as the node does) and the markers'."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = Node("bench_messages", context=context)
+    try:
+        types, stream = rclpy_types(), ReferenceStream(load_config(), model)
+        stream.compute(0.1)
+        sample, names = stream.sample(0.05), list(stream.joint_names)
+        joints = node.create_publisher(JointState, "bench_joint_states", 10)
+        poses = node.create_publisher(PoseStamped, "bench_pose", 10)
+        kept = {"joint": None, "pose": None}
+
+        def one_sample(k: int) -> None:
+            kept["joint"] = messages.joint_state(types, k, names, sample, kept["joint"])
+            kept["pose"] = messages.end_effector_pose(types, k, "world", sample, kept["pose"])
+            joints.publish(kept["joint"])
+            poses.publish(kept["pose"])
+
+        count = 5000
+        start = time.perf_counter()
+        for k in range(count):
+            one_sample(k)
+        per_sample = (time.perf_counter() - start) / count
+        trail = np.tile(sample.ee_position, (TRAIL_POINTS, 1))
+        start = time.perf_counter()
+        for _ in range(50):
+            messages.markers(types, 0, "world", (3.0, 2.0, 2.3), trail)
+        per_markers = (time.perf_counter() - start) / 50
+        print(f"[messages] joint_states and pose filled and published: {per_sample * 1e6:.1f} us per sample "
+              f"(alone, no subscriber); ~/markers built with {TRAIL_POINTS} trail points: {per_markers * 1e3:.2f} ms "
+              f"(at {MARKER_RATE:g} Hz)")
+    finally:
+        node.destroy_node()
+        context.try_shutdown()
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--duration", type=float, default=30.0, help="measured seconds per rate (default 30)")
@@ -279,10 +325,13 @@ def main() -> int:
     parser.add_argument("--model", choices=("flexible", "rigid"), default="flexible")
     parser.add_argument("--changes", type=int, default=5, help="parameter changes for the latency (default 5)")
     parser.add_argument("--domain-id", type=int, default=os.getpid() % 100 + 1)
+    parser.add_argument("--message-costs", action="store_true", help="first print the publisher's message costs")
     parser.add_argument("--flood", type=int, default=0, metavar="N", help="N random parameter requests at 50 Hz")
     parser.add_argument("-p", "--parameter", action="append", default=[], metavar="NAME:=VALUE",
                         help="a further node parameter, e.g. -p command_lead:=0.05 (repeatable)")
     args = parser.parse_args()
+    if args.message_costs:
+        message_costs(args.model)
     rows = [run(rate, args.duration, args.model, args.changes, args.domain_id, args.flood, args.parameter)
             for rate in args.rates]
     print_table(f"crane_reference node, {args.model} model, {args.duration:g} s per rate, {os.cpu_count()} CPUs", rows)

@@ -9,7 +9,11 @@ For the flexible crane (h = 1 ms), in one process:
   FRAME_BATCH), at the computed steps (a 1 kHz grid) and between them (interpolated);
 * a re-target: the reachability check (``check_targets``, run in the node's parameter callback before
   the change is accepted), ``retarget`` itself (rewind and blend), then the motion of 20 samples after it;
-* E's reach from the column's axis (the node's ranges of ellipse.a and ellipse.b, found at configure).
+* E's reach from the column's axis (the node's ranges of ellipse.a and ellipse.b, found at configure);
+* the solver side of the node's reference server (``StreamSolver.frames`` asked as the server asks it:
+  batches of 20 frames, a 5 ms compute slice, previews at 10 Hz) at 1000 and 100 Hz: CPU seconds per
+  second of stream, and the part that pickling and unpickling the batches (the pipe to the solver
+  process) takes of it.
 
 Each figure is the median of ``--repeats`` timings.  Run: ``.venv/bin/python benchmarks/bench_stream.py``.
 """
@@ -17,6 +21,7 @@ Each figure is the median of ``--repeats`` timings.  Run: ``.venv/bin/python ben
 from __future__ import annotations
 
 import argparse
+import pickle
 import time
 
 import numpy as np
@@ -25,6 +30,9 @@ from scipy.spatial.transform import Rotation
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import Task
 from crane_reference.stream.reference_stream import CHUNK_STEPS, ReferenceStream
+from crane_reference.stream.schedule import FrameSchedule
+from crane_reference.stream.server import COMPUTE_SLICE, FRAME_BATCH, LOOKAHEAD, RELEASE_KEEP
+from crane_reference.stream.solver import StreamSolver, StreamSpec
 from crane_reference.stream.targets import reach
 
 STEP = 1e-3  # [s]
@@ -93,6 +101,34 @@ def main() -> None:
     seconds = time.perf_counter() - start
     print(f"[reach] E's reach from the column's axis at z = {heights[0]:.3f} and {heights[1]:.3f} m (the node's "
           f"ranges of ellipse.a and ellipse.b): [{low:g}, {high:g}] m, found in {seconds * 1e3:.0f} ms (at configure)")
+
+    config = load_config()
+    for rate in (1000, 100):
+        solver = StreamSolver(StreamSpec(config, "flexible", STEP, 2.0, config.task, warm_up=False))
+        schedule = FrameSchedule(rate, rate, 0.1, 1.0, solver.info().start)
+
+        def serve(seconds: float, schedule: FrameSchedule = schedule, solver: StreamSolver = solver,
+                  rate: int = rate) -> float:
+            """Frames for ``seconds`` of stream, published as soon as made; the pickling time [s]."""
+            pickling, end = 0.0, schedule.made_k + round(seconds * rate)
+            while schedule.made_k < end:
+                plan = schedule.plan()
+                batch = solver.frames(schedule.request(plan, FRAME_BATCH, 1.0, 10, max(1, rate // 10), COMPUTE_SLICE),
+                                      RELEASE_KEEP + LOOKAHEAD)
+                start = time.perf_counter()
+                pickle.loads(pickle.dumps(batch))
+                pickling += time.perf_counter() - start
+                schedule.accept(batch, plan)
+                schedule.next_k = schedule.made_k
+            return pickling
+
+        serve(1.0)
+        motion = 10.0
+        start = time.process_time()
+        pickling = serve(motion)
+        cpu = time.process_time() - start
+        print(f"[server] solver side at {rate:4d} Hz: {cpu / motion:.3f} s of CPU per s of stream "
+              f"(pickling the batches {pickling / motion:.3f} s of it)")
 
 
 if __name__ == "__main__":

@@ -258,24 +258,25 @@ class ReferenceServer:
 
     # -- commands -------------------------------------------------------------------------------------
 
-    def _at_command_point(self, name: str, accepted_ns: int, action) -> tuple[int, float]:
-        """Run ``action(tau)`` at the command point (frame k at stream time tau: ``lead`` after the next sample
-        to publish, or the next frame to make while not publishing); the frames from k on are dropped at
-        once and made again after it.  Records the command's acceptance and effect.  Returns k."""
+    def _at_command_point(self, name: str, accepted_ns: int, *request: Any) -> tuple[int, float, Any]:
+        """Send the solver ``request`` (method, args...) with the stream time tau of the command point
+        inserted after the method (frame k: ``lead`` after the next sample to publish, or the next frame to
+        make while not publishing); the frames from k on are dropped at once and made again after it.
+        Records the command's acceptance and effect.  Returns k, tau and the solver's answer."""
         with self._lock:
             k, tau = self.schedule.command_point(lead=self.publishing)
             self.schedule.after_command(k, tau)
             self._commands_pending += 1
         try:
             with self._solver_lock:
-                action(tau)
+                answer = self.solver.call(request[0], tau, *request[1:])
         finally:
             with self._lock:
                 self._commands_pending -= 1
                 self._lock.notify_all()  # the worker makes the frames from k now, not at the next publish
         self._commands[f"{name}_stamp_s"] = f"{self.stamp_of(k):.6f}"
         self._commands[f"{name}_accepted_s"] = f"{accepted_ns / NANOSECONDS:.6f}"
-        return k, tau
+        return k, tau, answer
 
     def command(self, name: str, *args: Any, accepted_ns: int = 0) -> int:
         """Apply the stream command ``name`` (``pause``, ``resume``, ``set_speed_scaling`` (rate),
@@ -285,7 +286,7 @@ class ReferenceServer:
         if name not in COMMANDS:
             raise ValueError(f"command {name!r}: not one of {', '.join(COMMANDS)}")
         label = "speed_scaling" if name == "set_speed_scaling" else name
-        return self._at_command_point(label, accepted_ns, lambda tau: self.solver.call(name, tau, *args))[0]
+        return self._at_command_point(label, accepted_ns, name, *args)[0]
 
     def check_targets(self, targets: Task) -> None:
         """Raise :class:`~.targets.UnreachableTargetError` unless ``targets`` can be streamed from here."""
@@ -311,10 +312,7 @@ class ReferenceServer:
         stream unchanged."""
         if self.publishing:
             raise CommandRefusedError("a restart makes the reference jump to the start: stop publishing first")
-        result: list[Any] = []
-        k, _ = self._at_command_point("restart", accepted_ns,
-                                      lambda tau: result.append(self.solver.call("restart", tau)))
-        before, after = result[0]
+        k, _, (before, after) = self._at_command_point("restart", accepted_ns, "restart")
         jump = abs(after - before)
         self.schedule.fault = ""
         restart = Restart(k, float(jump.max()), self.info.joint_names[int(jump.argmax())])
@@ -327,7 +325,7 @@ class ReferenceServer:
         stream = self.stream
         if stream.state != RUNNING or stream.rate <= 0.0:
             return
-        k, tau = self._at_command_point("pause", accepted_ns, lambda tau: self.solver.call("pause", tau))
+        k, tau, _ = self._at_command_point("pause", accepted_ns, "pause")
         stream = self.stream
         rest_k = k + math.ceil((stream.settled_at - tau) * self.rate - 1e-9) + 1
         deadline = time.monotonic() + stream.ramp_time + self.schedule.lead + REST_MARGIN
