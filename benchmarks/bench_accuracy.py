@@ -1,7 +1,8 @@
 """Accuracy of the integrator against converged runs; prints the figures the README and the closing notes quote.
 
     python benchmarks/bench_accuracy.py [--duration 10] [--cache results/bench_accuracy]
-                                        [--only vibration growth damped iterations newton first-order reference]
+                                        [--only vibration growth damped iterations newton first-order mechanism
+                                                sensitivity slow reference]
 
 The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simulate_reference``), sampled every
 0.1 ms and cached as NPZ in ``--cache`` (the first run of a section takes minutes per crane).
@@ -19,26 +20,31 @@ The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simula
    stiffness-proportional, from the constrained modal analysis) at h = 1 ms: raw and controller-band errors
    (target: raw <= 1e-4 rad over 10 s) and the 40-250 Hz RMS kept over 5-10 s.
 4. [iterations] The Newton rules at h = 1 ms: converged (tolerance 1e-9), two evaluations and the online
-   default (three): cost per step, evaluations per step, raw and controller-band errors.
+   default (three), and exactly one or two evaluations whatever the correction (the route to one residual
+   evaluation per step): cost per step, evaluations per step, raw and controller-band errors.
 5. [newton] Largest difference of psi2, psi(3,0), psi4 between Newton tolerances 1e-8, 1e-9, 1e-10 and 1e-12.
 6. [first-order] The paper's ellipse and height plus the first-order constraint x y' - y x' = a b omega(t)
    (rigid crane, 2 s): the parametric-angle error at h = 2, 1, 0.5 ms, the velocity residual and the
    energy-balance error relative to the constraint work.
 7. [reference] The undamped reference at rtol 1e-9 against 1e-10: their difference bounds the reference's own
    error.
-9. [slow] The controller-band error at h = 1 ms (undamped and damped crane): the integrator with its modal
-   correction refreshed every 5 ms and every step, and the plain trapezoidal rule; psi2's drift at 3, 5 and
-   10 s. A stiff flexible drive (1e8 N m/rad) against DOP853 over 0.1 s.
 8. [mechanism] Why second-order schemes misreport the vibration: the constrained modes along the run (every
    0.5 s) with the detunings of the internal resonances 2 f9 = f8 + f10 and f9 + f10 = f11, which the slow
    motion sweeps through zero; and the luffing vibration (psi(3,0), 40-250 Hz RMS over 1-3, 3-5, 5-7, 7-10 s
    against the converged run) of the plain trapezoidal rule (turning mode i by 2 arctan(omega_i h / 2) per
    step) and of the integrator (exact frequencies) at h = 0.25 and 1 ms.
+9. [sensitivity] The conditioning of the 40-250 Hz RMS: the model with its payload mass changed by +-0.5 and
+   +-1 % and its boom's Young's modulus by +-1 % (h = 0.25 ms) against the nominal converged run, beside the
+   nominal crane at h = 1, 0.5, 1/3 and 0.25 ms (converged Newton).
+10. [slow] The controller-band error at h = 1 ms (undamped and damped crane): the integrator with its modal
+    correction refreshed every 5 ms and every step, and the plain trapezoidal rule; psi2's drift at 3, 5 and
+    10 s. A stiff flexible drive (1e8 N m/rad) against DOP853 over 0.1 s.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -218,7 +224,9 @@ def iteration_rules(params: CraneParameters, duration: float, cache: Path) -> No
     q0 = scenario.equilibrium.q
     simulate(scenario.motion, q0, 0.01)  # compile / load the kernels
     for evaluations, tolerance, name in ((2, 1e-9, "converged"), (2, 1e-4, "two evaluations"),
-                                         (EVALUATIONS, ONLINE_TOLERANCE, "online default")):
+                                         (EVALUATIONS, ONLINE_TOLERANCE, "online default"),
+                                         (1, math.inf, "exactly one evaluation"),
+                                         (2, math.inf, "exactly two evaluations")):
         start = time.perf_counter()
         tr = simulate(scenario.motion, q0, duration, step=1e-3, tolerance=tolerance, evaluations=evaluations)
         wall = time.perf_counter() - start
@@ -278,6 +286,28 @@ def reference_check(params: CraneParameters, duration: float, cache: Path) -> No
     difference = np.abs(coordinates(tight) - coordinates(loose)).max(axis=0)
     print(f"[reference] DOP853 rtol 1e-9 vs 1e-10 over {duration:g} s: psi2/psi30/psi4 differ by at most "
           f"{_triple(difference)} rad")
+
+
+def sensitivity(params: CraneParameters, duration: float, cache: Path) -> None:
+    """[sensitivity] How well-conditioned the 40-250 Hz RMS is: the crane with its payload mass changed by
+    -1, -0.5, +0.5, +1 % and its boom's Young's modulus by -1, +1 % (h = 0.25 ms, converged Newton), as a
+    share of the nominal converged run's; then the nominal crane at h = 1, 0.5, 1/3 and 0.25 ms (converged
+    Newton) for comparison: a step's deviation is that of a model this many percent off."""
+    reference = reference_run(params, duration, cache, "undamped")
+    kept_reference = [band_rms(reference, w) for w in WINDOWS]
+    changes = [(f"payload mass {100 * (s - 1):+.1f} %", replace(params, payload_mass=params.payload_mass * s))
+               for s in (0.99, 0.995, 1.005, 1.01)]
+    changes += [(f"boom Young's modulus {100 * (s - 1):+.0f} %",
+                 replace(params, boom=replace(params.boom, youngs_modulus=params.boom.youngs_modulus * s)))
+                for s in (0.99, 1.01)]
+    runs = [(f"{name}, h=0.25 ms", p, 2.5e-4) for name, p in changes]
+    runs += [(f"nominal, h={step * 1e3:.2f} ms", params, step) for step in (1e-3, 5e-4, 1e-3 / 3, 2.5e-4)]
+    for name, p, step in runs:
+        scenario = Scenario(p, "flexible")
+        tr = simulate(scenario.motion, scenario.equilibrium.q, duration, step=step, tolerance=1e-9, evaluations=2)
+        kept = [band_rms(tr, w) / r for w, r in zip(WINDOWS, kept_reference, strict=True)]
+        shares = "; ".join(f"{a:g}-{b:g} s {_triple(k, '.0%')}" for (a, b), k in zip(WINDOWS, kept, strict=True))
+        print(f"[sensitivity] {name}: 40-250 Hz RMS psi2/psi30/psi4 {shares} of the nominal converged run's")
 
 
 def mechanism(params: CraneParameters, duration: float, cache: Path) -> None:
@@ -341,7 +371,8 @@ def slow_motion(params: CraneParameters, duration: float, cache: Path) -> None:
           f"{np.abs(run.q - converged.q).max():.1e} rad")
 
 
-SECTIONS = ("vibration", "growth", "damped", "iterations", "newton", "first-order", "mechanism", "slow", "reference")
+SECTIONS = ("vibration", "growth", "damped", "iterations", "newton", "first-order", "mechanism", "sensitivity", "slow",
+            "reference")
 
 
 def main() -> None:
@@ -359,6 +390,7 @@ def main() -> None:
                          ("newton", lambda: newton_tolerance(params, args.duration)),
                          ("first-order", lambda: first_order(params)),
                          ("mechanism", lambda: mechanism(params, args.duration, args.cache)),
+                         ("sensitivity", lambda: sensitivity(params, args.duration, args.cache)),
                          ("slow", lambda: slow_motion(params, args.duration, args.cache)),
                          ("reference", lambda: reference_check(params, args.duration, args.cache))):
         if section in args.only:
