@@ -14,6 +14,7 @@ from tqdm import tqdm
 from .model.chain import VARIANTS, build_model
 from .model.config import ConfigError, load_config
 from .model.urdf import model_to_urdf
+from .motion.steps import ANALYSIS_STEP
 
 
 def progress_bar(label: str, total: float) -> tqdm:
@@ -240,7 +241,7 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--model", choices=[*VARIANTS, "both"], default="both")
     s.add_argument("--duration", type=float, default=10.0, help="simulated time [s] (default 10)")
     s.add_argument("--out", default="results", help="output directory (default ./results)")
-    s.add_argument("--step", type=float, default=1e-3, help="integrator step [s] (default 1e-3)")
+    s.add_argument("--step", type=float, default=ANALYSIS_STEP, help=f"integrator step [s] (default {ANALYSIS_STEP:g})")
     s.add_argument("--bag", metavar="DIR", help="instead of CSV/NPZ/Figure 2, write the node's topics as a rosbag2 "
                    "bag (new directory DIR), stamped with simulated time; --model both records flexible")
     s.add_argument("--rate", type=int, default=100, metavar="HZ", help="--bag: publish rate (default 100)")
@@ -299,7 +300,7 @@ def parser() -> argparse.ArgumentParser:
     a.add_argument("--config")
     a.add_argument("--out", default="results/analysis", help="output directory (default ./results/analysis)")
     a.add_argument("--duration", type=float, default=10.0, help="simulated time [s] (default 10)")
-    a.add_argument("--step", type=float, default=2.5e-4, help="integrator step [s] (default 2.5e-4)")
+    a.add_argument("--step", type=float, default=ANALYSIS_STEP, help=f"integrator step [s] (default {ANALYSIS_STEP:g})")
     return p
 
 

@@ -65,6 +65,7 @@ from ..model.parameters import CraneParameters
 from ..motion.integration import CUTOFF, METHOD
 from ..motion.programmed_motion import REALISATIONS, ProgrammedMotion
 from ..motion.simulation import SOLVER_FAILURES, MotionStepper, Scenario
+from ..motion.steps import ANALYSIS_STEP
 from ..motion.trajectory import Trajectory, stack_samples
 from .modal import Modes, linearise, modal_analysis, scenario_motion
 
@@ -296,7 +297,7 @@ def _run_summary(r: Run) -> dict:
     return summary
 
 
-def analyze(params: CraneParameters, out: str | Path, duration: float = 10.0, step: float = 2.5e-4,
+def analyze(params: CraneParameters, out: str | Path, duration: float = 10.0, step: float = ANALYSIS_STEP,
             modal_interval: float = 0.25, realisations: tuple[str, ...] = REALISATIONS,
             log: Callable[[str], None] = print) -> dict:
     """Run both variants under each realisation, write the PNGs, ``summary.json`` and ``summary.md`` to

@@ -40,6 +40,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from ..model.drive import column_drive
 from ..model.parameters import CraneParameters
+from ..motion.steps import ONLINE_STEP
 from ..stream.reference_stream import ERROR, ReferenceStream
 from ..stream.sample import ReferenceSample
 from ..stream.schedule import stamp_at
@@ -250,7 +251,7 @@ class ReferenceBag:
 # --- offline export of the reference ---------------------------------------------------------------
 
 
-def node_stream(config: CraneParameters, variant: str = "flexible", step: float = 1e-3) -> ReferenceStream:
+def node_stream(config: CraneParameters, variant: str = "flexible", step: float = ONLINE_STEP) -> ReferenceStream:
     """The stream the node builds for ``config`` with its parameters at their defaults (the column drive
     made as the node makes it, so that the motion is the same to the bit)."""
     return ReferenceStream(config, variant, step, drive=column_drive(config))

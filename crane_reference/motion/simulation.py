@@ -28,6 +28,7 @@ from .constraints import ConstraintSet, paper_constraints
 from .equilibrium import Equilibrium, EquilibriumError, static_equilibrium
 from .integration import EVALUATIONS, ONLINE_TOLERANCE, ExactFrequencyTrapezoidal, IntegrationError, StepState
 from .programmed_motion import ConstraintSingularityError, ProgrammedMotion, ProjectionError
+from .steps import ANALYSIS_STEP, ONLINE_STEP
 from .trajectory import Sample, Trajectory, make_sample, stack_samples
 
 POWERS = [ACCOUNTS.index(name) for name in ("drive_power", "constraint_power", "damping_power")]
@@ -88,7 +89,7 @@ class MotionStepper:
     """Online integration (:mod:`.integration`) of a :class:`ProgrammedMotion` with work bookkeeping."""
 
     def __init__(self, motion: ProgrammedMotion, t0: float, q0: np.ndarray, qd0: np.ndarray,
-                 step: float = 1e-3, tolerance: float = ONLINE_TOLERANCE, evaluations: int = EVALUATIONS):
+                 step: float = ONLINE_STEP, tolerance: float = ONLINE_TOLERANCE, evaluations: int = EVALUATIONS):
         if not step > 0.0:
             raise ValueError(f"step = {step}: must be > 0 s")
         self.step_size = step
@@ -181,7 +182,7 @@ class MotionStepper:
         self.state = self.integrator.restart(self.state)
 
 
-def simulate(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, step: float = 1e-3, t0: float = 0.0,
+def simulate(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, step: float = ANALYSIS_STEP, t0: float = 0.0,
              qd0: np.ndarray | None = None, progress: Progress | None = None, chunk: float = 0.25,
              tolerance: float = ONLINE_TOLERANCE, evaluations: int = EVALUATIONS) -> Trajectory:
     """Programmed motion from (t0, q0, qd0) to t_end with the integrator (Newton ``evaluations`` and

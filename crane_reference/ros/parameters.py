@@ -34,6 +34,7 @@ from rclpy.parameter import Parameter
 from ..interface.messages import ACTUATED_JOINTS, MAX_PUBLISH_RATE
 from ..model.chain import VARIANTS
 from ..model.parameters import CraneParameters, TorqueDrive
+from ..motion.steps import ONLINE_STEP
 
 Value = bool | int | float | str | list[str]
 BOOL, INTEGER, DOUBLE, STRING, STRING_ARRAY = (Parameter.Type.BOOL, Parameter.Type.INTEGER, Parameter.Type.DOUBLE,
@@ -128,7 +129,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "'' loads the packaged default", empty_allowed=True, read_only=True),
     ParameterSpec("model", STRING, "flexible", "Crane model variant: 'flexible' (rigid finite element boom) "
                   "or 'rigid' (one boom element)", choices=VARIANTS, read_only=True),
-    ParameterSpec("integrator.step", DOUBLE, 1e-3, "Step of the integrator", "s",
+    ParameterSpec("integrator.step", DOUBLE, ONLINE_STEP, "Step of the integrator", "s",
                   (1e-5, 1e-2), read_only=True),
     ParameterSpec("publish_rate", INTEGER, 100, "Rate of joint_states and ~/end_effector_pose; sample k is "
                   "stamped start + k / publish_rate", "Hz", (1, MAX_PUBLISH_RATE), read_only=True),

@@ -37,6 +37,7 @@ from ..motion.constraints import ConstraintSet
 from ..motion.equilibrium import static_equilibrium
 from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import SOLVER_FAILURES, MotionStepper, Scenario, TaskConstraints, paper_task_constraints
+from ..motion.steps import ONLINE_STEP
 from .history import History
 from .sample import ReferenceSample, between, reference_sample, reference_samples, warped
 from .targets import blend_constraints, check_task
@@ -52,7 +53,7 @@ MIN_SINGULAR_VALUE = 1e-3
 class ReferenceStream:
     """The programmed motion of one crane variant, computed ahead and sampled on demand."""
 
-    def __init__(self, params: CraneParameters, variant: str = "flexible", step: float = 1e-3,
+    def __init__(self, params: CraneParameters, variant: str = "flexible", step: float = ONLINE_STEP,
                  blend_time: float = 2.0, targets: Task | None = None,
                  drive: TorqueDrive | FlexibleDrive | None = None,
                  singular_value_margin: float = 0.1, task_constraints: TaskConstraints = paper_task_constraints,

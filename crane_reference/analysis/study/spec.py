@@ -5,7 +5,7 @@ A study spec (YAML) names the crane, the run and the parameters to vary::
     config: ""              # crane description YAML ('' = the packaged config/crane.yaml)
     variant: both           # flexible | rigid | both (both: the flexible-minus-rigid difference too)
     duration: 3.0           # [s] simulated per case
-    step: 0.001             # [s] integrator step
+    step: 0.00025           # [s] integrator step (default: the offline step, 0.25 ms)
     vary:                   # grids (values) and/or random ranges (low, high); random ranges draw `samples`
       ellipse_a: {values: [2.8, 3.0, 3.2]}
       path_speed: {values: [0.4, 0.8]}
@@ -46,6 +46,7 @@ import yaml
 from ...model.chain import VARIANTS
 from ...model.config import load_config
 from ...model.parameters import TorqueDrive
+from ...motion.steps import ANALYSIS_STEP
 
 PATH_SPEED_RISE = 1.0  # [s], quintic rise of the path speed from rest
 PARAMETERS: dict[str, tuple[str, float, float, bool]] = {
@@ -155,7 +156,7 @@ def parse_spec(data: Any, source: str = "study spec") -> StudySpec:
     if variant not in CHOICES:
         raise StudyError(f"variant = {variant!r}: must be one of {', '.join(CHOICES)}")
     duration = _number(data.get("duration", 3.0), "duration", 1e-3, 600.0)
-    step = _number(data.get("step", 1e-3), "step", 1e-5, 1e-2)
+    step = _number(data.get("step", ANALYSIS_STEP), "step", 1e-5, 1e-2)
     realisation = data.get("realisation", "ideal")
     if realisation not in ("ideal", "servo"):
         raise StudyError(f"realisation = {realisation!r}: must be 'ideal' or 'servo'")
