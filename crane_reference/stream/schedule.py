@@ -25,8 +25,10 @@ import time
 from collections import deque
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from .reference_stream import ERROR, ReferenceStream
-from .sample import ReferenceSample
+from .sample import ReferenceSample, columns, from_columns
 
 TIME_TOLERANCE = 1e-9  # [s], rounding slack when comparing stream times
 COMPUTE_MARGIN = 0.05  # [s] of motion computed beyond the preview horizon
@@ -96,6 +98,25 @@ class FrameBatch:
     compute_motion: float = 0.0
     non_finite: int = 0
     fault: str = ""
+
+    def __reduce__(self):
+        """Pickled with the frames' fields stacked (:func:`~.sample.columns`): the batch crosses from the
+        solver's process to the node's many times a second."""
+        frames = self.frames
+        previews = [(i, columns(f.preview)) for i, f in enumerate(frames) if f.preview is not None]
+        packed = (np.array([f.k for f in frames], dtype=np.int64), np.array([f.tau for f in frames]),
+                  np.array([f.horizon for f in frames]), columns([f.sample for f in frames]), previews)
+        return _unpacked_batch, (packed, self.next_preview_k, self.busy, self.compute_wall, self.compute_motion,
+                                 self.non_finite, self.fault)
+
+
+def _unpacked_batch(packed, *rest) -> FrameBatch:
+    """The :class:`FrameBatch` that :meth:`FrameBatch.__reduce__` packed."""
+    ks, taus, horizons, samples, previews = packed
+    preview_of = {i: from_columns(stacked) for i, stacked in previews}
+    frames = [Frame(k, tau, sample, preview_of.get(i), horizon) for i, (k, tau, horizon, sample) in
+              enumerate(zip(ks.tolist(), taus.tolist(), horizons.tolist(), from_columns(samples), strict=True))]
+    return FrameBatch(frames, *rest)
 
 
 def make_frames(stream: ReferenceStream, request: FrameRequest) -> FrameBatch:
