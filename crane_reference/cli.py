@@ -14,7 +14,7 @@ from tqdm import tqdm
 from .model.chain import VARIANTS, build_model
 from .model.config import ConfigError, load_config
 from .model.urdf import model_to_urdf
-from .motion.steps import ANALYSIS_STEP
+from .motion.steps import ANALYSIS_STEP, ONLINE_STEP
 
 
 def progress_bar(label: str, total: float) -> tqdm:
@@ -38,6 +38,7 @@ def simulate_command(args: argparse.Namespace) -> int:
         return export_command(args)
     from .analysis.plotting import figure2
     from .motion.simulation import Scenario, simulate
+    step = ANALYSIS_STEP if args.step is None else args.step
     params = load_config(args.config)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -46,11 +47,11 @@ def simulate_command(args: argparse.Namespace) -> int:
         scenario = Scenario(params, variant)
         ready = time.perf_counter()  # the first calls compile the kernels (empty cache) or load them
         start = scenario.equilibrium
-        simulate(scenario.motion, start.q, args.step, step=args.step)
+        simulate(scenario.motion, start.q, step, step=step)
         ready = time.perf_counter() - ready
         wall = time.perf_counter()
         with progress_bar(variant, args.duration) as bar:
-            trajectory = simulate(scenario.motion, start.q, args.duration, step=args.step, progress=advance_to(bar))
+            trajectory = simulate(scenario.motion, start.q, args.duration, step=step, progress=advance_to(bar))
         wall = time.perf_counter() - wall
         trajectory.to_csv(out / f"{variant}.csv")
         trajectory.to_npz(out / f"{variant}.npz")
@@ -60,7 +61,7 @@ def simulate_command(args: argparse.Namespace) -> int:
                               for k in scenario.model.dependent_joints)
         print(f"{variant:>8}: kernels ready in {ready:.2f} s (compiled or loaded); "
               f"{trajectory.t[-1]:.3f} s simulated in {wall:.2f} s wall "
-              f"(real-time factor {trajectory.t[-1] / wall:.1f}), {len(trajectory.t) - 1} steps of {args.step:g} s; "
+              f"(real-time factor {trajectory.t[-1] / wall:.1f}), {len(trajectory.t) - 1} steps of {step:g} s; "
               f"max constraint residual {trajectory.residual_distance.max():.2e} m; "
               f"min singular value of K_dc {trajectory.kdc_min_singular_value.min():.3f}; "
               f"equilibrium start: z_E,s = {scenario.z_static:.6f} m, {dependent} from (9), "
@@ -86,9 +87,10 @@ def export_command(args: argparse.Namespace) -> int:
     except bag.BagError as error:
         print(f"crane-reference: --bag: {error}", file=sys.stderr)
         return 2
+    step = ONLINE_STEP if args.step is None else args.step
     wall = time.perf_counter()
     with writer, progress_bar(variant, args.duration) as bar:
-        samples = bag.export_reference(writer, bag.node_stream(config, variant, args.step), args.rate,
+        samples = bag.export_reference(writer, bag.node_stream(config, variant, step), args.rate,
                                        args.duration, progress=advance_to(bar))
     wall = time.perf_counter() - wall
     counts = ", ".join(f"{topic} {count}" for topic, count in writer.counts.items())
@@ -241,7 +243,8 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--model", choices=[*VARIANTS, "both"], default="both")
     s.add_argument("--duration", type=float, default=10.0, help="simulated time [s] (default 10)")
     s.add_argument("--out", default="results", help="output directory (default ./results)")
-    s.add_argument("--step", type=float, default=ANALYSIS_STEP, help=f"integrator step [s] (default {ANALYSIS_STEP:g})")
+    s.add_argument("--step", type=float, help=f"integrator step [s] (default {ANALYSIS_STEP:g}; with --bag the node's "
+                   f"{ONLINE_STEP:g})")
     s.add_argument("--bag", metavar="DIR", help="instead of CSV/NPZ/Figure 2, write the node's topics as a rosbag2 "
                    "bag (new directory DIR), stamped with simulated time; --model both records flexible")
     s.add_argument("--rate", type=int, default=100, metavar="HZ", help="--bag: publish rate (default 100)")
@@ -269,7 +272,7 @@ def parser() -> argparse.ArgumentParser:
     tr.add_argument("--torque-limit", nargs="*", default=[], metavar="[JOINT=]N_M", help="actuator torque limits")
     tr.add_argument("--rate", type=float, default=1000.0, help="controller rate [Hz] (default 1000)")
     tr.add_argument("--duration", type=float, default=5.0, help="simulated time [s] (default 5)")
-    tr.add_argument("--step", type=float, default=1e-3, help="integrator step [s] (default 1e-3)")
+    tr.add_argument("--step", type=float, default=ONLINE_STEP, help=f"integrator step [s] (default {ONLINE_STEP:g})")
     tr.add_argument("--out", default="results/tracking", help="output directory (default ./results/tracking)")
     sub.add_parser("compile", help="compile the numba kernels ahead of the first run (fills the cache; run it "
                    "after installing, e.g. after colcon build)")

@@ -139,3 +139,31 @@ def test_after_a_command_samples_come_first_then_previews_on_their_cadence(strea
     assert k == schedule.next_k + 10 and k < window_end
     assert previews[:4] == [window_end + i * decimation for i in range(4)]
     assert all(b - a == decimation for a, b in itertools.pairwise(previews))
+
+
+def test_a_frame_batch_crosses_a_pipe_unchanged(stream_factory):
+    """A batch pickled (as it crosses to the node's process, its fields stacked) and read back equals the
+    batch made: every field of every sample, the previews, held samples and the batch's accounts."""
+    import pickle
+
+    stream = stream_factory()
+    schedule = FrameSchedule(RATE, 100, LEAD, 1.0, stream.sample(0.0))
+    made = make_frames(stream, schedule.request(schedule.plan(), 12, 0.2, 5, 4, None))
+    held = Frame(12, 0.12, made.frames[-1].sample.hold())
+    batch = dataclasses.replace(made, frames=[*made.frames, held], compute_wall=0.25, non_finite=1, fault="why")
+    read = pickle.loads(pickle.dumps(batch))
+
+    def same(a, b) -> None:
+        for name in (f.name for f in dataclasses.fields(a)):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+            assert type(getattr(a, name)) is type(getattr(b, name)), name
+
+    assert [f.preview is None for f in read.frames] == [f.preview is None for f in batch.frames]
+    assert sum(f.preview is not None for f in batch.frames) == 3 and read.frames[-1].sample.held
+    for mine, theirs in zip(batch.frames, read.frames, strict=True):
+        assert (mine.k, mine.tau, mine.horizon) == (theirs.k, theirs.tau, theirs.horizon)
+        same(mine.sample, theirs.sample)
+        for p, r in zip(mine.preview or [], theirs.preview or [], strict=True):
+            same(p, r)
+    assert (read.next_preview_k, read.busy, read.compute_wall, read.compute_motion, read.non_finite, read.fault) == (
+        batch.next_preview_k, batch.busy, batch.compute_wall, batch.compute_motion, batch.non_finite, batch.fault)

@@ -19,6 +19,7 @@ import numpy as np
 from ..model.chain import VARIANTS
 from ..model.config import load_config
 from ..motion.simulation import Scenario, simulate
+from ..motion.steps import ONLINE_STEP
 from .reference_stream import ReferenceStream
 
 WARM_UP_STEPS = 3
@@ -63,10 +64,10 @@ def warm_up(variants: Iterable[str] = VARIANTS) -> WarmUp:
     for variant in variants:
         scenario = Scenario(params, variant)
         q = scenario.equilibrium.q
-        simulate(scenario.motion, q, WARM_UP_STEPS * 1e-3, step=1e-3)
+        simulate(scenario.motion, q, WARM_UP_STEPS * ONLINE_STEP, step=ONLINE_STEP)
         scenario.motion.solve(0.0, q, np.zeros_like(q))
         stream = ReferenceStream(params, variant)
-        stream.compute(WARM_UP_STEPS * 1e-3)
+        stream.compute(WARM_UP_STEPS * ONLINE_STEP)
         stream.sample(0.5e-3)
         stream.check_targets(params.task)
         stream.retarget(1e-3, params.task, checked=True)
