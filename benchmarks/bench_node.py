@@ -15,8 +15,10 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
 * latency from a parameter change (``ellipse.a``, through the parameter service) to the reception of
   the first sample that uses it (the node reports that sample's stamp in /diagnostics as
   ``retarget_stamp_s``), over ``--changes`` changes, and from the node's acceptance of the change to that
-  sample's stamp (``retarget_accepted_s`` to ``retarget_stamp_s``, both on the node's clock); samples held
-  late while the changes and the commands below were made (held_late_commands);
+  sample's stamp (``retarget_accepted_s`` to ``retarget_stamp_s``, both on the node's clock), and the
+  node's margin: how long before that stamp the sample was ready (``retarget_margin_s``, smallest of the
+  changes; ``margin_*`` for the commands below); samples held late while the changes and the commands
+  below were made (held_late_commands);
 * smoothness of the commands: the largest change of the column's velocity between two received samples
   (rad/s) in normal running and after ~/pause, resume, a speed_scaling change to 0.5 and a re-target
   (each window: the ramp time plus 0.5 s; the flexible boom's 70 Hz bending makes the column's velocity
@@ -127,10 +129,11 @@ def spin_until(executor: SingleThreadedExecutor, condition, timeout: float) -> b
 
 
 def measure_latency(executor: SingleThreadedExecutor, client: AsyncParameterClient, recorder: Recorder,
-                    changes: int) -> tuple[list[float], list[float]]:
-    """Seconds from sending each ellipse.a change to receiving the first sample that uses it, and from its
-    acceptance by the node (its clock, /diagnostics retarget_accepted_s) to that sample's stamp."""
-    latencies, after_acceptance = [], []
+                    changes: int) -> tuple[list[float], list[float], list[float]]:
+    """Seconds from sending each ellipse.a change to receiving the first sample that uses it, from its
+    acceptance by the node (its clock, /diagnostics retarget_accepted_s) to that sample's stamp, and how
+    long before that stamp the node had the sample ready (retarget_margin_s)."""
+    latencies, after_acceptance, margins = [], [], []
     for i in range(changes):
         previous = recorder.diagnostics.get("retarget_stamp_s")
         sent = time.monotonic_ns()
@@ -146,8 +149,10 @@ def measure_latency(executor: SingleThreadedExecutor, client: AsyncParameterClie
         latencies.append((recorder.monotonic[first] - sent) / NS)
         after_acceptance.append(float(recorder.diagnostics["retarget_stamp_s"])
                                 - float(recorder.diagnostics["retarget_accepted_s"]))
+        spin_until(executor, lambda: "retarget_margin_s" in recorder.diagnostics, 5.0)
+        margins.append(float(recorder.diagnostics.get("retarget_margin_s", "nan")))
         spin_for(executor, 1.0)
-    return latencies, after_acceptance
+    return latencies, after_acceptance, margins
 
 
 def call(executor: SingleThreadedExecutor, client, request, timeout: float = 10.0):
@@ -161,13 +166,15 @@ def command_smoothness(executor: SingleThreadedExecutor, subscriber: Node, clien
                        recorder: Recorder, ramp: float) -> dict[str, float]:
     """Largest per-sample change of the column's velocity in normal running and after each command."""
     pause = subscriber.create_client(SetBool, f"/{NODE}/pause")
-    windows = {}
+    windows, margins = {}, {}
 
     def window(name: str, command) -> None:
         start = len(recorder.stamps)
         command()
         spin_for(executor, ramp + 0.5)
         windows[name] = (start, len(recorder.stamps))
+        margin = recorder.diagnostics.get(f"{'speed_scaling' if name.startswith('speed') else name}_margin_s")
+        margins[name] = float("nan") if margin is None else float(margin)
 
     windows["normal"] = (len(recorder.stamps), len(recorder.stamps))
     spin_for(executor, ramp + 0.5)
@@ -182,7 +189,8 @@ def command_smoothness(executor: SingleThreadedExecutor, subscriber: Node, clien
     window("retarget", lambda: set_parameter("ellipse.a", 3.05))
     set_parameter("speed_scaling", 1.0)
     velocity = np.array(recorder.slew_velocity)
-    return {f"dv_{name}_rad_s": float(np.max(np.abs(np.diff(velocity[a:b])))) for name, (a, b) in windows.items()}
+    return {**{f"dv_{name}_rad_s": float(np.max(np.abs(np.diff(velocity[a:b])))) for name, (a, b) in windows.items()},
+            **{f"margin_{name}_ms": 1e3 * margin for name, margin in margins.items()}}
 
 
 def flood(executor: SingleThreadedExecutor, client: AsyncParameterClient, recorder: Recorder, requests: int,
@@ -249,8 +257,8 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         spin_until(executor, lambda: float(recorder.diagnostics.get("published", 0)) > 0, 2.0)
         late = {k: float(recorder.diagnostics.get(k, 0)) - before[k] for k in before}
         factor = recorder.diagnostics.get("real_time_factor", "nan")
-        latencies, after_acceptance = (measure_latency(executor, client, recorder, changes) if changes
-                                       else ([float("nan")], [float("nan")]))
+        latencies, after_acceptance, margins = (measure_latency(executor, client, recorder, changes) if changes
+                                                else ([float("nan")],) * 3)
         smoothness = command_smoothness(executor, subscriber, client, recorder, 1.0)
         held_in_commands = float(recorder.diagnostics.get("held_late", 0)) - before["held_late"] - late["held_late"]
         flooded = flood(executor, client, recorder, flood_requests, rate) if flood_requests else {}
@@ -276,6 +284,7 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         "cpu_solver_process_percent": 100.0 * cpu[1] / wall, "real_time_factor": float(factor),
         "latency_median_ms": 1e3 * float(np.median(latencies)), "latency_max_ms": 1e3 * float(np.max(latencies)),
         "effect_after_acceptance_max_ms": 1e3 * float(np.max(after_acceptance)),
+        "margin_retarget_min_ms": 1e3 * float(np.min(margins)),
         "held_late_commands": int(held_in_commands),
         **smoothness, **flooded, "exit_code": node.returncode, "traceback": "Traceback" in stderr,
     }

@@ -31,6 +31,7 @@ from crane_reference.motion.constraints import (
     paper_constraints,
 )
 from crane_reference.motion.programmed_motion import ProgrammedMotion
+from crane_reference.stream.targets import settled
 
 SEED = 7
 SAMPLES = 6
@@ -287,3 +288,17 @@ def test_blend_ends_and_continuity():
     for edge in (0.2, 0.9):  # C2: value, rate and curvature continuous across both ends
         before, after = np.array(blend(edge - 1e-9)), np.array(blend(edge + 1e-9))
         assert np.allclose(before, after, rtol=0, atol=1e-6), (edge, before, after)
+
+
+def test_settled_profiles_drop_finished_blends_also_inside_running_ones():
+    """Re-targeting faster than the blend time nests blends; from time t on, the settled profile keeps only the
+    blends still running and equals the nested one (to rounding)."""
+    innermost = Blend(Constant(3.0), Constant(3.2), t0=0.0, duration=0.5)  # finished at 0.5 s
+    middle = Blend(innermost, QuinticRise(3.1, 0.1, 0.5, 1.0), t0=0.4, duration=0.7)  # finished at 1.1 s
+    running = Blend(middle, Constant(2.9), t0=1.0, duration=2.0)
+    outer = Blend(running, Constant(3.3), t0=1.3, duration=2.0)
+    profile = settled(outer, 1.5)
+    assert profile == Blend(Blend(QuinticRise(3.1, 0.1, 0.5, 1.0), Constant(2.9), 1.0, 2.0), Constant(3.3), 1.3, 2.0)
+    assert settled(outer, 0.2) == outer  # nothing finished yet
+    for t in np.linspace(1.5, 4.0, 26):
+        assert np.allclose(profile(t), outer(t), rtol=1e-14, atol=1e-14), t

@@ -174,12 +174,18 @@ class MotionStepper:
         self.state, self._k, work, self.sample, self.integrator.motion = snapshot
         self._work = work.copy()
 
-    def retarget(self, constraints: ConstraintSet) -> None:
-        """Continue under new constraints (they must hold at the current state, e.g. a C2 blend that
-        starts now); the method's history restarts at the current state."""
+    def retarget(self, constraints: ConstraintSet, t: float, q: np.ndarray, qd: np.ndarray, work: np.ndarray) -> None:
+        """Continue from a computed step (t, q, qd and the work accounts [J] there, e.g. a row of
+        :meth:`advance_until`) under new constraints that hold there (e.g. a C2 blend that starts at t).  The
+        method restarts there (:meth:`~.integration.ExactFrequencyTrapezoidal.restart`: (8) solved again at
+        (t, q, qd), a fresh modal correction), which is all a continuation under new constraints keeps of the
+        step, so no step is integrated again."""
         self.integrator.motion = ProgrammedMotion(self.motion.dynamics, constraints, tuple(self.motion.dependent),
                                                   self.motion.min_singular_value)
-        self.state = self.integrator.restart(self.state)
+        self._k = int(np.floor((t - self._t0) / self.step_size + 1e-9))  # grid times at or before t
+        self._work = work.copy()
+        self.state = self.integrator.restart(StepState(t, q, qd, self.state.solution, self.state.correction))
+        self.sample = make_sample(t, q, qd, self.state.solution, self._work)
 
 
 def simulate(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, step: float = ANALYSIS_STEP, t0: float = 0.0,

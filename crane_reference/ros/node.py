@@ -29,7 +29,8 @@ Clocks and stamps
 Commands
     A re-target (``ellipse.*``, ``z.*`` parameters), a speed change (``speed_scaling``) and ``~/pause``
     take effect at the sample ``command_lead`` seconds after the next one to be published; diagnostics
-    give both instants (``{command}_accepted_s``, ``{command}_stamp_s``).  Speed changes and pauses are C2
+    give both instants (``{command}_accepted_s``, ``{command}_stamp_s``) and how long before the second
+    the command's first sample was ready (``{command}_margin_s``).  Speed changes and pauses are C2
     ramps of the stream's time warp.  ``~/restart`` (back to the static-equilibrium start: a position
     jump) is done while inactive only and published from the next activation.  Parameter values are
     validated in the on-set callback (table of :mod:`~crane_reference.ros.parameters`, then the server's

@@ -95,6 +95,7 @@ class ReferenceStream:
                                 reference_sample(self._stepper.sample, self.model.drive_joint))
         self._warp = TimeWarp(self._warp.ramp_time, self.speed_scaling, tau)
         self._hold: ReferenceSample | None = None
+        self._forgotten: list[list] = []
         self.state = RUNNING
         self.last_error = ""
 
@@ -173,19 +174,14 @@ class ReferenceStream:
             except SOLVER_FAILURES as failure:
                 self._fail(failure)
                 return
-            self._history.extend(reference_samples(rows, self.model.drive_joint), self._stepper.motion,
+            work = np.column_stack((rows["work_drive"], rows["work_constraints"], rows["work_damping"]))
+            self._history.extend(reference_samples(rows, self.model.drive_joint), work, self._stepper.motion,
                                  self._stepper.snapshot())
 
-    def _rewind(self, k: int) -> None:
-        """Forget the motion after the k-th computed instant and put the solver back there.  Instants
-        inside a compiled run keep their samples only: the solver restarts from the last restartable
-        instant before k and steps to k again in one compiled run (the same steps, bit for bit)."""
-        start = self._history.restart_point(k)
-        self._stepper.rewind(self._history.entries[start].snapshot)
-        if k > start:
-            self._stepper.advance_until(self._history.times[k])
-            self._history.set_snapshot(k, self._stepper.snapshot())
-        self._history.truncate(k)
+    def free_forgotten(self) -> None:
+        """Free the motion that commands discarded since the last call (a server that answers commands
+        does it after answering, off their critical path)."""
+        self._forgotten.clear()
 
     def _fail(self, failure: Exception) -> None:
         last = self._history.last
@@ -251,9 +247,10 @@ class ReferenceStream:
         t = self.motion_time(tau)
         self.compute(tau)
         k = self._history.first_at_or_after(t)
-        self._rewind(k)
+        entry = self._history.entries[k]
         new = self.task_constraints(targets, self.scenario.z_static)
-        self._stepper.retarget(blend_constraints(self._stepper.motion.constraints, new, self._history.times[k],
-                                                 self.blend_time))
+        self._stepper.retarget(blend_constraints(entry.motion.constraints, new, entry.sample.t, self.blend_time),
+                               entry.sample.t, entry.sample.q, entry.sample.qd, entry.work)
+        self._forgotten.append(self._history.truncate(k))
         self._history.set_snapshot(k, self._stepper.snapshot())
         self.targets = targets

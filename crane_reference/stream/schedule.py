@@ -221,6 +221,10 @@ class FrameSchedule:
         """Frames the buffer lacks to the look-ahead."""
         return self.lookahead - (max(self.made_k, self.next_k) - self.next_k)
 
+    def is_urgent(self, plan: Plan) -> bool:
+        """Whether the frames of ``plan`` are within 1 / URGENT_PART of the look-ahead from publishing."""
+        return plan.k < self.next_k + self.lookahead // URGENT_PART
+
     def request(self, plan: Plan, count: int, horizon: float, points: int, decimation: int,
                 compute_budget: float | None) -> FrameRequest:
         """What the solver makes next for ``plan`` (see :func:`make_frames`): up to ``count`` frames, with a

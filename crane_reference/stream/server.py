@@ -16,15 +16,19 @@ Publishing
 
 Computing ahead
     The worker asks the solver for frames in batches of :data:`FRAME_BATCH` (a quarter of the look-ahead
-    if fewer), each after at most :data:`COMPUTE_SLICE` s of computing while publishing (unbounded before),
-    and forgets motion older than :data:`RELEASE_KEEP` s before them.  The publisher never waits for the
-    solver: the schedule's lock is held only to move frames.
+    if fewer; :data:`URGENT_BATCH` seconds of stream close to publishing, as after a command, so the first
+    frames come back soon), each after at most :data:`COMPUTE_SLICE` s of computing while publishing
+    (unbounded before), and forgets motion older than :data:`RELEASE_KEEP` s before them.  The publisher
+    never waits for the solver: the schedule's lock is held only to move frames.
 
 Commands
     :meth:`ReferenceServer.command` applies a stream command (``pause``, ``resume``,
     ``set_speed_scaling``, ``retarget``) at the frame ``lead`` seconds after the next one to publish, or at
     the next frame to make while nothing is published; the frames from there on are dropped at once and
-    made again after it, so no frame of the motion before the command is published past that point.
+    made again after it (the first batch in the command's own request to the solver), so no frame of the
+    motion before the command is published past that point.  The status gives, per command, when it was
+    accepted, the stamp it takes effect at and its margin: how long before that stamp its first frame was
+    ready (negative: samples were held; a longer ``lead`` helps).
     Speed changes and pauses are C2 ramps of the stream's time warp, re-targets C2 blends.
     :meth:`ReferenceServer.restart` (back to the static-equilibrium start: a position jump) is refused
     while publishing.  A command that raises leaves the stream as it was (its frames are made again, the
@@ -42,12 +46,13 @@ from typing import Any, Protocol
 from ..model.parameters import Task
 from .reference_stream import RUNNING
 from .sample import ReferenceSample
-from .schedule import NANOSECONDS, Frame, FrameSchedule, stamp_at
+from .schedule import NANOSECONDS, Frame, FrameBatch, FrameRequest, FrameSchedule, Plan, stamp_at
 from .solver import SolverStoppedError, StreamInfo, StreamStatus
 
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
 COMPUTE_SLICE = 0.005  # [s] of wall time the solver computes per request while publishing
 FRAME_BATCH = 20  # frames made per request, and the room the worker waits for to ask again
+URGENT_BATCH = 0.005  # [s] of stream (at least one frame) made per request close to publishing (after a command)
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to make (for commands)
 MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, the stamps leap (re-anchored)
 REST_MARGIN = 1.0  # [s] :meth:`ReferenceServer.come_to_rest` waits beyond the ramp and the lead
@@ -129,7 +134,9 @@ class ReferenceServer:
         self.preview = preview
         self.schedule = FrameSchedule(rate, max(2, math.ceil(LOOKAHEAD * rate)), lead, MAX_CATCH_UP,
                                       self.info.start)
+        self._urgent_batch = max(1, round(URGENT_BATCH * rate))
         self._refill = min(FRAME_BATCH, max(1, self.schedule.lookahead // 4))
+        self._clock_seen = (0, 0)  # the last clock reading [ns] of due() and the monotonic time [ns] of it
         self._lock = threading.Condition()  # the schedule and the counters here (never held while solving)
         self._solver_lock = threading.Lock()  # one request at a time, and commands against frame requests
         self._halt = threading.Event()
@@ -139,6 +146,7 @@ class ReferenceServer:
         self._clock_behind = 0
         self._clock_note = ""
         self._commands: dict[str, str] = {}
+        self._awaiting: dict[str, int] = {}  # command -> its first frame, until made
         self._rates_reference = (0, 0.0, 0.0, 0)
         self._worker = threading.Thread(target=self._work, name="crane_reference_frames", daemon=True)
         self._worker.start()
@@ -180,22 +188,44 @@ class ReferenceServer:
                     plan = schedule.plan()
                     # in batches, but up to the whole look-ahead before publishing starts
                     refill = plan.room >= self._refill or not self.publishing
-                    preview = self.preview
-                    request = schedule.request(plan, min(plan.room, FRAME_BATCH) if refill else 0, preview.horizon,
-                                               preview.points, preview.decimation,
-                                               COMPUTE_SLICE if self.publishing else None)  # all before starting
+                    urgent = self.publishing and schedule.is_urgent(plan)
+                    request = self._frame_request(plan, (self._urgent_batch if urgent else FRAME_BATCH) * refill)
                 with self._solver_lock:
                     if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
                         continue
                     batch = self.solver.call("frames", request, RELEASE_KEEP + LOOKAHEAD)
                 with self._lock:
-                    if schedule.accept(batch, plan) and not batch.frames and not batch.busy:
+                    if self._accept(batch, plan) and not batch.frames and not batch.busy:
                         self._lock.wait(timeout=LOOKAHEAD)
         except SolverStoppedError:
             if not self._halt.is_set():
                 schedule.fault = "the solver process ended"
         except Exception as error:  # publishing goes on (holding) and reports it
             schedule.fault = f"solver thread stopped: {type(error).__name__}: {error}"
+
+    def _frame_request(self, plan: Plan, count: int) -> FrameRequest:
+        """The solver's next request for ``plan`` (the server's lock held): up to ``count`` frames, with one
+        slice of computing ahead while publishing (all the look-ahead before)."""
+        preview = self.preview
+        return self.schedule.request(plan, min(plan.room, count), preview.horizon,
+                                     preview.points, preview.decimation,
+                                     COMPUTE_SLICE if self.publishing else None)
+
+    def _accept(self, batch: FrameBatch, plan: Plan) -> bool:
+        """Take the frames of ``batch`` made for ``plan`` (the server's lock held; False if a command replaced
+        them meanwhile); a command whose first frame is now made gets its margin: how long before that
+        frame is due it was ready, at least (negative: samples were held)."""
+        accepted = self.schedule.accept(batch, plan)
+        for name, k in list(self._awaiting.items()):
+            if self._start_ns is None:
+                del self._awaiting[name]
+            elif self.schedule.made_k > k:
+                seen_ns, seen_at = self._clock_seen  # the clock now, assuming it runs at the wall clock's rate
+                now_ns = seen_ns + time.monotonic_ns() - seen_at
+                margin = (stamp_at(self._start_ns, k, self.rate) - now_ns) / NANOSECONDS
+                self._commands[f"{name}_margin_s"] = f"{margin:.6f}"
+                del self._awaiting[name]
+        return accepted
 
     # -- publishing -----------------------------------------------------------------------------------
 
@@ -229,6 +259,7 @@ class ReferenceServer:
                 self._clock_note = (f"ROS time jumped {(start - self._start_ns) / NANOSECONDS:.3f} s ahead of the "
                                     "schedule: the stamps leap with it, no sample skipped")
                 self._start_ns = start
+            self._clock_seen = (now_ns, time.monotonic_ns())
             behind = self._last_stamp - now_ns
             self._clock_behind = behind if behind > NANOSECONDS // self.rate else 0
             batch = schedule.due(now_ns, start)
@@ -261,19 +292,29 @@ class ReferenceServer:
     def _at_command_point(self, name: str, accepted_ns: int, *request: Any) -> tuple[int, float, Any]:
         """Send the solver ``request`` (method, args...) with the stream time tau of the command point
         inserted after the method (frame k: ``lead`` after the next sample to publish, or the next frame to
-        make while not publishing); the frames from k on are dropped at once and made again after it.
-        Records the command's acceptance and effect.  Returns k, tau and the solver's answer."""
+        make while not publishing); the frames from k on are dropped at once, and the first batch of them is
+        made again in the same request.  Records the command's acceptance and effect.  Returns k, tau and the
+        solver's answer."""
         with self._lock:
             k, tau = self.schedule.command_point(lead=self.publishing)
             self.schedule.after_command(k, tau)
+            self._commands.pop(f"{name}_margin_s", None)
+            if self.publishing:
+                self._awaiting[name] = k
             self._commands_pending += 1
+            plan = self.schedule.plan()
+            frames = self._frame_request(plan, self._urgent_batch)
+        batch = None
         try:
             with self._solver_lock:
-                answer = self.solver.call(request[0], tau, *request[1:])
+                answer, batch = self.solver.call("command", request[0], tau, request[1:], frames,
+                                                 RELEASE_KEEP + LOOKAHEAD)
         finally:
             with self._lock:
+                if batch is not None:
+                    self._accept(batch, plan)
                 self._commands_pending -= 1
-                self._lock.notify_all()  # the worker makes the frames from k now, not at the next publish
+                self._lock.notify_all()  # the worker goes on after these frames, not at the next publish
         self._commands[f"{name}_stamp_s"] = f"{self.stamp_of(k):.6f}"
         self._commands[f"{name}_accepted_s"] = f"{accepted_ns / NANOSECONDS:.6f}"
         return k, tau, answer

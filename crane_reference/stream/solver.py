@@ -124,6 +124,16 @@ class StreamSolver:
         self.stream.release(request.plan.tau, keep)
         return batch
 
+    def command(self, method: str, tau: float, args: tuple, request: FrameRequest, keep: float
+                ) -> tuple[Any, FrameBatch]:
+        """The stream command ``method(tau, *args)``, then the frames of ``request`` (:meth:`frames`): one
+        request, so a command's first frames are ready without a second trip."""
+        return getattr(self, method)(tau, *args), self.frames(request, keep)
+
+    def after_reply(self) -> None:
+        """Tidy up after a reply is sent (:meth:`~.reference_stream.ReferenceStream.free_forgotten`)."""
+        self.stream.free_forgotten()
+
     def check_targets(self, targets: Task) -> None:
         self.stream.check_targets(targets)
 
@@ -173,6 +183,7 @@ class LocalSolver:
             return getattr(self.solver, method)(*args)
         finally:
             self.status = self.solver.status()
+            self.solver.after_reply()
 
     def close(self) -> None:
         pass
@@ -203,6 +214,8 @@ def _serve(requests: Connection, replies: Connection) -> None:
         except Exception as error:  # reported to the caller, which raises it
             reply = (False, _portable(error))
         replies.send((*reply, solver.status()))
+        del reply
+        solver.after_reply()
 
 
 def _portable(error: Exception) -> Exception:

@@ -105,10 +105,14 @@ def reach(scenario: Scenario, radius: float, heights: Iterable[float], margin: f
 
 
 def settled(profile: Profile, t: float) -> Profile:
-    """Drop blends that have finished by t, so repeated re-targeting does not nest profiles forever."""
-    while isinstance(profile, Blend) and t >= profile.t0 + profile.duration:
-        profile = profile.new
-    return profile
+    """``profile`` from t on with the blends in it that have finished by t dropped (also those inside a
+    blend still running), so re-targeting faster than the blend time does not nest profiles further than
+    the blends in progress."""
+    if not isinstance(profile, Blend):
+        return profile
+    if t >= profile.t0 + profile.duration:
+        return settled(profile.new, t)
+    return dataclasses.replace(profile, old=settled(profile.old, t))
 
 
 def blend_constraints(old: ConstraintSet, new: ConstraintSet, t0: float, duration: float) -> ConstraintSet:
