@@ -66,12 +66,17 @@ def test_a_missing_frame_holds_the_last_published_sample(stream_factory):
     assert schedule.counters.published == 2 and schedule.counters.held_late == 1
 
 
-def test_commands_take_effect_lead_seconds_ahead_and_replace_the_frames(stream_factory):
+def test_commands_take_effect_within_the_lead_and_replace_the_frames(stream_factory):
     sample = stream_factory().sample(0.0)
     schedule = schedule_with(sample, frames=80)
-    schedule.due(5 * NANOSECONDS // RATE, 0)  # samples 0..5 published
-    k, tau = schedule.command_point()
-    assert k == 6 + round(LEAD * RATE) and tau == pytest.approx(k / RATE)
+    period = NANOSECONDS // RATE
+    schedule.due(5 * period, 0)  # samples 0..5 published (stamps k * period from 0)
+    accepted = 5 * period + 3_000_000  # 3 ms after sample 5's stamp
+    k, tau = schedule.command_point(accepted, 0)
+    assert k == 5 + round(LEAD * RATE) and tau == pytest.approx(k / RATE)  # stamped LEAD - 3 ms after acceptance
+    assert k * period <= accepted + LEAD * NANOSECONDS < (k + 1) * period
+    assert schedule.command_point(accepted - NANOSECONDS, 0)[0] == 7  # a late acceptance: the one after the next
+    assert schedule.command_point()[0] == 6  # nothing published: the next frame
     plan = schedule.plan()  # a plan made before the command
     schedule.after_command(k, tau)
     assert [f.k for f in schedule.frames] == list(range(6, k))
@@ -79,7 +84,7 @@ def test_commands_take_effect_lead_seconds_ahead_and_replace_the_frames(stream_f
     assert not schedule.accept(FrameBatch([Frame(80, 0.8, sample)], 0, False), plan)  # made for the old buffer: dropped
     # with fewer frames made than the lead, the command applies at the next frame to make
     short = schedule_with(sample, frames=10)
-    assert short.command_point() == (10, pytest.approx(0.1))
+    assert short.command_point(0, 0) == (10, pytest.approx(0.1))
 
 
 def test_frames_are_the_stream_sampled_at_the_rate_with_decimated_previews(stream_factory):
@@ -131,12 +136,12 @@ def test_after_a_command_samples_come_first_then_previews_on_their_cadence(strea
 
     fill(None)
     schedule.due(NANOSECONDS // 2, 0)  # published up to 0.5 s
-    k, tau = schedule.command_point()
+    k, tau = schedule.command_point(NANOSECONDS // 2 + 1, 0)
     schedule.after_command(k, tau)
     stream.retarget(tau, Task(3.1, 2.0, 0.2, 5.0))
     window_end = schedule.next_k + lookahead // 4
     previews = fill(0.005)
-    assert k == schedule.next_k + 10 and k < window_end
+    assert k == round(0.6 * RATE) and k < window_end  # the last sample stamped within the 0.1 s lead
     assert previews[:4] == [window_end + i * decimation for i in range(4)]
     assert all(b - a == decimation for a, b in itertools.pairwise(previews))
 

@@ -77,14 +77,14 @@ def test_served_samples_are_the_stream_at_consecutive_stamps(server: ReferenceSe
     assert server.next_stamp() == start + 150 * PERIOD
 
 
-def test_a_command_takes_effect_lead_after_the_next_sample(server: ReferenceServer) -> None:
+def test_a_command_takes_effect_at_the_last_sample_within_the_lead(server: ReferenceServer) -> None:
     start = NS
     server.begin(start)
     before = publish(server, start, 0.5)
     targets = Task(3.2, 2.0, 0.2, 5.0)
     server.check_targets(targets)
-    k = server.command("retarget", targets, accepted_ns=start + 49 * PERIOD)
-    assert k == len(before) + round(LEAD * RATE)
+    k = server.command("retarget", targets, accepted_ns=start + 49 * PERIOD + 1)  # just after sample 49 went out
+    assert k == 49 + round(LEAD * RATE)  # stamped LEAD - 1 ns after the acceptance
     assert server.commands["retarget_stamp_s"] == f"{(start + k * PERIOD) / NS:.6f}"
     after = publish(server, start + len(before) * PERIOD, 1.0)
     truth = ReferenceStream(load_config(), "rigid", blend_time=0.5, ramp_time=0.3)
@@ -119,7 +119,7 @@ def test_coming_to_rest_pauses_along_the_ramp(server: ReferenceServer) -> None:
     server.begin(NS)
     publish(server, NS, 0.3)
     server.end()  # not publishing: the pause is applied at the next frame to make, and nothing to wait for
-    server.come_to_rest()
+    server.come_to_rest(NS + 30 * PERIOD)
     assert server.stream.state == PAUSED and server.stream.rate == 0.0
 
 

@@ -28,7 +28,8 @@ Clocks and stamps
 
 Commands
     A re-target (``ellipse.*``, ``z.*`` parameters), a speed change (``speed_scaling``) and ``~/pause``
-    take effect at the sample ``command_lead`` seconds after the next one to be published; diagnostics
+    take effect at the last sample stamped within ``command_lead`` seconds of their acceptance (at least the
+    one after the next to be published); diagnostics
     give both instants (``{command}_accepted_s``, ``{command}_stamp_s``) and how long before the second
     the command's first sample was ready (``{command}_margin_s``).  Speed changes and pauses are C2
     ramps of the stream's time warp.  ``~/restart`` (back to the static-equilibrium start: a position

@@ -11,8 +11,8 @@ and no ROS types, so every rule here is tested without rclpy:
   with a preview every ``decimation`` frames; a frame that is not finite is replaced by the last valid
   sample held;
 * commands (:meth:`FrameSchedule.command_point`, :meth:`FrameSchedule.after_command`): a command takes
-  effect at the frame ``lead`` seconds after the next one to publish (or at the next one to make, if
-  earlier); frames from there on are dropped and made again;
+  effect at the last frame stamped within ``lead`` seconds of its acceptance, but not before the one after
+  the next to publish (nor after the next one to make); frames from there on are dropped and made again;
 * publishing (:meth:`FrameSchedule.due`, :meth:`FrameSchedule.outgoing`): every sample due by now,
   skipping those more than ``max_catch_up`` seconds late; a sample whose frame is not ready is the last
   one published, held (zero velocity).
@@ -257,11 +257,18 @@ class FrameSchedule:
 
     # -- commands -------------------------------------------------------------------------------------
 
-    def command_point(self, lead: bool = True) -> tuple[int, float]:
-        """The frame a command takes effect at, and its stream time: ``lead`` after the next one to publish,
-        or (``lead`` False, nothing being published) the next one itself."""
+    def command_point(self, accepted_ns: int | None = None, start_ns: int = 0) -> tuple[int, float]:
+        """The frame a command accepted at the clock reading ``accepted_ns`` takes effect at, and its stream
+        time.  While publishing (stamps from ``start_ns``, :func:`stamp_at`): the last frame stamped at most
+        ``lead`` after the acceptance, so the effect comes within ``lead``, but at least the one after the
+        next to publish (the next may be going out); nothing being published (``accepted_ns`` None): the next
+        frame itself.  Never beyond the next frame to make."""
         free = max(self.made_k, self.next_k)  # the next frame the worker makes
-        k = min(self.next_k + (math.ceil(self.lead * self.rate) if lead else 0), free)
+        if accepted_ns is None:
+            k = min(self.next_k, free)
+        else:
+            within_lead = (accepted_ns + round(self.lead * NANOSECONDS) - start_ns) * self.rate // NANOSECONDS
+            k = min(max(self.next_k + 1, within_lead), free)
         tau = self.made_tau if k == free else next(f.tau for f in self.frames if f.k == k)
         return k, tau
 

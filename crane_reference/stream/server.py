@@ -23,12 +23,13 @@ Computing ahead
 
 Commands
     :meth:`ReferenceServer.command` applies a stream command (``pause``, ``resume``,
-    ``set_speed_scaling``, ``retarget``) at the frame ``lead`` seconds after the next one to publish, or at
-    the next frame to make while nothing is published; the frames from there on are dropped at once and
-    made again after it (the first batch in the command's own request to the solver), so no frame of the
-    motion before the command is published past that point.  The status gives, per command, when it was
-    accepted, the stamp it takes effect at and its margin: how long before that stamp its first frame was
-    ready (negative: samples were held; a longer ``lead`` helps).
+    ``set_speed_scaling``, ``retarget``) at the last frame stamped within ``lead`` seconds of its acceptance
+    (at least the one after the next to publish: the effect comes at most ``lead`` after the acceptance when
+    ``lead`` spans two periods), or at the next frame to make while nothing is published; the frames from
+    there on are dropped at once and made again after it (the first batch in the command's own request to
+    the solver), so no frame of the motion before the command is published past that point.  The status
+    gives, per command, when it was accepted, the stamp it takes effect at and its margin: how long before
+    that stamp its first frame was ready (negative: samples were held; a longer ``lead`` helps).
     Speed changes and pauses are C2 ramps of the stream's time warp, re-targets C2 blends.
     :meth:`ReferenceServer.restart` (back to the static-equilibrium start: a position jump) is refused
     while publishing.  A command that raises leaves the stream as it was (its frames are made again, the
@@ -291,12 +292,13 @@ class ReferenceServer:
 
     def _at_command_point(self, name: str, accepted_ns: int, *request: Any) -> tuple[int, float, Any]:
         """Send the solver ``request`` (method, args...) with the stream time tau of the command point
-        inserted after the method (frame k: ``lead`` after the next sample to publish, or the next frame to
-        make while not publishing); the frames from k on are dropped at once, and the first batch of them is
-        made again in the same request.  Records the command's acceptance and effect.  Returns k, tau and the
+        inserted after the method (frame k: the last one stamped within ``lead`` of the acceptance
+        ``accepted_ns``, at least the one after the next to publish; the next frame to make while not
+        publishing); the frames from k on are dropped at once, and the first batch of them is made again in
+        the same request.  Records the command's acceptance and effect.  Returns k, tau and the
         solver's answer."""
         with self._lock:
-            k, tau = self.schedule.command_point(lead=self.publishing)
+            k, tau = self.schedule.command_point(accepted_ns if self.publishing else None, self._start_ns or 0)
             self.schedule.after_command(k, tau)
             self._commands.pop(f"{name}_margin_s", None)
             if self.publishing:
@@ -319,11 +321,11 @@ class ReferenceServer:
         self._commands[f"{name}_accepted_s"] = f"{accepted_ns / NANOSECONDS:.6f}"
         return k, tau, answer
 
-    def command(self, name: str, *args: Any, accepted_ns: int = 0) -> int:
+    def command(self, name: str, *args: Any, accepted_ns: int) -> int:
         """Apply the stream command ``name`` (``pause``, ``resume``, ``set_speed_scaling`` (rate),
-        ``retarget`` (targets, checked with :meth:`check_targets`)) at the command point; ``accepted_ns``:
-        when it was accepted (clock reading, for the status).  Returns the sample it takes effect at.
-        Raises what the stream raises (the stream unchanged)."""
+        ``retarget`` (targets, checked with :meth:`check_targets`)) at the command point of its acceptance
+        at the clock reading ``accepted_ns`` [ns] (:meth:`~.schedule.FrameSchedule.command_point`).  Returns
+        the sample it takes effect at.  Raises what the stream raises (the stream unchanged)."""
         if name not in COMMANDS:
             raise ValueError(f"command {name!r}: not one of {', '.join(COMMANDS)}")
         label = "speed_scaling" if name == "set_speed_scaling" else name
@@ -360,7 +362,7 @@ class ReferenceServer:
         self._commands.update(restart_jump_rad=f"{restart.jump:.6g}", restart_jump_joint=restart.joint)
         return restart
 
-    def come_to_rest(self, accepted_ns: int = 0, stop: threading.Event | None = None) -> None:
+    def come_to_rest(self, accepted_ns: int, stop: threading.Event | None = None) -> None:
         """Pause a moving stream (a speed ramp to rest) and wait, while publishing, until its first sample at
         rest is published (at most the ramp, the lead and REST_MARGIN; sooner if ``stop`` is set)."""
         stream = self.stream
