@@ -8,7 +8,8 @@ For the flexible crane (h = 1 ms), in one process:
 * ``ReferenceStream.samples``: microseconds per sample, one at a time and in batches of 20 (the node's
   FRAME_BATCH), at the computed steps (a 1 kHz grid) and between them (interpolated);
 * a re-target: the reachability check (``check_targets``, run in the node's parameter callback before
-  the change is accepted), ``retarget`` itself (rewind and blend), then the motion of 20 samples after it;
+  the change is accepted), ``retarget`` itself (restart at the computed step, blend), then the motion of
+  20 samples after it;
 * E's reach from the column's axis (the node's ranges of ellipse.a and ellipse.b, found at configure);
 * the solver side of the node's reference server (``StreamSolver.frames`` asked as the server asks it:
   batches of 20 frames, a 5 ms compute slice, previews at 10 Hz) at 1000 and 100 Hz: CPU seconds per
@@ -90,7 +91,7 @@ def main() -> None:
         stream.samples([tau + j * STEP for j in range(BATCH)])
         after.append(time.perf_counter() - start)
         stream.compute(tau + 1.0)
-    print(f"[retarget] reachability check {np.median(checks) * 1e3:6.1f} ms, retarget (rewind, blend) "
+    print(f"[retarget] reachability check {np.median(checks) * 1e3:6.1f} ms, retarget (restart, blend) "
           f"{np.median(retargets) * 1e3:6.1f} ms, the first {BATCH} samples after it {np.median(after) * 1e3:6.1f} ms "
           f"(medians of {args.repeats})")
 
