@@ -13,7 +13,9 @@ import pytest
 
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import Task
-from crane_reference.stream.reference_stream import PAUSED, ReferenceStream
+from crane_reference.motion.programmed_motion import ConstraintSingularityError
+from crane_reference.motion.simulation import MotionStepper
+from crane_reference.stream.reference_stream import ERROR, PAUSED, RUNNING, ReferenceStream
 from crane_reference.stream.server import CommandRefusedError, Preview, ReferenceServer
 from crane_reference.stream.solver import LocalSolver, SolverProcess, StreamSpec
 from crane_reference.stream.targets import UnreachableTargetError
@@ -113,6 +115,41 @@ def test_restart_only_while_not_publishing_and_its_jump(server: ReferenceServer)
     resumed = publish(server, NS + len(out) * PERIOD, 0.2)
     np.testing.assert_allclose(resumed[0].frame.sample.q, start, atol=1e-12)
     assert resumed[0].stamp_ns > out[-1].stamp_ns
+
+
+def test_a_solver_failure_holds_the_last_sample_and_a_restart_recovers(server: ReferenceServer,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """The integrator fails (injected into MotionStepper.advance_until): the frames made before the failure are
+    published, the stream's, then its last sample held (zero velocity) with the stream in ERROR naming the
+    failure; a restart while not publishing goes back to the start, RUNNING."""
+    truth = ReferenceStream(load_config(), "rigid", blend_time=0.5, ramp_time=0.3)
+    truth.compute(2.5)  # before the failure is injected (into every MotionStepper)
+    server.begin(NS)
+    before = publish(server, NS, 0.3)
+
+    def fail(self: MotionStepper, t_end: float) -> None:
+        raise ConstraintSingularityError("injected by the test")
+
+    monkeypatch.setattr(MotionStepper, "advance_until", fail)
+    after = publish(server, NS + len(before) * PERIOD, 2.0)  # beyond the look-ahead made before the failure
+    out = before + after
+    held = np.array([o.frame.sample.held for o in out])
+    moving = int(np.argmax(held))  # the first held sample: all before it moving, all after it held
+    assert 0 < moving < len(out) and np.all(held[moving:]) and not np.any(held[:moving])
+    np.testing.assert_array_equal([o.frame.sample.q for o in out[:moving]],
+                                  [truth.sample(k / RATE).q for k in range(moving)])
+    for o in out[moving:]:
+        np.testing.assert_array_equal(o.frame.sample.q, out[moving - 1].frame.sample.q)
+        assert np.all(o.frame.sample.qd == 0.0) and np.all(np.isfinite(o.frame.sample.effort))
+    status = server.status(NS + len(out) * PERIOD)
+    assert status.stream.state == ERROR and "injected by the test" in status.stream.last_error
+    server.end()
+    monkeypatch.undo()
+    server.restart()
+    assert server.stream.state == RUNNING
+    server.begin(NS + len(out) * PERIOD)
+    resumed = publish(server, NS + len(out) * PERIOD, 0.1)
+    np.testing.assert_allclose(resumed[0].frame.sample.q, truth.start_configuration(), atol=1e-12)
 
 
 def test_coming_to_rest_pauses_along_the_ramp(server: ReferenceServer) -> None:

@@ -82,7 +82,16 @@ from ..stream.server import CommandRefusedError, Outgoing, Preview, ReferenceSer
 from ..stream.solver import LocalSolver, SolverProcess, SolverStoppedError, StreamSpec
 from ..stream.targets import UnreachableTargetError
 from .message_types import rclpy_types
-from .parameters import PARAMETERS, SPECS, TARGET_PARAMETERS, ParameterError, check, coerce_parameters, declare
+from .parameters import (
+    COMMANDING_PARAMETERS,
+    PARAMETERS,
+    SPECS,
+    TARGET_PARAMETERS,
+    ParameterError,
+    check,
+    coerce_parameters,
+    declare,
+)
 
 NODE_NAME = messages.NODE_NAME
 MAX_WAIT = 0.1  # [s] of wall time the publisher sleeps at most before reading the clock again
@@ -248,7 +257,7 @@ class CraneReferenceNode(LifecycleNode):
         """Publish from the next sample on (stamps continue from the clock's present time); a reference
         stopped by a deactivation resumes along a speed ramp."""
         self._starting = "activating: waiting for the first second of motion"
-        if self._server.stream.state == PAUSED and self._resume_on_activate:
+        if self._server.stream.state == PAUSED and self._resume_on_activate and self._server.computing:
             self._server.command("resume", accepted_ns=self._now())
         self._resume_on_activate = False
         self._quiet.clear()
@@ -381,7 +390,10 @@ class CraneReferenceNode(LifecycleNode):
             return response
         stream = self._server.stream
         wanted = PAUSED if request.data else RUNNING
-        if stream.state == ERROR:
+        if not self._server.computing:
+            response.success = False
+            response.message = "the solver stopped; deactivate, cleanup, configure and activate start a new one"
+        elif stream.state == ERROR:
             response.success = False
             response.message = (f"the stream is in ERROR ({stream.last_error}); deactivate, call ~/restart "
                                 "and activate")
@@ -411,6 +423,13 @@ class CraneReferenceNode(LifecycleNode):
                 self._joint_indices(list(joints))
             except ParameterError as error:
                 reason = str(error)
+        commanding = [p.name for p in parameters if p.name in COMMANDING_PARAMETERS]
+        if reason is None and commanding and self._server is not None:
+            try:
+                self._server.check_computing()
+            except CommandRefusedError as error:
+                reason = (f"{', '.join(commanding)}: {error} (deactivate, cleanup, configure and activate start a "
+                          "new solver)")
         changed = {p.name: p.value for p in parameters if p.name in TARGET_PARAMETERS}
         if reason is None and changed and self._server is not None:  # else checked at configure
             try:
@@ -430,6 +449,13 @@ class CraneReferenceNode(LifecycleNode):
         server = self._server
         if server is None:  # the values are read at configure
             return
+        try:
+            self._apply_to_server(server, names)
+        except CommandRefusedError as error:  # the solver stopped since the on-set check
+            self.get_logger().error(f"{', '.join(names)} set but not applied: {error}")
+
+    def _apply_to_server(self, server: ReferenceServer, names: list[str]) -> None:
+        """Send the server the changes of the parameters ``names`` (their values in self._values)."""
         if "blend_time" in names:
             server.set_blend_time(self._values["blend_time"])
         if "command_lead" in names:
@@ -531,7 +557,10 @@ class CraneReferenceNode(LifecycleNode):
         stream, counters = status.stream, status.counters
         late, self._late_reported = counters["held_late"] - self._late_reported, counters["held_late"]
         level, message = messages.OK, stream.state
-        if stream.state == ERROR or status.fault:
+        if not status.computing:
+            level, message = messages.ERROR, (f"solver stopped: {status.fault}; holding the last sample (deactivate, "
+                                              "cleanup, configure and activate start a new solver)")
+        elif stream.state == ERROR or status.fault:
             level, message = messages.ERROR, f"{stream.state}: {stream.last_error or status.fault}"
         elif status.clock_behind:
             level, message = messages.WARN, (f"{stream.state}: ROS time went back: waiting until it reaches the last "
@@ -544,7 +573,7 @@ class CraneReferenceNode(LifecycleNode):
         values = messages.diagnostic_values(
             stream.state, status.last, status.real_time_factor, self._rate, status.achieved_rate, counters,
             stream.targets, stream.rate, stream.last_error or status.fault,
-            {"frames_ready": status.frames_ready, **status.commands})
+            {"frames_ready": status.frames_ready, "blend_time_s": f"{stream.blend_time:g}", **status.commands})
         self._diagnostics_pub.publish(messages.diagnostics(self._types, self._now(), name, hardware_id, level,
                                                            message, values))
         if level == messages.ERROR:

@@ -184,6 +184,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
 SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PARAMETERS}
 TARGET_PARAMETERS = {"ellipse.a": "ellipse_a", "ellipse.b": "ellipse_b", "z.increment": "z_increment",
                      "z.rise_time": "rise_time"}
+# parameters whose change is a request to the running solver (refused once it has stopped)
+COMMANDING_PARAMETERS = {*TARGET_PARAMETERS, "speed_scaling", "blend_time"}
 
 
 def coerce_parameters(parameters: list[Parameter]) -> list[Parameter]:

@@ -33,7 +33,8 @@ Commands
     Speed changes and pauses are C2 ramps of the stream's time warp, re-targets C2 blends.
     :meth:`ReferenceServer.restart` (back to the static-equilibrium start: a position jump) is refused
     while publishing.  A command that raises leaves the stream as it was (its frames are made again, the
-    same).
+    same).  Once the solver has ended or failed (:attr:`ReferenceServer.computing` false) the last sample is
+    held and every request is refused (:class:`CommandRefusedError`) before it touches the frames made.
 """
 
 from __future__ import annotations
@@ -107,8 +108,8 @@ class ServerStatus:
     """A snapshot for diagnostics: the stream's status, whether publishing, the last sample sent, the
     counters, the fault, frames ready, each command's acceptance time and the stamp it takes effect at
     [s], the last restart, how far the clock is behind the last stamp [s] (it went back), a note on a
-    forward jump of the clock since the last snapshot, the achieved publish rate [Hz] and the solver's
-    real-time factor since the last snapshot."""
+    forward jump of the clock since the last snapshot, the achieved publish rate [Hz], the solver's
+    real-time factor since the last snapshot and whether the server still computes ahead."""
 
     stream: StreamStatus
     publishing: bool
@@ -121,6 +122,7 @@ class ServerStatus:
     clock_note: str = ""
     achieved_rate: float = 0.0
     real_time_factor: float = math.inf
+    computing: bool = True
 
 
 class ReferenceServer:
@@ -159,8 +161,10 @@ class ReferenceServer:
 
     @property
     def commands(self) -> dict[str, str]:
-        """Each command's acceptance time and the stamp it takes effect at [s] (``{name}_accepted_s``,
-        ``{name}_stamp_s``), and the last restart's jump (``restart_jump_rad``, ``restart_jump_joint``)."""
+        """Each command's acceptance time, the stamp it takes effect at [s] and the stream time of that sample
+        (``{name}_accepted_s``, ``{name}_stamp_s``, ``{name}_stream_time_s``, the last exact: it locates the
+        command in a recording or an offline run), and the last restart's jump (``restart_jump_rad``,
+        ``restart_jump_joint``)."""
         return dict(self._commands)
 
     @property
@@ -198,9 +202,9 @@ class ReferenceServer:
                 with self._lock:
                     if self._accept(batch, plan) and not batch.frames and not batch.busy:
                         self._lock.wait(timeout=LOOKAHEAD)
-        except SolverStoppedError:
+        except SolverStoppedError as error:
             if not self._halt.is_set():
-                schedule.fault = "the solver process ended"
+                schedule.fault = str(error)
         except Exception as error:  # publishing goes on (holding) and reports it
             schedule.fault = f"solver thread stopped: {type(error).__name__}: {error}"
 
@@ -297,6 +301,7 @@ class ReferenceServer:
         publishing); the frames from k on are dropped at once, and the first batch of them is made again in
         the same request.  Records the command's acceptance and effect.  Returns k, tau and the
         solver's answer."""
+        self.check_computing()
         with self._lock:
             k, tau = self.schedule.command_point(accepted_ns if self.publishing else None, self._start_ns or 0)
             self.schedule.after_command(k, tau)
@@ -308,9 +313,7 @@ class ReferenceServer:
             frames = self._frame_request(plan, self._urgent_batch)
         batch = None
         try:
-            with self._solver_lock:
-                answer, batch = self.solver.call("command", request[0], tau, request[1:], frames,
-                                                 RELEASE_KEEP + LOOKAHEAD)
+            answer, batch = self._request("command", request[0], tau, request[1:], frames, RELEASE_KEEP + LOOKAHEAD)
         finally:
             with self._lock:
                 if batch is not None:
@@ -319,13 +322,36 @@ class ReferenceServer:
                 self._lock.notify_all()  # the worker goes on after these frames, not at the next publish
         self._commands[f"{name}_stamp_s"] = f"{self.stamp_of(k):.6f}"
         self._commands[f"{name}_accepted_s"] = f"{accepted_ns / NANOSECONDS:.6f}"
+        self._commands[f"{name}_stream_time_s"] = repr(tau)
         return k, tau, answer
+
+    @property
+    def computing(self) -> bool:
+        """Whether the server computes ahead (False once its solver ended or failed: the last sample is held,
+        and commands are refused; a new server with a new solver is needed)."""
+        return self._worker.is_alive()
+
+    def check_computing(self) -> None:
+        """Raise :class:`CommandRefusedError` (saying why) once the solver has stopped."""
+        if not self.computing:
+            raise CommandRefusedError(f"the solver stopped ({self.schedule.fault or 'closed'}): start a new one")
+
+    def _request(self, method: str, *args: Any) -> Any:
+        """The solver's answer to ``method(*args)``, one request at a time; :class:`CommandRefusedError` if
+        the solver has stopped."""
+        self.check_computing()
+        with self._solver_lock:
+            try:
+                return self.solver.call(method, *args)
+            except SolverStoppedError as error:
+                raise CommandRefusedError(f"the solver stopped ({error}): start a new one") from error
 
     def command(self, name: str, *args: Any, accepted_ns: int) -> int:
         """Apply the stream command ``name`` (``pause``, ``resume``, ``set_speed_scaling`` (rate),
         ``retarget`` (targets, checked with :meth:`check_targets`)) at the command point of its acceptance
         at the clock reading ``accepted_ns`` [ns] (:meth:`~.schedule.FrameSchedule.command_point`).  Returns
-        the sample it takes effect at.  Raises what the stream raises (the stream unchanged)."""
+        the sample it takes effect at.  Raises what the stream raises (the stream unchanged), or
+        :class:`CommandRefusedError` once the solver has stopped."""
         if name not in COMMANDS:
             raise ValueError(f"command {name!r}: not one of {', '.join(COMMANDS)}")
         label = "speed_scaling" if name == "set_speed_scaling" else name
@@ -333,12 +359,10 @@ class ReferenceServer:
 
     def check_targets(self, targets: Task) -> None:
         """Raise :class:`~.targets.UnreachableTargetError` unless ``targets`` can be streamed from here."""
-        with self._solver_lock:
-            self.solver.call("check_targets", targets)
+        self._request("check_targets", targets)
 
     def set_blend_time(self, seconds: float) -> None:
-        with self._solver_lock:
-            self.solver.call("set_blend_time", seconds)
+        self._request("set_blend_time", seconds)
 
     def set_lead(self, seconds: float) -> None:
         with self._lock:
@@ -346,8 +370,7 @@ class ReferenceServer:
 
     def reach(self, radius: float, heights: tuple[float, ...]) -> tuple[float, float]:
         """The crane's reach [m] at heights above E's static one (:meth:`~.solver.StreamSolver.reach`)."""
-        with self._solver_lock:
-            return self.solver.call("reach", radius, heights)
+        return self._request("reach", radius, heights)
 
     def restart(self, accepted_ns: int = 0) -> Restart:
         """Back to the static-equilibrium start of the current targets, also out of ERROR; only while not
@@ -364,9 +387,10 @@ class ReferenceServer:
 
     def come_to_rest(self, accepted_ns: int, stop: threading.Event | None = None) -> None:
         """Pause a moving stream (a speed ramp to rest) and wait, while publishing, until its first sample at
-        rest is published (at most the ramp, the lead and REST_MARGIN; sooner if ``stop`` is set)."""
+        rest is published (at most the ramp, the lead and REST_MARGIN; sooner if ``stop`` is set).  Nothing to
+        do once computing ahead has stopped (the solver ended or failed: the last sample is held already)."""
         stream = self.stream
-        if stream.state != RUNNING or stream.rate <= 0.0:
+        if stream.state != RUNNING or stream.rate <= 0.0 or not self._worker.is_alive():
             return
         k, tau, _ = self._at_command_point("pause", accepted_ns, "pause")
         stream = self.stream
@@ -391,4 +415,4 @@ class ReferenceServer:
                 self.stream, self.publishing, schedule.last, schedule.counters.as_dict(), schedule.fault,
                 len(schedule.frames), dict(self._commands), self._clock_behind / NANOSECONDS, note,
                 (published - last_published) * NANOSECONDS / (now_ns - last_now) if now_ns > last_now else 0.0,
-                (motion - last_motion) / (wall - last_wall) if wall > last_wall else math.inf)
+                (motion - last_motion) / (wall - last_wall) if wall > last_wall else math.inf, self.computing)
