@@ -27,8 +27,10 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
   invalid values of ellipse.*, z.*, speed_scaling and unknown names; single and atomic requests), then
   stamp gaps longer than two periods, non-finite positions or velocities, requests without a response
   and whether a valid change still takes effect afterwards;
-* first, in this process and alone (``--message-costs``): what the node's publisher spends per sample to
-  fill and publish ~/joint_states and ~/end_effector_pose, and to build ~/markers with a full trail.
+* first (``--message-costs``), in this process: what the node's publisher spends per sample to fill and
+  publish ~/joint_states and ~/end_effector_pose, alone and with a subscriber in another process, the CPU
+  share of a process that only publishes them at each rate (the floor of publishing from rclpy), and the
+  cost of building ~/markers with a full trail.
 
 Run: ``.venv/bin/python benchmarks/bench_node.py [--duration 30] [--rates 100 500 1000] [--model flexible]
 [--flood 300] [-p command_lead:=0.05 ...]``.
@@ -44,6 +46,7 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -290,17 +293,39 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
     }
 
 
-def message_costs(model: str) -> None:
-    """Print the publisher's per-sample costs (messages filled again, as the node does) and the markers'."""
+SUBSCRIBER = """
+import rclpy
+from geometry_msgs.msg import PoseStamped
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+rclpy.init()
+node = Node("bench_messages_subscriber")
+node.create_subscription(JointState, "/bench_joint_states", lambda msg: None, 1000)
+node.create_subscription(PoseStamped, "/bench_pose", lambda msg: None, 1000)
+try:
+    rclpy.spin(node)
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+"""
+
+
+def message_costs(model: str, domain: int, rates: list[int]) -> None:
+    """Print the publisher's per-sample costs (messages filled again, as the node does) alone and with a
+    subscriber in another process, this process's CPU share when it only publishes at each of ``rates``
+    (the floor of the node's publishing in rclpy: no stream, no clock, no schedule) and the markers' cost."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     context = rclpy.Context()
     rclpy.init(context=context)
     node = Node("bench_messages", context=context)
+    subscriber = None
     try:
         types, stream = rclpy_types(), ReferenceStream(load_config(), model)
         stream.compute(0.1)
         sample, names = stream.sample(0.05), list(stream.joint_names)
-        joints = node.create_publisher(JointState, "bench_joint_states", 10)
-        poses = node.create_publisher(PoseStamped, "bench_pose", 10)
+        joints = node.create_publisher(JointState, "/bench_joint_states", 10)
+        poses = node.create_publisher(PoseStamped, "/bench_pose", 10)
         kept = {"joint": None, "pose": None}
 
         def one_sample(k: int) -> None:
@@ -309,22 +334,57 @@ def message_costs(model: str) -> None:
             joints.publish(kept["joint"])
             poses.publish(kept["pose"])
 
-        count = 5000
-        start = time.perf_counter()
-        for k in range(count):
-            one_sample(k)
-        per_sample = (time.perf_counter() - start) / count
+        def per_sample(count: int = 5000) -> tuple[float, float]:
+            """Wall and CPU time (this process, every thread) per sample, back to back."""
+            wall, cpu = time.perf_counter(), time.process_time()
+            for k in range(count):
+                one_sample(k)
+            return (time.perf_counter() - wall) / count, (time.process_time() - cpu) / count
+
+        def paced(rate: int, seconds: float = 5.0) -> float:
+            """CPU share of this process [%] publishing at ``rate`` Hz (sleeping until each period's start)."""
+            start, cpu = time.monotonic(), time.process_time()
+            k = 0
+            while (now := time.monotonic()) - start < seconds:
+                one_sample(k)
+                k += 1
+                time.sleep(max(0.0, start + k / rate - now))
+            return 100.0 * (time.process_time() - cpu) / (time.monotonic() - start)
+
+        alone_wall, alone_cpu = per_sample()
+        subscriber = subprocess.Popen([sys.executable, "-c", SUBSCRIBER], env=env)
+        if not spin_until_matched(joints, poses, timeout=30.0):
+            raise RuntimeError("the subscriber process did not match the bench topics within 30 s")
+        with_wall, with_cpu = per_sample()
+        floors = {rate: paced(rate) for rate in rates}
         trail = np.tile(sample.ee_position, (TRAIL_POINTS, 1))
         start = time.perf_counter()
         for _ in range(50):
             messages.markers(types, 0, "world", (3.0, 2.0, 2.3), trail)
         per_markers = (time.perf_counter() - start) / 50
-        print(f"[messages] joint_states and pose filled and published: {per_sample * 1e6:.1f} us per sample "
-              f"(alone, no subscriber); ~/markers built with {TRAIL_POINTS} trail points: {per_markers * 1e3:.2f} ms "
+        print(f"[messages] joint_states and pose filled and published, per sample: alone {alone_wall * 1e6:.1f} us "
+              f"(CPU {alone_cpu * 1e6:.1f} us), with a subscriber in another process {with_wall * 1e6:.1f} us "
+              f"(CPU {with_cpu * 1e6:.1f} us, every thread of this process)")
+        print("[messages] CPU of a process that only publishes them, paced (floor of the node's publishing): "
+              + ", ".join(f"{share:.1f} % at {rate} Hz" for rate, share in floors.items()))
+        print(f"[messages] ~/markers built with {TRAIL_POINTS} trail points: {per_markers * 1e3:.2f} ms "
               f"(at {MARKER_RATE:g} Hz)")
     finally:
+        if subscriber is not None:
+            subscriber.send_signal(signal.SIGINT)
+            subscriber.wait(timeout=10)
         node.destroy_node()
         context.try_shutdown()
+
+
+def spin_until_matched(*publishers: Any, timeout: float) -> bool:
+    """Wait until every publisher has a subscriber (False after ``timeout`` seconds)."""
+    deadline = time.monotonic() + timeout
+    while any(p.get_subscription_count() == 0 for p in publishers):
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
 
 
 def main() -> int:
@@ -340,7 +400,7 @@ def main() -> int:
                         help="a further node parameter, e.g. -p command_lead:=0.05 (repeatable)")
     args = parser.parse_args()
     if args.message_costs:
-        message_costs(args.model)
+        message_costs(args.model, args.domain_id, args.rates)
     rows = [run(rate, args.duration, args.model, args.changes, args.domain_id, args.flood, args.parameter)
             for rate in args.rates]
     print_table(f"crane_reference node, {args.model} model, {args.duration:g} s per rate, {os.cpu_count()} CPUs", rows)
