@@ -50,6 +50,7 @@ Services: ``~/restart`` (std_srvs/Trigger), ``~/pause`` (std_srvs/SetBool).
 
 from __future__ import annotations
 
+import gc
 import sys
 import threading
 from collections import deque
@@ -612,7 +613,8 @@ def main(args: list[str] | None = None) -> int:
     node = None
     try:
         node = CraneReferenceNode()
-        rclpy.spin(node)
+        gc.freeze()  # the start-up's objects (modules, kernels, the stream) out of the collector's full passes,
+        rclpy.spin(node)  # which would otherwise hold the GIL over all of them while samples are due
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (StartupError, ConfigError, ParameterError) as error:

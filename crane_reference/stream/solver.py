@@ -16,6 +16,7 @@ stream time, target checks, the crane's reach.  Two clients carry the requests t
 
 from __future__ import annotations
 
+import gc
 import os
 import pickle
 import signal
@@ -201,6 +202,7 @@ def _serve(requests: Connection, replies: Connection) -> None:
         replies.send((False, _portable(error), None))
         return
     replies.send((True, solver.info(), solver.status()))
+    gc.freeze()  # the start-up's objects out of the collector's full passes (each would stall the replies)
     while True:
         try:
             request = requests.recv()
