@@ -357,10 +357,11 @@ def message_costs(model: str, domain: int, rates: list[int]) -> None:
             raise RuntimeError("the subscriber process did not match the bench topics within 30 s")
         with_wall, with_cpu = per_sample()
         floors = {rate: paced(rate) for rate in rates}
-        trail = np.tile(sample.ee_position, (TRAIL_POINTS, 1))
+        ellipse = messages.points(types, messages.ellipse_points(3.0, 2.0, 2.3))  # kept, as the node does
+        trail = messages.points(types, np.tile(sample.ee_position, (TRAIL_POINTS, 1)))
         start = time.perf_counter()
         for _ in range(50):
-            messages.markers(types, 0, "world", (3.0, 2.0, 2.3), trail)
+            messages.markers(types, 0, "world", ellipse, trail)
         per_markers = (time.perf_counter() - start) / 50
         print(f"[messages] joint_states and pose filled and published, per sample: alone {alone_wall * 1e6:.1f} us "
               f"(CPU {alone_cpu * 1e6:.1f} us), with a subscriber in another process {with_wall * 1e6:.1f} us "

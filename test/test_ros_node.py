@@ -765,7 +765,9 @@ def test_rclpy_and_rosbags_messages_agree() -> None:
                                                         [sample, *preview], effort=True),
         "diagnostics": lambda t: messages.diagnostics(t, stamp, "crane", "node", messages.WARN, "late",
                                                       {"rate": 99.5, "state": "RUNNING"}),
-        "markers": lambda t: messages.markers(t, stamp, "world", (3.0, 2.0, 2.3), np.array([[1.0, 2.0, 3.0]] * 3)),
+        "markers": lambda t: messages.markers(t, stamp, "world",
+                                              messages.points(t, messages.ellipse_points(3.0, 2.0, 2.3)),
+                                              messages.points(t, np.array([[1.0, 2.0, 3.0]] * 3))),
         "robot_description": lambda t: messages.robot_description(t, "<robot/>"),
     }
     for name, build in builders.items():

@@ -135,8 +135,14 @@ def header(types: MessageTypes, stamp_ns: int, frame_id: str) -> Any:
     return types.Header(stamp=time_msg(types, stamp_ns), frame_id=frame_id)
 
 
-def _point(types: MessageTypes, xyz: Sequence[float]) -> Any:
+def point(types: MessageTypes, xyz: Sequence[float]) -> Any:
+    """geometry_msgs/Point (x, y, z) [m]."""
     return types.Point(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
+
+
+def points(types: MessageTypes, xyz: np.ndarray) -> list[Any]:
+    """geometry_msgs/Point of each row of ``xyz`` (N, 3) [m]."""
+    return [point(types, p) for p in np.asarray(xyz, dtype=float).reshape(-1, 3)]
 
 
 def _color(types: MessageTypes, rgba: Sequence[float]) -> Any:
@@ -146,7 +152,7 @@ def _color(types: MessageTypes, rgba: Sequence[float]) -> Any:
 def _pose(types: MessageTypes, position: Sequence[float], quaternion: Sequence[float]) -> Any:
     """geometry_msgs/Pose from a position and a quaternion (x, y, z, w)."""
     x, y, z, w = (float(v) for v in quaternion)
-    return types.Pose(position=_point(types, position), orientation=types.Quaternion(x=x, y=y, z=z, w=w))
+    return types.Pose(position=point(types, position), orientation=types.Quaternion(x=x, y=y, z=z, w=w))
 
 
 # --- published messages ---------------------------------------------------------------------------
@@ -243,13 +249,13 @@ def diagnostic_values(state: str, sample: ReferenceSample | None, real_time_fact
 
 
 def _line_strip(types: MessageTypes, stamp_ns: int, frame_id: str, namespace: str,
-                points: np.ndarray, rgba: Sequence[float]) -> Any:
-    """A LINE_STRIP marker through ``points`` (N, 3) in ``frame_id``; every Marker field given."""
+                vertices: list[Any], rgba: Sequence[float]) -> Any:
+    """A LINE_STRIP marker through the Point messages ``vertices`` in ``frame_id``; every Marker field given."""
     return types.Marker(
         header=header(types, stamp_ns, frame_id), ns=namespace, id=0, type=types.Marker.LINE_STRIP,
         action=types.Marker.ADD, pose=_pose(types, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),
         scale=types.Vector3(x=LINE_WIDTH, y=0.0, z=0.0), color=_color(types, rgba),
-        lifetime=duration_msg(types, 0), frame_locked=False, points=[_point(types, p) for p in points], colors=[],
+        lifetime=duration_msg(types, 0), frame_locked=False, points=vertices, colors=[],
         texture_resource="", texture=types.CompressedImage(header=header(types, 0, ""), format="",
                                                            data=types.uint8_array(b"")),
         uv_coordinates=[], text="", mesh_resource="",
@@ -264,13 +270,13 @@ def ellipse_points(a: float, b: float, z: float, segments: int = ELLIPSE_SEGMENT
     return np.column_stack([a * np.cos(phi), b * np.sin(phi), np.full_like(phi, z)])
 
 
-def markers(types: MessageTypes, stamp_ns: int, frame_id: str, ellipse: tuple[float, float, float],
-            trail: np.ndarray) -> Any:
-    """visualization_msgs/MarkerArray: the target ellipse (a, b, z) and E's trail (N, 3), as LINE_STRIPs."""
+def markers(types: MessageTypes, stamp_ns: int, frame_id: str, ellipse: list[Any], trail: list[Any]) -> Any:
+    """visualization_msgs/MarkerArray: the target ellipse and E's trail as LINE_STRIPs through their Point
+    messages (:func:`points` of :func:`ellipse_points` and of E's positions: a publisher keeps them, so a
+    point is made once, not at every publication)."""
     return types.MarkerArray(markers=[
-        _line_strip(types, stamp_ns, frame_id, ELLIPSE_NAMESPACE, ellipse_points(*ellipse), ELLIPSE_COLOR),
-        _line_strip(types, stamp_ns, frame_id, TRAIL_NAMESPACE, np.asarray(trail, dtype=float).reshape(-1, 3),
-                    TRAIL_COLOR),
+        _line_strip(types, stamp_ns, frame_id, ELLIPSE_NAMESPACE, ellipse, ELLIPSE_COLOR),
+        _line_strip(types, stamp_ns, frame_id, TRAIL_NAMESPACE, trail, TRAIL_COLOR),
     ])
 
 

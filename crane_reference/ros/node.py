@@ -56,8 +56,8 @@ import threading
 from collections import deque
 from collections.abc import Callable
 from contextlib import suppress
+from typing import Any
 
-import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
@@ -208,7 +208,8 @@ class CraneReferenceNode(LifecycleNode):
         self._offer_reach(server)
         self._late_reported = 0
         self._joint_message = self._pose_message = None  # filled again for every sample (messages.joint_state)
-        self._trail: deque[np.ndarray] = deque(maxlen=TRAIL_POINTS)
+        self._trail: deque[Any] = deque(maxlen=TRAIL_POINTS)  # E's positions as Point messages
+        self._ellipse: tuple[tuple[float, ...], list[Any]] = ((), [])  # (a, b, z) and its Point messages
         depth = messages.PUBLISHER_DEPTH
         self._publishers_managed = [
             self.create_lifecycle_publisher(JointState, messages.JOINT_STATES_TOPIC, depth),
@@ -521,7 +522,7 @@ class CraneReferenceNode(LifecycleNode):
                 types, stamp, frame_id, names, self._preview_indices, offsets, [sample, *frame.preview],
                 self._values["preview.effort"]))
         if outgoing.k % max(1, round(self._rate / TRAIL_RATE)) == 0:
-            self._trail.append(sample.ee_position)
+            self._trail.append(messages.point(types, sample.ee_position))
 
     def _publish_markers(self) -> None:
         """~/markers (timer): the target ellipse at the final height and E's trail, stamped like the last sample."""
@@ -530,9 +531,11 @@ class CraneReferenceNode(LifecycleNode):
         if sample is None:
             return
         targets = server.stream.targets
-        z = server.info.z_static + targets.z_increment
-        self._marker_pub.publish(messages.markers(self._types, stamp, self._values["frame_id"],
-                                                  (targets.ellipse_a, targets.ellipse_b, z), np.array(self._trail)))
+        ellipse = (targets.ellipse_a, targets.ellipse_b, server.info.z_static + targets.z_increment)
+        if ellipse != self._ellipse[0]:
+            self._ellipse = ellipse, messages.points(self._types, messages.ellipse_points(*ellipse))
+        self._marker_pub.publish(messages.markers(self._types, stamp, self._values["frame_id"], self._ellipse[1],
+                                                  list(self._trail)))
 
     def _diagnostics_loop(self) -> None:
         """Diagnostics thread: /diagnostics every DIAGNOSTICS_PERIOD of wall time from the node's creation on
