@@ -28,9 +28,10 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
   stamp gaps longer than two periods, non-finite positions or velocities, requests without a response
   and whether a valid change still takes effect afterwards;
 * first (``--message-costs``), in this process: what the node's publisher spends per sample to fill and
-  publish ~/joint_states and ~/end_effector_pose, alone and with a subscriber in another process, the CPU
-  share of a process that only publishes them at each rate (the floor of publishing from rclpy), and the
-  cost of building ~/markers with a full trail.
+  publish ~/joint_states and ~/end_effector_pose (serialized and filled in place, as the node does, and as
+  message objects, for comparison), alone and with a subscriber in another process, the CPU share of a
+  process that only publishes them at each rate (the floor of publishing from rclpy), and the cost of
+  building and publishing ~/markers with a full trail.
 
 Run: ``.venv/bin/python benchmarks/bench_node.py [--duration 30] [--rates 100 500 1000] [--model flexible]
 [--flood 300] [-p command_lead:=0.05 ...]``.
@@ -45,6 +46,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -56,11 +58,14 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
+from rclpy.serialization import serialize_message
 from report import print_table
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
+from visualization_msgs.msg import MarkerArray
 
 from crane_reference.interface import messages
+from crane_reference.interface.serialized import SerializedJointState, SerializedPose
 from crane_reference.model.config import load_config
 from crane_reference.ros.message_types import rclpy_types
 from crane_reference.ros.node import MARKER_RATE, TRAIL_POINTS
@@ -311,9 +316,10 @@ except (KeyboardInterrupt, ExternalShutdownException):
 
 
 def message_costs(model: str, domain: int, rates: list[int]) -> None:
-    """Print the publisher's per-sample costs (messages filled again, as the node does) alone and with a
-    subscriber in another process, this process's CPU share when it only publishes at each of ``rates``
-    (the floor of the node's publishing in rclpy: no stream, no clock, no schedule) and the markers' cost."""
+    """Print the publisher's per-sample costs alone and with a subscriber in another process, this process's
+    CPU share when it only publishes at each of ``rates`` (the floor of the node's publishing in rclpy: no
+    stream, no clock, no schedule), both for the serialized messages the node publishes and for message
+    objects, and the markers' cost."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     context = rclpy.Context()
@@ -326,50 +332,61 @@ def message_costs(model: str, domain: int, rates: list[int]) -> None:
         sample, names = stream.sample(0.05), list(stream.joint_names)
         joints = node.create_publisher(JointState, "/bench_joint_states", 10)
         poses = node.create_publisher(PoseStamped, "/bench_pose", 10)
+        joint_writer = SerializedJointState(serialize_message(messages.joint_state(types, 0, names, sample)))
+        pose_writer = SerializedPose(serialize_message(messages.end_effector_pose(types, 0, "world", sample)))
         kept = {"joint": None, "pose": None}
 
         def one_sample(k: int) -> None:
+            """As the node publishes: serialized once, filled in place and published as bytes."""
+            joints.publish(joint_writer.fill(k, sample))
+            poses.publish(pose_writer.fill(k, sample))
+
+        def one_message_object(k: int) -> None:
+            """As the node published before: message objects filled again and converted by rclpy."""
             kept["joint"] = messages.joint_state(types, k, names, sample, kept["joint"])
             kept["pose"] = messages.end_effector_pose(types, k, "world", sample, kept["pose"])
             joints.publish(kept["joint"])
             poses.publish(kept["pose"])
 
-        def per_sample(count: int = 5000) -> tuple[float, float]:
+        def per_sample(publish: Callable[[int], None], count: int = 5000) -> tuple[float, float]:
             """Wall and CPU time (this process, every thread) per sample, back to back."""
             wall, cpu = time.perf_counter(), time.process_time()
             for k in range(count):
-                one_sample(k)
+                publish(k)
             return (time.perf_counter() - wall) / count, (time.process_time() - cpu) / count
 
-        def paced(rate: int, seconds: float = 5.0) -> float:
+        def paced(rate: int, publish: Callable[[int], None], seconds: float = 5.0) -> float:
             """CPU share of this process [%] publishing at ``rate`` Hz (sleeping until each period's start)."""
             start, cpu = time.monotonic(), time.process_time()
             k = 0
             while (now := time.monotonic()) - start < seconds:
-                one_sample(k)
+                publish(k)
                 k += 1
                 time.sleep(max(0.0, start + k / rate - now))
             return 100.0 * (time.process_time() - cpu) / (time.monotonic() - start)
 
-        alone_wall, alone_cpu = per_sample()
+        ways = {"serialized (the node)": one_sample, "message objects": one_message_object}
+        alone = {way: per_sample(publish) for way, publish in ways.items()}
         subscriber = subprocess.Popen([sys.executable, "-c", SUBSCRIBER], env=env)
         if not spin_until_matched(joints, poses, timeout=30.0):
             raise RuntimeError("the subscriber process did not match the bench topics within 30 s")
-        with_wall, with_cpu = per_sample()
-        floors = {rate: paced(rate) for rate in rates}
+        for way, publish in ways.items():
+            (alone_wall, alone_cpu), (with_wall, with_cpu) = alone[way], per_sample(publish)
+            floors = {rate: paced(rate, publish) for rate in rates}
+            print(f"[messages] {way}: joint_states and pose filled and published, per sample: alone "
+                  f"{alone_wall * 1e6:.1f} us (CPU {alone_cpu * 1e6:.1f} us), with a subscriber in another process "
+                  f"{with_wall * 1e6:.1f} us (CPU {with_cpu * 1e6:.1f} us, every thread of this process)")
+            print(f"[messages] {way}: CPU of a process that only publishes them, paced (floor of the node's "
+                  "publishing): " + ", ".join(f"{share:.1f} % at {rate} Hz" for rate, share in floors.items()))
         ellipse = messages.points(types, messages.ellipse_points(3.0, 2.0, 2.3))  # kept, as the node does
         trail = messages.points(types, np.tile(sample.ee_position, (TRAIL_POINTS, 1)))
+        markers = node.create_publisher(MarkerArray, "/bench_markers", 10)
         start = time.perf_counter()
         for _ in range(50):
-            messages.markers(types, 0, "world", ellipse, trail)
+            markers.publish(messages.markers(types, 0, "world", ellipse, trail))
         per_markers = (time.perf_counter() - start) / 50
-        print(f"[messages] joint_states and pose filled and published, per sample: alone {alone_wall * 1e6:.1f} us "
-              f"(CPU {alone_cpu * 1e6:.1f} us), with a subscriber in another process {with_wall * 1e6:.1f} us "
-              f"(CPU {with_cpu * 1e6:.1f} us, every thread of this process)")
-        print("[messages] CPU of a process that only publishes them, paced (floor of the node's publishing): "
-              + ", ".join(f"{share:.1f} % at {rate} Hz" for rate, share in floors.items()))
-        print(f"[messages] ~/markers built with {TRAIL_POINTS} trail points: {per_markers * 1e3:.2f} ms "
-              f"(at {MARKER_RATE:g} Hz)")
+        print(f"[messages] ~/markers built and published with {TRAIL_POINTS} trail points: {per_markers * 1e3:.2f} ms "
+              f"(at {MARKER_RATE:g} Hz while subscribed)")
     finally:
         if subscriber is not None:
             subscriber.send_signal(signal.SIGINT)

@@ -43,8 +43,8 @@ Commands
 Topics (all in the node's namespace but /diagnostics): ``~/joint_states`` (sensor_msgs/JointState),
 ``~/end_effector_pose`` (geometry_msgs/PoseStamped), ``~/reference_preview`` (trajectory_msgs/JointTrajectory
 of ``preview.joints``, at ``preview.rate``), ``/diagnostics`` (diagnostic_msgs/DiagnosticArray, 1 Hz),
-``~/markers`` (visualization_msgs/MarkerArray, 10 Hz: target ellipse and E's trail), ``~/robot_description``
-(std_msgs/String, transient local); subscribed: ``~/speed_scaling`` (std_msgs/Float64).
+``~/markers`` (visualization_msgs/MarkerArray, 10 Hz while subscribed: target ellipse and E's trail),
+``~/robot_description`` (std_msgs/String, transient local); subscribed: ``~/speed_scaling`` (std_msgs/Float64).
 Services: ``~/restart`` (std_srvs/Trigger), ``~/pause`` (std_srvs/SetBool).
 """
 
@@ -68,6 +68,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from std_srvs.srv import SetBool, Trigger
@@ -75,6 +76,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..interface import messages
+from ..interface.serialized import SerializedJointState, SerializedPose
 from ..model.config import ConfigError, load_config
 from ..model.parameters import Task
 from ..motion.simulation import SOLVER_FAILURES
@@ -207,7 +209,9 @@ class CraneReferenceNode(LifecycleNode):
         self.get_logger().info(f"solver {server.info.kernels}")
         self._offer_reach(server)
         self._late_reported = 0
-        self._joint_message = self._pose_message = None  # filled again for every sample (messages.joint_state)
+        # the per-sample messages, serialized once and filled in place (interface.serialized)
+        self._joint_writer: SerializedJointState | None = None
+        self._pose_writer: SerializedPose | None = None
         self._trail: deque[Any] = deque(maxlen=TRAIL_POINTS)  # E's positions as Point messages
         self._ellipse: tuple[tuple[float, ...], list[Any]] = ((), [])  # (a, b, z) and its Point messages
         depth = messages.PUBLISHER_DEPTH
@@ -504,16 +508,19 @@ class CraneReferenceNode(LifecycleNode):
                 raise  # not a shutdown: let the thread report it
 
     def _send(self, outgoing: Outgoing) -> None:
-        """Publish one sample: joint states, E's pose, the preview if the frame has one; E's trail."""
+        """Publish one sample: joint states and E's pose (serialized once, then filled in place and published
+        as bytes), the preview if the frame has one; E's trail."""
         frame, stamp = outgoing.frame, outgoing.stamp_ns
         sample = frame.sample
         types, frame_id = self._types, self._values["frame_id"]
-        if self._pose_message is not None and self._pose_message.header.frame_id != frame_id:
-            self._pose_message = None  # frame_id changed: a new message
-        self._joint_message = messages.joint_state(types, stamp, self._joint_names, sample, self._joint_message)
-        self._pose_message = messages.end_effector_pose(types, stamp, frame_id, sample, self._pose_message)
-        self._joint_pub.publish(self._joint_message)
-        self._pose_pub.publish(self._pose_message)
+        if self._joint_writer is None:
+            self._joint_writer = SerializedJointState(serialize_message(
+                messages.joint_state(types, stamp, self._joint_names, sample)))
+        if self._pose_writer is None or self._pose_writer.frame_id != frame_id:
+            self._pose_writer = SerializedPose(serialize_message(
+                messages.end_effector_pose(types, stamp, frame_id, sample)))
+        self._joint_pub.publish(self._joint_writer.fill(stamp, sample))
+        self._pose_pub.publish(self._pose_writer.fill(stamp, sample))
         if frame.preview is not None:
             horizon_ns, count = round(frame.horizon * NANOSECONDS), len(frame.preview)
             offsets = [i * horizon_ns // count for i in range(count + 1)]
@@ -525,10 +532,11 @@ class CraneReferenceNode(LifecycleNode):
             self._trail.append(messages.point(types, sample.ee_position))
 
     def _publish_markers(self) -> None:
-        """~/markers (timer): the target ellipse at the final height and E's trail, stamped like the last sample."""
+        """~/markers (timer): the target ellipse at the final height and E's trail, stamped like the last sample;
+        built and published only while something subscribes (RViz; the trail is kept meanwhile)."""
         server = self._server
         sample, stamp = server.last_sample() if server is not None else (None, 0)
-        if sample is None:
+        if sample is None or self._marker_pub.get_subscription_count() == 0:  # nobody looks: nothing to build
             return
         targets = server.stream.targets
         ellipse = (targets.ellipse_a, targets.ellipse_b, server.info.z_static + targets.z_increment)

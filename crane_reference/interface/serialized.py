@@ -1,0 +1,129 @@
+"""The per-sample messages (JointState, E's PoseStamped) as serialized messages, filled in place.
+
+Publishing a message object costs a conversion to its C form and a serialization at every sample;
+a publisher handed the serialized bytes (rclpy's ``Publisher.publish(bytes)``, which goes to
+``rmw_publish_serialized_message``) publishes them as they are.  The bytes here are those of a prototype
+serialized by a message library (rclpy's ``serialize_message`` in the node, rosbags' CDR serializer
+offline) with each sample's numbers written over the prototype's at their offsets; the names and the
+frame_id stay the prototype's.
+
+Layout of a ROS 2 serialized message (plain CDR, XCDR version 1, as every ROS 2 middleware and rosbag2
+use it): a 4-byte encapsulation header (second byte 1: little endian, 0: big endian), then the body, in
+which each primitive is aligned to its own size counted from the body's start; a string is a uint32
+length (the terminating NUL included) and its bytes; a sequence is a uint32 count and its elements.
+std_msgs/Header is the stamp (int32 sec, uint32 nanosec) and the frame_id string.
+"""
+
+from __future__ import annotations
+
+import struct
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .messages import NANOSECONDS
+
+if TYPE_CHECKING:
+    from ..stream.sample import ReferenceSample
+
+ENCAPSULATION = 4
+"""[bytes] before the body."""
+
+
+def _aligned(offset: int, size: int) -> int:
+    """``offset`` rounded up to a multiple of ``size`` (offsets count from the body's start)."""
+    return offset + (-offset) % size
+
+
+class _Layout:
+    """Reads a serialized message's body field by field, with its byte order (from the encapsulation)."""
+
+    def __init__(self, data: bytes):
+        if len(data) < ENCAPSULATION + 8 or data[0] != 0 or data[1] not in (0, 1):
+            raise ValueError(f"not a plain-CDR serialized message (encapsulation {data[:ENCAPSULATION].hex()})")
+        self.data, self.order = data, "<" if data[1] == 1 else ">"
+        self.offset = 8  # after the header's stamp
+
+    def count(self) -> int:
+        """A uint32 (string length or sequence count) at the next aligned offset; moves past it."""
+        self.offset = _aligned(self.offset, 4)
+        (value,) = struct.unpack_from(self.order + "I", self.data, ENCAPSULATION + self.offset)
+        self.offset += 4
+        return value
+
+    def string(self) -> str:
+        """The next string; moves past it."""
+        length = self.count()
+        start = ENCAPSULATION + self.offset
+        self.offset += length
+        return self.data[start:start + length - 1].decode()
+
+    def doubles(self, count: int) -> int:
+        """The body offset of the next ``count`` float64 (aligned to 8); moves past them."""
+        self.offset = _aligned(self.offset, 8)
+        start = self.offset
+        self.offset += 8 * count
+        if ENCAPSULATION + self.offset > len(self.data):
+            raise ValueError(f"serialized message of {len(self.data)} bytes ends inside its float64 fields")
+        return start
+
+
+class _SerializedMessage:
+    """A prototype's bytes and writable views of its stamp and float64 fields."""
+
+    def __init__(self, prototype: bytes, layout: _Layout):
+        self._buffer = bytearray(prototype)
+        self._order = layout.order
+        self._stamp = struct.Struct(layout.order + "iI")
+
+    def _doubles(self, offset: int, count: int) -> np.ndarray:
+        return np.frombuffer(self._buffer, dtype=np.dtype(self._order + "f8"), count=count,
+                             offset=ENCAPSULATION + offset)
+
+    def _stamped(self, stamp_ns: int) -> bytes:
+        """The message with header.stamp = ``stamp_ns`` (a non-negative time [ns]), as bytes."""
+        self._stamp.pack_into(self._buffer, ENCAPSULATION, stamp_ns // NANOSECONDS, stamp_ns % NANOSECONDS)
+        return bytes(self._buffer)
+
+
+class SerializedJointState(_SerializedMessage):
+    """sensor_msgs/JointState: header, name[], position[], velocity[], effort[] (see
+    :func:`~.messages.joint_state`); ``prototype`` serialized with one entry per name in each array."""
+
+    def __init__(self, prototype: bytes):
+        layout = _Layout(prototype)
+        layout.string()  # header.frame_id
+        self.names = [layout.string() for _ in range(layout.count())]
+        arrays = []
+        for field in ("position", "velocity", "effort"):
+            count = layout.count()
+            if count != len(self.names):
+                raise ValueError(f"prototype JointState has {count} {field} entries for {len(self.names)} names")
+            arrays.append(layout.doubles(count))
+        super().__init__(prototype, layout)
+        self._position, self._velocity, self._effort = (self._doubles(offset, len(self.names)) for offset in arrays)
+
+    def fill(self, stamp_ns: int, sample: ReferenceSample) -> bytes:
+        """The serialized JointState of ``sample`` stamped ``stamp_ns``."""
+        self._position[:] = sample.q
+        self._velocity[:] = sample.qd
+        self._effort[:] = sample.effort
+        return self._stamped(stamp_ns)
+
+
+class SerializedPose(_SerializedMessage):
+    """geometry_msgs/PoseStamped: header, then position (x, y, z) and orientation (x, y, z, w) (see
+    :func:`~.messages.end_effector_pose`)."""
+
+    def __init__(self, prototype: bytes):
+        layout = _Layout(prototype)
+        self.frame_id = layout.string()
+        offset = layout.doubles(7)
+        super().__init__(prototype, layout)
+        self._pose = self._doubles(offset, 7)
+
+    def fill(self, stamp_ns: int, sample: ReferenceSample) -> bytes:
+        """The serialized PoseStamped of E in ``sample`` stamped ``stamp_ns``."""
+        self._pose[:3] = sample.ee_position
+        self._pose[3:] = sample.ee_quaternion
+        return self._stamped(stamp_ns)

@@ -1,0 +1,111 @@
+"""Serialized per-sample messages (crane_reference.interface.serialized) against the message libraries'
+own serializers: rosbags' CDR (both byte orders) and rclpy's serialize_message, the bytes the node
+publishes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseStamped
+from rclpy.serialization import deserialize_message, serialize_message
+from rosbags.typesys import Stores, get_typestore
+from sensor_msgs.msg import JointState
+
+from crane_reference.interface import messages
+from crane_reference.interface.serialized import SerializedJointState, SerializedPose
+from crane_reference.ros.message_types import rclpy_types
+from crane_reference.stream.sample import ReferenceSample
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+JOINT_STATE, POSE = "sensor_msgs/msg/JointState", "geometry_msgs/msg/PoseStamped"
+# frame_ids and names of every length modulo 8, so that each field's alignment padding varies
+FRAME_IDS = ["", "w", "ab", "abc", "world", "crane_1", "map/base", "crane/world"]
+NAME_SETS = [["column_slew"], ["a", "bb", "ccc"], [f"joint_{'x' * i}" for i in range(9)]]
+STAMPS = [0, 1, 999_999_999, 1_700_000_000_123_456_789]
+
+
+def random_sample(rng: np.random.Generator, n: int) -> ReferenceSample:
+    quaternion = rng.normal(size=4)
+    return ReferenceSample(float(rng.uniform(0, 10)), rng.normal(size=n), rng.normal(size=n), rng.normal(size=n),
+                           rng.normal(size=n) * 1e3, rng.normal(size=3), quaternion / np.linalg.norm(quaternion),
+                           1e-15, False)
+
+
+def zero_sample(n: int) -> ReferenceSample:
+    return ReferenceSample(0.0, np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(3),
+                           np.array([0.0, 0.0, 0.0, 1.0]), 0.0, False)
+
+
+@pytest.mark.parametrize("little_endian", [True, False])
+@pytest.mark.parametrize("names", NAME_SETS)
+def test_joint_states_filled_in_place_equal_rosbags_serialization(names, little_endian):
+    """Every filled message is byte for byte what rosbags serializes for the same values, and reads back as
+    them, whatever the padding before each array."""
+    types, rng = messages.rosbags_types(TYPESTORE), np.random.default_rng(len(names))
+    for frame_id in FRAME_IDS:
+        prototype = messages.joint_state(types, 5, names, zero_sample(len(names)))
+        prototype.header.frame_id = frame_id  # JointState's frame_id is empty in the node; any works here
+        writer = SerializedJointState(bytes(TYPESTORE.serialize_cdr(prototype, JOINT_STATE,
+                                                                     little_endian=little_endian)))
+        assert writer.names == names
+        for stamp in STAMPS:
+            sample = random_sample(rng, len(names))
+            data = writer.fill(stamp, sample)
+            expected = messages.joint_state(types, stamp, names, sample)
+            expected.header.frame_id = frame_id
+            assert data == bytes(TYPESTORE.serialize_cdr(expected, JOINT_STATE, little_endian=little_endian))
+            read = TYPESTORE.deserialize_cdr(data, JOINT_STATE)
+            assert (read.header.stamp.sec, read.header.stamp.nanosec) == divmod(stamp, 10**9)
+            assert read.name == names and read.header.frame_id == frame_id
+            np.testing.assert_array_equal(read.position, sample.q)
+            np.testing.assert_array_equal(read.velocity, sample.qd)
+            np.testing.assert_array_equal(read.effort, sample.effort)
+
+
+@pytest.mark.parametrize("little_endian", [True, False])
+def test_poses_filled_in_place_equal_rosbags_serialization(little_endian):
+    types, rng = messages.rosbags_types(TYPESTORE), np.random.default_rng(7)
+    for frame_id in FRAME_IDS:
+        prototype = messages.end_effector_pose(types, 0, frame_id, zero_sample(3))
+        writer = SerializedPose(bytes(TYPESTORE.serialize_cdr(prototype, POSE, little_endian=little_endian)))
+        assert writer.frame_id == frame_id
+        for stamp in STAMPS:
+            sample = random_sample(rng, 3)
+            data = writer.fill(stamp, sample)
+            assert data == bytes(TYPESTORE.serialize_cdr(messages.end_effector_pose(types, stamp, frame_id, sample),
+                                                         POSE, little_endian=little_endian))
+            read = TYPESTORE.deserialize_cdr(data, POSE)
+            position, orientation = read.pose.position, read.pose.orientation
+            np.testing.assert_array_equal([position.x, position.y, position.z], sample.ee_position)
+            np.testing.assert_array_equal([orientation.x, orientation.y, orientation.z, orientation.w],
+                                          sample.ee_quaternion)
+
+
+def test_the_node_s_messages_read_back_by_rclpy_as_the_message_objects():
+    """With the prototype from rclpy (as the node makes it), rclpy reads a filled message back as the message
+    object with the same values, and it has the length of rclpy's serialization of that object (rclpy's
+    serializer leaves the alignment padding as it finds it, so the padding bytes are not compared)."""
+    types, rng = rclpy_types(), np.random.default_rng(3)
+    names = NAME_SETS[2]
+    joints = SerializedJointState(serialize_message(messages.joint_state(types, 0, names, zero_sample(len(names)))))
+    poses = SerializedPose(serialize_message(messages.end_effector_pose(types, 0, "world", zero_sample(3))))
+    for stamp in STAMPS:
+        sample = random_sample(rng, len(names))
+        for writer, message, kind in ((joints, messages.joint_state(types, stamp, names, sample), JointState),
+                                      (poses, messages.end_effector_pose(types, stamp, "world", sample), PoseStamped)):
+            data = writer.fill(stamp, sample)
+            assert deserialize_message(data, kind) == message
+            assert len(data) == len(serialize_message(message))
+
+
+def test_a_prototype_that_does_not_fit_is_refused():
+    types = messages.rosbags_types(TYPESTORE)
+    short = messages.joint_state(types, 0, ["a", "b"], zero_sample(2))
+    short.effort = np.zeros(1)
+    with pytest.raises(ValueError, match="1 effort entries for 2 names"):
+        SerializedJointState(bytes(TYPESTORE.serialize_cdr(short, JOINT_STATE)))
+    with pytest.raises(ValueError, match="not a plain-CDR serialized message"):
+        SerializedPose(b"\x01\x00\x00\x00" + bytes(64))
+    with pytest.raises(ValueError, match="ends inside its float64 fields"):
+        SerializedPose(bytes(TYPESTORE.serialize_cdr(messages.end_effector_pose(types, 0, "w", zero_sample(3)),
+                                                     POSE))[:-8])
