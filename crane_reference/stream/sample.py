@@ -35,8 +35,8 @@ class ReferenceSample:
 
     def is_finite(self) -> bool:
         """Whether every number is finite (a NaN or infinity propagates into the sum)."""
-        return math.isfinite(self.q.sum() + self.qd.sum() + self.qdd.sum() + self.effort.sum()
-                             + self.ee_position.sum() + self.ee_quaternion.sum() + self.residual_distance)
+        arrays = (self.q, self.qd, self.qdd, self.effort, self.ee_position, self.ee_quaternion)
+        return math.isfinite(np.concatenate(arrays).sum() + self.residual_distance)
 
 
 SampleColumns = tuple[np.ndarray, ...]

@@ -142,14 +142,15 @@ def make_frames(stream: ReferenceStream, request: FrameRequest) -> FrameBatch:
     if stream.state == ERROR:  # hold the last sample made, not the stream's (computed further ahead)
         return FrameBatch([Frame(plan.k + i, tau + i * dt, last.hold()) for i in range(count)], next_preview_k,
                           False, wall, motion)
+    computed_until = stream.computed_until
     times = [tau + i * dt for i in range(count)]
-    times = [t for t in times if t <= stream.computed_until - TIME_TOLERANCE]
+    times = [t for t in times if t <= computed_until - TIME_TOLERANCE]
     frames: list[Frame] = []
     non_finite, fault = 0, ""
     for i, (t, sample) in enumerate(zip(times, stream.samples(times), strict=True)):
         k, preview = plan.k + i, None
         if k >= next_preview_k:
-            if stream.computed_until >= t + horizon:
+            if computed_until >= t + horizon:
                 preview = stream.preview(t, horizon, request.points)
                 next_preview_k = k + request.decimation
             elif k >= request.urgent_until:
@@ -159,15 +160,16 @@ def make_frames(stream: ReferenceStream, request: FrameRequest) -> FrameBatch:
             non_finite, fault = non_finite + 1, why
         frames.append(frame)
         last = frame.sample
-    return FrameBatch(frames, next_preview_k, stream.computed_until < ahead, wall, motion, non_finite, fault)
+    return FrameBatch(frames, next_preview_k, computed_until < ahead, wall, motion, non_finite, fault)
 
 
 def checked(frame: Frame, last_valid: ReferenceSample) -> tuple[Frame, str]:
     """``frame`` if finite (a non-finite preview dropped), else ``last_valid`` held, with the fault that says
     why ("" if none): NaN is never published."""
-    finite_preview = frame.preview is None or all(sample.is_finite() for sample in frame.preview)
     if frame.sample.is_finite():
-        return replace(frame, preview=frame.preview if finite_preview else None), ""
+        if frame.preview is None or all(sample.is_finite() for sample in frame.preview):
+            return frame, ""
+        return replace(frame, preview=None), ""
     return (Frame(frame.k, frame.tau, last_valid.hold()),
             f"non-finite sample at stream time {frame.tau:.3f} s: holding the last valid one")
 
