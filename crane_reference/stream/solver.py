@@ -11,7 +11,8 @@ stream time, target checks, the crane's reach.  Two clients carry the requests t
   wait for, or delay, a publisher's thread behind Python's GIL.  Requests and replies are pickled over two
   pipes; an exception raised by the solver is raised again in the caller.  The child runs in a session of
   its own and ignores SIGINT (a Ctrl-C is the caller's to handle), and exits when its request pipe closes,
-  also if the caller dies.
+  also if the caller dies.  It runs at a lower scheduling priority (:data:`SOLVER_NICENESS`): it computes
+  a second of frames ahead and can wait, the caller's publisher cannot.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from .targets import reach
 from .warmup import warm_up
 
 POLL_PERIOD = 0.1  # [s] between checks of the caller's stop flag while it waits for the solver process
+SOLVER_NICENESS = 5  # added to the solver process's nice value: the caller's threads win a contended core
 
 
 class SolverStoppedError(RuntimeError):
@@ -305,6 +307,7 @@ class SolverProcess:
 
 if __name__ == "__main__":
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the caller decides when the solver ends (see the module)
+    os.nice(SOLVER_NICENESS)
     from crane_reference.stream import solver  # the classes under their importable names (pickled replies)
 
     solver._serve(Connection(int(sys.argv[1]), writable=False), Connection(int(sys.argv[2]), readable=False))
