@@ -36,9 +36,10 @@ The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simula
 9. [sensitivity] The conditioning of the 40-250 Hz RMS: the model with its payload mass changed by +-0.5 and
    +-1 % and its boom's Young's modulus by +-1 % (h = 0.25 ms) against the nominal converged run, beside the
    nominal crane at h = 1, 0.5, 1/3 and 0.25 ms (converged Newton).
-10. [slow] The controller-band error at h = 1 ms (undamped and damped crane): the integrator with its modal
-    correction refreshed every 5 ms and every step, and the plain trapezoidal rule; psi2's drift at 3, 5 and
-    10 s. A stiff flexible drive (1e8 N m/rad) against DOP853 over 0.1 s.
+10. [slow] The controller-band error at the node's step and at 1 ms (undamped and damped crane): the
+    integrator with its modal correction computed every step, every 5 ms, every REFRESH_INTERVAL (the
+    default) and every 50 ms (extrapolated in between), and the plain trapezoidal rule; psi2's drift at 3, 5
+    and 10 s. A stiff flexible drive (1e8 N m/rad) against DOP853 over 0.1 s.
 """
 
 from __future__ import annotations
@@ -58,9 +59,10 @@ from crane_reference.model.config import load_config
 from crane_reference.model.parameters import CraneParameters, Damping, FlexibleDrive
 from crane_reference.model.profiles import Constant, QuinticRise
 from crane_reference.motion.constraints import ArealRate, ConstraintSet, EllipseXY, HeightZ
-from crane_reference.motion.integration import EVALUATIONS, ONLINE_TOLERANCE
+from crane_reference.motion.integration import EVALUATIONS, ONLINE_TOLERANCE, REFRESH_INTERVAL
 from crane_reference.motion.programmed_motion import ProgrammedMotion
 from crane_reference.motion.simulation import MotionStepper, Scenario, simulate, simulate_reference
+from crane_reference.motion.steps import ONLINE_STEP
 from crane_reference.motion.trajectory import Trajectory
 
 COORDINATES = ("column_slew", "boom_luff", "knuckle")
@@ -336,10 +338,11 @@ def mechanism(params: CraneParameters, duration: float, cache: Path) -> None:
 
 
 def slow_motion(params: CraneParameters, duration: float, cache: Path) -> None:
-    """[slow] Where the controller-band error at h = 1 ms comes from, on the undamped and the damped crane:
-    the integrator with its modal correction computed every 5 ms (default) and every step, and the plain
-    trapezoidal rule; the controller-band error of psi2 (signed, at 3, 5 and 10 s: a drift of the column's
-    progress grows linearly) and its largest value, and of E.  Then a stiff flexible drive (s_dr = 1e8 N m/rad)
+    """[slow] Where the controller-band error comes from, on the undamped and the damped crane: the
+    integrator at the node's step and at 1 ms with its modal correction computed every step, every 5 ms, every
+    REFRESH_INTERVAL (default) and every 50 ms, and the plain trapezoidal rule; the controller-band error of
+    psi2 (signed, at 3, 5 and 10 s: a drift of the column's progress grows linearly) and its largest value,
+    and of E.  Then a stiff flexible drive (s_dr = 1e8 N m/rad)
     over 0.1 s against DOP853."""
     damping = realistic_damping(params)
     for label, p in (("undamped", params),
@@ -349,10 +352,11 @@ def slow_motion(params: CraneParameters, duration: float, cache: Path) -> None:
         q0 = scenario.equilibrium.q
         t = reference.t[::round(GRID / REFERENCE_SAMPLE)]
         slew = on_grid(reference, coordinates(reference), t)[:, 0]
-        for name, modal, refresh in (("integrator, refresh every 5 ms", True, 5e-3),
-                                     ("integrator, refresh every step", True, 0.9e-3),
-                                     ("plain trapezoidal rule", False, 5e-3)):
-            stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), 1e-3)
+        runs = [(step, f"h={step * 1e3:g} ms, modal correction computed every {refresh * 1e3:g} ms", True, refresh)
+                for step in (ONLINE_STEP, 1e-3) for refresh in (step, 5e-3, REFRESH_INTERVAL, 5e-2)]
+        runs.append((1e-3, "h=1 ms, plain trapezoidal rule", False, REFRESH_INTERVAL))
+        for step, name, modal, refresh in runs:
+            stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), step)
             stepper.integrator.modal, stepper.integrator.refresh_interval = modal, refresh
             run = Trajectory.from_arrays("flexible", scenario.model.joint_names, scenario.model.drive_joint,
                                          stepper.advance_until(duration))

@@ -9,12 +9,13 @@ the same run.
 1. [eval] Time of M(q) with h, gravity and E's kinematics, and of one full qdd from (8), at 24 DOF; the cost
    of calling a compiled function with the ChainData named tuple.
 2. [profile] The compiled cost of the parts of one step (timed in compiled loops): the modal correction
-   (an eigenproblem, every 5 ms of motion), the iteration factor, per Newton evaluation a projection and a
+   (an eigenproblem, every REFRESH_INTERVAL of motion), the iteration factor, per Newton evaluation a projection and a
    residual, and at the step's end a full evaluation.
-3. [speed] Per case (rigid; flexible with n_rfe = 6, 12, 24): Pinocchio's ABA per call; at h = 1 and 2 ms the
-   throughput of simulate (best of ``--repeats``) per step, as a multiple of one ABA call and as a real-time
-   factor; single steps (one compiled call each, 2 s after the drive's jumps): median, worst and 99.9 %
-   quantile; the mean Newton evaluations per step and the largest constraint residual.
+3. [speed] Per case (rigid; flexible with n_rfe = 6, 12, 24): Pinocchio's ABA per call; at the node's step
+   (``ONLINE_STEP``) and at 1 ms the steps alone per step (compiled runs of 0.25 s, best of ``--repeats``), as a
+   multiple of one ABA call and as a real-time factor, and with every row's full evaluation (what simulate
+   records); single steps (one compiled call each, from 1 s on): median, worst and 99.9 % quantile; the mean
+   Newton evaluations per step and the largest constraint residual.
 """
 
 from __future__ import annotations
@@ -30,13 +31,15 @@ from bench_accuracy import newton_iterations
 from numba import njit
 
 from crane_reference.dynamics import kernels
+from crane_reference.dynamics.inertia import world_pseudo_inertias
 from crane_reference.dynamics.structures import Coefficients
 from crane_reference.dynamics.terms import chain_terms, end_effector_jacobian, position_terms
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import CraneParameters
 from crane_reference.model.urdf import model_to_urdf
-from crane_reference.motion.integration import ExactFrequencyTrapezoidal
+from crane_reference.motion.integration import REFRESH_INTERVAL, ExactFrequencyTrapezoidal, StepState
 from crane_reference.motion.simulation import MotionStepper, Scenario, simulate
+from crane_reference.motion.steps import ONLINE_STEP
 
 
 def per_call(function, repeat: int = 2000) -> float:
@@ -91,32 +94,54 @@ def aba_time(scenario: Scenario, repeat: int = 20000) -> float:
 
 def step_times(scenario: Scenario, step: float, duration: float, after: float = 1.0) -> np.ndarray:
     """Wall time [s] of each step over ``duration`` seconds from t = ``after`` (past the drive's jumps), each
-    step one compiled call from Python with its inputs prepared beforehand (what one step costs the
-    node, call included)."""
+    step one compiled call from Python with its inputs prepared beforehand (what one step costs a caller
+    that steps one at a time, call included)."""
     stepper = MotionStepper(scenario.motion, 0.0, scenario.equilibrium.q, np.zeros_like(scenario.equilibrium.q),
                             step)
     stepper.advance_until(after)
     state, motion, settings = stepper.state, scenario.motion, stepper.integrator.settings
     times = state.t + step * np.arange(1, round(duration / step) + 1)
     k, drives = motion.constraints.coefficients_at(times), motion.dynamics.drive.kernel_parameters(times)
-    q, qd, qdd, correction = state.q, state.qd, state.solution.qdd, state.correction
-    M, B, t0 = state.solution.dynamics.M, state.solution.velocity_map, state.t
+    q, qd, qdd, correction, t0 = state.q, state.qd, state.solution.qdd, state.correction, state.t
+    evaluated = np.zeros(1, dtype=np.bool_)
     walls = np.empty(times.size)
     for i in range(times.size):
         k_i = Coefficients(k.Q[i:i + 1], k.g[i:i + 1], k.c[i:i + 1], k.order)
         start = time.perf_counter()
-        run = kernels.integration_run(q, qd, qdd, M, B, correction, t0, times[i:i + 1], k_i, drives[i:i + 1],
-                                      motion.partition, motion.dynamics.chain, settings)
+        run = kernels.integration_run(q, qd, qdd, correction, t0, times[i:i + 1], k_i, drives[i:i + 1],
+                                      motion.partition, motion.dynamics.chain, settings, evaluated)
         walls[i] = time.perf_counter() - start
         last = run.last
-        q, qd, qdd, correction, t0 = last.q, last.qd, last.evaluation.terms.qdd, last.correction, times[i]
-        M, B = last.evaluation.terms.M, last.evaluation.terms.velocity_map
+        q, qd, qdd, correction, t0 = last.q, last.qd, run.rows.qdd[0], last.correction, times[i]
     return walls
 
 
+def run_times(scenario: Scenario, step: float, duration: float, every_row: bool, chunk: float = 0.25) -> float:
+    """Wall time [s] of ``duration`` seconds of motion from rest in compiled runs of ``chunk`` seconds: the
+    steps alone (only each run's last row evaluated, what a caller that reads the motion needs) or with
+    every row's full evaluation (reactions, residuals, energy accounts: what ``simulate`` records)."""
+    motion = scenario.motion
+    integrator = ExactFrequencyTrapezoidal(motion)
+    state = integrator.start(0.0, scenario.equilibrium.q, np.zeros_like(scenario.equilibrium.q))
+    per_run = round(chunk / step)
+    start = time.perf_counter()
+    for first in range(0, round(duration / step), per_run):
+        times = step * np.arange(first + 1, first + per_run + 1)
+        k, drives = motion.constraints.coefficients_at(times), motion.dynamics.drive.kernel_parameters(times)
+        run = kernels.integration_run(state.q, state.qd, state.solution.qdd, state.correction, state.t, times, k,
+                                      drives, motion.partition, motion.dynamics.chain, integrator.settings,
+                                      np.full(times.size, every_row))
+        state = StepState(times[-1], run.last.q, run.last.qd, motion.solution_from_evaluation(run.last.evaluation),
+                          run.last.correction)
+    return time.perf_counter() - start
+
+
 def speed(params: CraneParameters, duration: float, repeats: int) -> None:
-    """[speed] Throughput of simulate (compiled runs of 0.25 s), the cost of single steps (median and worst
-    over 2 s) and both as multiples of one Pinocchio ABA call on the same chain, measured in this run."""
+    """[speed] Per case: the steps alone (compiled runs of 0.25 s from rest, past the drive's torque jumps of
+    the paper's task, best of ``repeats``) per step as a multiple of one Pinocchio ABA call on the same chain,
+    measured in this run, and as a real-time factor; the same with every row evaluated (``simulate``'s
+    records); single steps (one compiled call each, from 1 s on): median, worst and 99.9 % quantile; the
+    mean Newton evaluations per step and the largest constraint residual."""
     cases = [("rigid", params), *(("flexible", replace(params, boom=replace(params.boom, rfe_count=n)))
                                   for n in (6, 12, 24))]
     for variant, p in cases:
@@ -127,20 +152,18 @@ def speed(params: CraneParameters, duration: float, repeats: int) -> None:
         label = f"[speed] {variant:8s} n_rfe={p.boom.rfe_count if variant == 'flexible' else 1:2d} " \
                 f"dof={scenario.model.dof:2d}"
         print(f"{label}: Pinocchio ABA on the exported URDF {aba * 1e6:.2f} us/call")
-        for step in (1e-3, 2e-3):
-            walls = []
-            for _ in range(repeats):
-                start = time.perf_counter()
-                tr = simulate(scenario.motion, q0, duration, step=step)
-                walls.append(time.perf_counter() - start)
-            wall, per_step = min(walls), min(walls) / (tr.t.size - 1)
+        for step in (ONLINE_STEP, 1e-3):
+            steps = round(duration / step)
+            alone = min(run_times(scenario, step, duration, False) for _ in range(repeats)) / steps
+            recorded = min(run_times(scenario, step, duration, True) for _ in range(repeats)) / steps
             single = step_times(scenario, step, 2.0)
-            print(f"{label} h={step * 1e3:.0f} ms: {duration:.0f} s in {wall:6.2f} s wall (best of {repeats}; median "
-                  f"{np.median(walls):.2f} s), {per_step * 1e6:6.1f} us/step = {per_step / aba:4.1f} ABA, real-time "
-                  f"factor {duration / wall:5.1f}; single steps median {np.median(single) * 1e6:.1f} us, worst "
+            residual = simulate(scenario.motion, q0, min(duration, 2.0), step=step).residual_distance.max()
+            print(f"{label} h={step * 1e3:.2f} ms: steps alone {alone * 1e6:6.1f} us/step = {alone / aba:4.1f} ABA, "
+                  f"real-time factor {step / alone:5.1f}; every row evaluated {recorded * 1e6:6.1f} us/step = "
+                  f"{recorded / aba:4.1f} ABA; single steps median {np.median(single) * 1e6:.1f} us, worst "
                   f"{single.max() * 1e6:.1f} us ({single.max() / np.median(single):.1f}x median), 99.9 % below "
                   f"{np.quantile(single, 0.999) * 1e6:.1f} us; Newton evaluations "
-                  f"{newton_iterations(scenario, step):.2f}/step, max residual {tr.residual_distance.max():.1e} m")
+                  f"{newton_iterations(scenario, step):.2f}/step, max residual {residual:.1e} m")
 
 
 @njit
@@ -180,8 +203,9 @@ def _repeat_residual(q, qd, a, k, drive, partition, chain, n):
     at = kernels.project_positions(q, k, partition.holonomic_dependent, chain, 1e-9, 25)
     total = 0.0
     for _ in range(n):
-        total += kernels.newton_residual(q, qd, a, at.T, at.S, at.ee_position, at.ee_jacobian, k, drive, partition,
-                                         chain)[1][0]
+        Hw = world_pseudo_inertias(at.T, chain.body_joint, chain.body_H)
+        total += kernels.newton_residual(q, qd, a, at.T, at.S, Hw, at.ee_position, at.ee_jacobian, k, drive,
+                                         partition, chain)[1][0]
     return total
 
 
@@ -212,8 +236,8 @@ def _repeat_evaluation(q, qd, k, drive, partition, chain, n):
 def component_times(params: CraneParameters, repeat: int = 3000) -> None:
     """[profile] Compiled cost of the parts of a step (flexible, n_rfe = 6), each timed in a compiled loop
     (no Python call overhead), best of 5: a step is a factor, per Newton evaluation a projection and a
-    residual, and at its end a projection and a full evaluation with the integrator's qdd; every 5 ms of
-    motion the modal correction."""
+    residual, and at its end a projection and a full evaluation with the integrator's qdd; every
+    REFRESH_INTERVAL of motion the modal correction."""
     scenario = Scenario(params, "flexible")
     motion = scenario.motion
     q, chain, partition = scenario.equilibrium.q, motion.dynamics.chain, motion.partition
@@ -232,7 +256,7 @@ def component_times(params: CraneParameters, repeat: int = 3000) -> None:
               (off, k, motion.holonomic_dependent, chain)),
              ("Newton residual of (8) by inverse dynamics", _repeat_residual,
               (q, qd, acc.qdd[partition.integrated], k, drive, partition, chain)),
-             ("modal correction (eigenproblem, every 5 ms)", _repeat_correction,
+             (f"modal correction (eigenproblem, every {REFRESH_INTERVAL * 1e3:g} ms)", _repeat_correction,
               (reduced_mass, drive, partition, chain, settings)),
              ("iteration matrix and its Cholesky factor", _repeat_factor,
               (acc.M, acc.velocity_map, correction, drive, partition, chain)),

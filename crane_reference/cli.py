@@ -14,7 +14,7 @@ from tqdm import tqdm
 from .model.chain import VARIANTS, build_model
 from .model.config import ConfigError, load_config
 from .model.urdf import model_to_urdf
-from .motion.steps import ANALYSIS_STEP, ONLINE_STEP
+from .motion.steps import ANALYSIS_STEP, ONLINE_STEP, PLANT_STEP
 
 
 def progress_bar(label: str, total: float) -> tqdm:
@@ -272,7 +272,8 @@ def parser() -> argparse.ArgumentParser:
     tr.add_argument("--torque-limit", nargs="*", default=[], metavar="[JOINT=]N_M", help="actuator torque limits")
     tr.add_argument("--rate", type=float, default=1000.0, help="controller rate [Hz] (default 1000)")
     tr.add_argument("--duration", type=float, default=5.0, help="simulated time [s] (default 5)")
-    tr.add_argument("--step", type=float, default=ONLINE_STEP, help=f"integrator step [s] (default {ONLINE_STEP:g})")
+    tr.add_argument("--step", type=float, default=PLANT_STEP,
+                    help=f"the plant's integrator step [s] (default {PLANT_STEP:g})")
     tr.add_argument("--out", default="results/tracking", help="output directory (default ./results/tracking)")
     sub.add_parser("compile", help="compile the numba kernels ahead of the first run (fills the cache; run it "
                    "after installing, e.g. after colcon build)")

@@ -94,8 +94,9 @@ PROJECTION_TOLERANCE = 1e-9
 Newton converges quadratically, so the residual left is ~|Phi_qq| 1e-18, far below 1e-15 m; the
 velocities and (8) are then evaluated at the projected q itself."""
 
-REFRESH_INTERVAL = 0.005
-"""[s] of motion after which the modal correction is computed again at the current configuration."""
+REFRESH_INTERVAL = 0.02
+"""[s] of motion after which the modal correction is computed again at the current configuration (between
+computations it is extrapolated linearly, :func:`crane_reference.dynamics.kernels.correction_at`)."""
 
 CUTOFF = 0.8 * math.pi
 """omega h [rad] from which a mode counts as not resolved by the step (damped, not turned exactly)."""
@@ -152,7 +153,8 @@ class ExactFrequencyTrapezoidal:
     def _fresh(self) -> ModalCorrection:
         """No modal correction yet: the first step computes it."""
         n_ic = len(self.motion.independent)
-        return ModalCorrection(np.zeros((n_ic, n_ic)), np.zeros((n_ic, n_ic)), -math.inf, 0.0)
+        zero = np.zeros((n_ic, n_ic))
+        return ModalCorrection(zero, zero, zero, zero, -math.inf, 0.0, n_ic)
 
     def start(self, t: float, q: np.ndarray, qd: np.ndarray) -> StepState:
         """Consistent start: q_dc from the position constraints, qd_dc from (7), qdd from (8)."""
@@ -170,7 +172,7 @@ class ExactFrequencyTrapezoidal:
         if not keep_modes or not math.isfinite(state.correction.time):
             return StepState(state.t, state.q, state.qd, solution, self._fresh())
         qdd = kernels.corrected_accelerations(solution.dynamics.M, solution.velocity_map, solution.qdd, state.qd,
-                                              state.correction, self.motion.partition)
+                                              kernels.correction_at(state.correction, state.t), self.motion.partition)
         return StepState(state.t, state.q, state.qd, replace(solution, qdd=qdd), state.correction)
 
     def step(self, state: StepState, t1: float, ends_on_jump: bool = False) -> StepState:
@@ -188,11 +190,10 @@ class ExactFrequencyTrapezoidal:
         drives = drive.kernel_parameters(times)
         if ends_on_jump:
             drives[-1] = drive.kernel_parameters(times[-1], left_limit=True)
-        previous = state.solution
         run = kernels.integration_run(
-            state.q, state.qd, previous.qdd, previous.dynamics.M, previous.velocity_map, state.correction,
-            state.t, times, motion.constraints.coefficients_at(times), drives, motion.partition,
-            motion.dynamics.chain, self.settings)
+            state.q, state.qd, state.solution.qdd, state.correction, state.t, times,
+            motion.constraints.coefficients_at(times), drives, motion.partition, motion.dynamics.chain, self.settings,
+            np.ones(times.size, dtype=np.bool_))
         if run.status != CONVERGED:
             t0 = times[run.completed - 1] if run.completed else state.t
             t1 = times[min(run.completed, len(times) - 1)]

@@ -31,7 +31,7 @@ from ...model.parameters import CraneParameters
 from ...motion.constraints import ConstraintSet
 from ...motion.programmed_motion import REALISATIONS, ProgrammedMotion
 from ...motion.simulation import Scenario, simulate
-from ...motion.steps import ONLINE_STEP
+from ...motion.steps import PLANT_STEP
 from ...motion.trajectory import Trajectory
 from ..bands import vibration_band
 from ..vibration import boom_tip_deflection
@@ -60,7 +60,7 @@ class TrackingSpec:
     limits: dict[str, float] = field(default_factory=dict)
     rate: float = 1000.0
     duration: float = 5.0
-    step: float = ONLINE_STEP
+    step: float = PLANT_STEP
     reference_step: float | None = None
 
     def __post_init__(self) -> None:
