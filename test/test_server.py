@@ -24,11 +24,12 @@ RATE = 100  # [Hz]
 LEAD = 0.1  # [s]
 NS = 10**9
 PERIOD = NS // RATE
+STEP = 1e-3  # [s]: the integrator step of the served stream and of the streams it is compared with
 
 
 def spec(**changes) -> StreamSpec:
     config = load_config()
-    return StreamSpec(**{"config": config, "model": "rigid", "step": 1e-3, "blend_time": 0.5, "targets": config.task,
+    return StreamSpec(**{"config": config, "model": "rigid", "step": STEP, "blend_time": 0.5, "targets": config.task,
                          "warm_up": False, "ramp_time": 0.3, **changes})
 
 
@@ -68,7 +69,7 @@ def test_served_samples_are_the_stream_at_consecutive_stamps(server: ReferenceSe
     out = publish(server, start, 1.5)
     assert [o.k for o in out] == list(range(len(out))) and len(out) == 150
     assert [o.stamp_ns for o in out] == [start + k * PERIOD for k in range(150)]
-    truth = ReferenceStream(load_config(), "rigid", blend_time=0.5, ramp_time=0.3)
+    truth = ReferenceStream(load_config(), "rigid", STEP, blend_time=0.5, ramp_time=0.3)
     truth.compute(1.5)
     np.testing.assert_array_equal([o.frame.sample.q for o in out], [truth.sample(k / RATE).q for k in range(150)])
     previews = [o.k for o in out if o.frame.preview is not None]  # the look-ahead made before publishing has all;
@@ -89,7 +90,7 @@ def test_a_command_takes_effect_at_the_last_sample_within_the_lead(server: Refer
     assert k == 49 + round(LEAD * RATE)  # stamped LEAD - 1 ns after the acceptance
     assert server.commands["retarget_stamp_s"] == f"{(start + k * PERIOD) / NS:.6f}"
     after = publish(server, start + len(before) * PERIOD, 1.0)
-    truth = ReferenceStream(load_config(), "rigid", blend_time=0.5, ramp_time=0.3)
+    truth = ReferenceStream(load_config(), "rigid", STEP, blend_time=0.5, ramp_time=0.3)
     truth.retarget(k / RATE, targets)
     truth.compute(1.5)
     np.testing.assert_array_equal([o.frame.sample.q for o in before + after],
@@ -105,7 +106,7 @@ def test_restart_only_while_not_publishing_and_its_jump(server: ReferenceServer)
     server.end()
     restart = server.restart()
     assert restart.k == len(out)  # while not publishing: at the next sample, the frames made ahead dropped
-    truth = ReferenceStream(load_config(), "rigid", blend_time=0.5, ramp_time=0.3)
+    truth = ReferenceStream(load_config(), "rigid", STEP, blend_time=0.5, ramp_time=0.3)
     start = truth.start_configuration()
     truth.compute(restart.k / RATE)
     jump = np.abs(truth.sample(restart.k / RATE).q - start)
@@ -122,7 +123,7 @@ def test_a_solver_failure_holds_the_last_sample_and_a_restart_recovers(server: R
     """The integrator fails (injected into MotionStepper.advance_until): the frames made before the failure are
     published, the stream's, then its last sample held (zero velocity) with the stream in ERROR naming the
     failure; a restart while not publishing goes back to the start, RUNNING."""
-    truth = ReferenceStream(load_config(), "rigid", blend_time=0.5, ramp_time=0.3)
+    truth = ReferenceStream(load_config(), "rigid", STEP, blend_time=0.5, ramp_time=0.3)
     truth.compute(2.5)  # before the failure is injected (into every MotionStepper)
     server.begin(NS)
     before = publish(server, NS, 0.3)
