@@ -102,17 +102,19 @@ def step_times(scenario: Scenario, step: float, duration: float, after: float = 
     state, motion, settings = stepper.state, scenario.motion, stepper.integrator.settings
     times = state.t + step * np.arange(1, round(duration / step) + 1)
     k, drives = motion.constraints.coefficients_at(times), motion.dynamics.drive.kernel_parameters(times)
-    q, qd, qdd, correction, t0 = state.q, state.qd, state.solution.qdd, state.correction, state.t
+    q, qd, qdd, B, correction, t0 = state.q, state.qd, state.solution.qdd, state.solution.velocity_map, \
+        state.correction, state.t
     evaluated = np.zeros(1, dtype=np.bool_)
     walls = np.empty(times.size)
     for i in range(times.size):
         k_i = Coefficients(k.Q[i:i + 1], k.g[i:i + 1], k.c[i:i + 1], k.order)
         start = time.perf_counter()
-        run = kernels.integration_run(q, qd, qdd, correction, t0, times[i:i + 1], k_i, drives[i:i + 1],
+        run = kernels.integration_run(q, qd, qdd, B, correction, t0, times[i:i + 1], k_i, drives[i:i + 1],
                                       motion.partition, motion.dynamics.chain, settings, evaluated)
         walls[i] = time.perf_counter() - start
         last = run.last
         q, qd, qdd, correction, t0 = last.q, last.qd, run.rows.qdd[0], last.correction, times[i]
+        B = last.evaluation.terms.velocity_map
     return walls
 
 
@@ -128,7 +130,8 @@ def run_times(scenario: Scenario, step: float, duration: float, every_row: bool,
     for first in range(0, round(duration / step), per_run):
         times = step * np.arange(first + 1, first + per_run + 1)
         k, drives = motion.constraints.coefficients_at(times), motion.dynamics.drive.kernel_parameters(times)
-        run = kernels.integration_run(state.q, state.qd, state.solution.qdd, state.correction, state.t, times, k,
+        run = kernels.integration_run(state.q, state.qd, state.solution.qdd, state.solution.velocity_map,
+                                      state.correction, state.t, times, k,
                                       drives, motion.partition, motion.dynamics.chain, integrator.settings,
                                       np.full(times.size, every_row))
         state = StepState(times[-1], run.last.q, run.last.qd, motion.solution_from_evaluation(run.last.evaluation),

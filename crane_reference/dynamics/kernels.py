@@ -251,7 +251,7 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
     inertia = np.zeros((n_ic, n_ic))
     damping = np.zeros((n_ic, n_ic))
     if partition.servo or not settings.modal:
-        return ModalCorrection(inertia, damping, np.zeros_like(inertia), np.zeros_like(damping), t, h, n_ic)
+        return ModalCorrection(inertia, damping, t, h)
     L = cholesky(reduced_mass)
     stiffness = np.empty((n_ic, n_ic))
     for i in range(n_ic):
@@ -273,13 +273,11 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
             modal_damping[i] = modes[i] @ (physical @ modes[i])
     c = np.zeros(n_ic)
     d = np.zeros(n_ic)
-    resolved = n_ic
     for i in range(n_ic):
         k = max(omega_squared[i], 0.0)
         omega = np.sqrt(k)
         if omega * h >= settings.cutoff:
             d[i] = 2.0 * settings.unresolved_damping * omega
-            resolved -= 1
             continue
         root = np.sqrt(complex(modal_damping[i] ** 2 - 4.0 * k))
         second = 0.5 * (-modal_damping[i] - root)
@@ -300,33 +298,7 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
                 total_d += LV[i, m] * d[m] * LV[j, m]
             inertia[i, j] = inertia[j, i] = total_c
             damping[i, j] = damping[j, i] = total_d
-    return ModalCorrection(inertia, damping, np.zeros_like(inertia), np.zeros_like(damping), t, h, resolved)
-
-
-@njit(cache=True, nogil=True)
-def refreshed(previous: ModalCorrection, fresh: ModalCorrection):
-    """``fresh`` with the rates of change from ``previous`` to it, (fresh - previous) / (t_fresh - t_previous),
-    when ``previous`` was computed earlier for the same step size and resolved as many modes (else none: a mode
-    that crossed the cutoff changes the terms by a jump, not a rate): the terms then follow the configuration's
-    change to first order between computations (:func:`correction_at`)."""
-    elapsed = fresh.time - previous.time
-    if not (np.isfinite(elapsed) and elapsed > 0.0 and abs(previous.step - fresh.step) <= 1e-9 * fresh.step
-            and previous.resolved == fresh.resolved):
-        return fresh
-    return ModalCorrection(fresh.inertia, fresh.damping, (fresh.inertia - previous.inertia) / elapsed,
-                           (fresh.damping - previous.damping) / elapsed, fresh.time, fresh.step, fresh.resolved)
-
-
-@njit(cache=True, nogil=True)
-def correction_at(correction: ModalCorrection, t):
-    """The modal terms at time t, extrapolated linearly from their computation: Delta M_r(t) = Delta M_r +
-    (t - time) dDelta M_r/dt and likewise D_u (as computed where no rates are known)."""
-    elapsed = t - correction.time
-    if not np.isfinite(elapsed) or elapsed == 0.0:
-        return correction
-    return ModalCorrection(correction.inertia + elapsed * correction.inertia_rate,
-                           correction.damping + elapsed * correction.damping_rate, correction.inertia_rate,
-                           correction.damping_rate, t, correction.step, correction.resolved)
+    return ModalCorrection(inertia, damping, t, h)
 
 
 @njit(cache=True, nogil=True)
@@ -347,8 +319,7 @@ def corrected_accelerations(M, B, qdd, qd, correction: ModalCorrection, partitio
     if partition.servo:
         return qdd.copy()
     n_ic = independent.size
-    zero = np.zeros((n_ic, n_ic))
-    none = ModalCorrection(zero, zero, zero, zero, correction.time, correction.step, n_ic)
+    none = ModalCorrection(np.zeros((n_ic, n_ic)), np.zeros((n_ic, n_ic)), correction.time, correction.step)
     reduced_mass = map_columns(project_rows(M, B, independent, dependent, False), B, independent, dependent)
     exact = qdd[independent]
     return qdd + matvec(B, converted_accelerations(reduced_mass, exact, qd[independent], none, correction) - exact)
@@ -435,39 +406,41 @@ def _reduced_mass(M, B, partition: Partition):
 @njit(cache=True, nogil=True)
 def _end_accelerations(end: Iterate, a1, k: Coefficients, partition: Partition, chain: ChainData):
     """qdd = B a1_ic + e at the step's end state (the acceleration constraints of (7) there: E's velocity
-    terms, A, c and B; no mass matrix)."""
+    terms, A, c and B; no mass matrix), and B."""
     d = point_bias(velocity_terms(end.qd, end.S), chain.ee_joint, end.ee_position)
     A, c_acc = acceleration_terms(end.ee_position, matvec(end.ee_jacobian, end.qd), end.ee_jacobian, d, k)
     B, e_dc = constraint_map(A, c_acc, partition.independent, partition.dependent)
-    return _accelerations_from(a1[:partition.independent.size], B, e_dc, partition.independent, partition.dependent)
+    return _accelerations_from(a1[:partition.independent.size], B, e_dc, partition.independent,
+                               partition.dependent), B
 
 
 @njit(cache=True, nogil=True)
-def _failed(q0, qd0, qdd0, correction: ModalCorrection, iterations):
+def _failed(q0, qd0, qdd0, B0, correction: ModalCorrection, iterations):
     """The :class:`Advance` of a step whose constraints could not be met: its start, unsolved."""
     nan = np.full(3, np.nan)
-    return Advance(q0, qd0, qdd0, nan, np.full((3, 3), np.nan), nan, correction, CONSTRAINTS_UNSOLVABLE, iterations)
+    return Advance(q0, qd0, qdd0, B0, nan, np.full((3, 3), np.nan), nan, correction, CONSTRAINTS_UNSOLVABLE,
+                   iterations)
 
 
 @njit(cache=True, nogil=True)
-def integration_step(q0, qd0, qdd0, correction: ModalCorrection, t0, h, k: Coefficients, drive,
+def integration_step(q0, qd0, qdd0, B0, correction: ModalCorrection, t0, h, k: Coefficients, drive,
                      partition: Partition, chain: ChainData, settings: StepSettings):
     """One step of the integrator (see :mod:`crane_reference.motion.integration`) from t0 to t0 + h of the
     integrated coordinates x = q[integrated] = (q_ic, q_vd): the trapezoidal rule on the residual of (8)
-    with the modal terms P^T (M qdd + h - Q) - Delta M_r a_ic + D_u v_ic.  The first iterate is the
-    predictor q0 + h qd0 + h^2/2 qdd0 with q_hd from the position constraints; M and B there give the
-    iteration matrix (:func:`iteration_factor`, the matrix of the step's end to first order in h) and,
-    when ``settings.refresh_interval`` has passed since it was computed or for another step size, the
-    modal correction.  Newton on the independent accelerations with the residual from inverse dynamics,
-    fixed point on the q_vd ones; q_hd predicted to second order in the change of x at the later iterates,
-    qd_dc from the velocity-level constraints at every iterate.  At least ``settings.evaluations``
-    evaluations, then until the last correction is below the tolerance; the step ends at the state of the
-    corrected accelerations, on the position constraints, with qdd = B a_ic + e there (:class:`Advance`).
+    with the modal terms P^T (M qdd + h - Q) - Delta M_r a_ic + D_u v_ic (the correction is computed anew
+    when ``settings.refresh_interval`` has passed since it was, or for another step size, from M and B0 at
+    t0).  The first iterate is the predictor q0 + h qd0 + h^2/2 qdd0 with q_hd from the position constraints;
+    M and B there give the iteration matrix (:func:`iteration_factor`: the matrix of the step's end to first
+    order in h).  Newton on the independent accelerations with the residual from inverse dynamics, fixed
+    point on the q_vd ones; q_hd predicted to second order in the change of x at the later iterates, qd_dc
+    from the velocity-level constraints at every iterate.  At least ``settings.evaluations`` evaluations,
+    then until the last correction is below the tolerance; the step ends at the state of the corrected
+    accelerations, on the position constraints, with qdd = B a_ic + e there (:class:`Advance`; no M).
 
     The accelerations a_n carried from step to step are those of the corrected equation; with a new
     correction they are converted so that the force they balance stays the same,
     (M_r - Delta M_new) a_new + D_new v = (M_r - Delta M_old) a_old + D_old v (at a start the old terms are
-    zero: a_old is the acceleration of (8) itself), M_r taken at the first iterate."""
+    zero: a_old is the acceleration of (8) itself)."""
     independent, integrated, servo = partition.independent, partition.integrated, partition.servo
     n_ic = independent.size
     x0, v0, a0 = q0[integrated], qd0[integrated], qdd0[integrated].copy()
@@ -475,28 +448,28 @@ def integration_step(q0, qd0, qdd0, correction: ModalCorrection, t0, h, k: Coeff
     a1 = a0.copy()
     it = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, True, False)
     if not it.solved:
-        return _failed(q0, qd0, qdd0, correction, 1)
+        return _failed(q0, qd0, qdd0, B0, correction, 1)
     Hw = world_pseudo_inertias(it.T, chain.body_joint, chain.body_H)
     M = mass_matrix(it.S, composite_inertias(Hw, chain.body_joint, q0.size))
     qdd, residual, B = newton_residual(it.q, it.qd, a1, it.T, it.S, Hw, it.ee_position, it.ee_jacobian, k, drive,
                                        partition, chain)
-    t1 = t0 + h
-    if t1 - correction.time >= settings.refresh_interval - 1e-9 * h or abs(h - correction.step) > 1e-9 * h:
-        reduced_mass = _reduced_mass(M, B, partition)
-        fresh = refreshed(correction, modal_correction(reduced_mass, h, t1, drive, partition, chain, settings))
+    if t0 - correction.time >= settings.refresh_interval or abs(h - correction.step) > 1e-9 * h:
+        T0, S0 = forward_kinematics(q0, chain.kinds, chain.axes, chain.origins)
+        M0 = mass_matrix(S0, composite_inertias(world_pseudo_inertias(T0, chain.body_joint, chain.body_H),
+                                                chain.body_joint, q0.size))
+        reduced_mass = _reduced_mass(M0, B0, partition)
+        fresh = modal_correction(reduced_mass, h, t0, drive, partition, chain, settings)
         if not servo:
-            a0[:n_ic] = converted_accelerations(reduced_mass, a0[:n_ic], v0[:n_ic], correction_at(correction, t0),
-                                                correction_at(fresh, t0))
+            a0[:n_ic] = converted_accelerations(reduced_mass, a0[:n_ic], v0[:n_ic], correction, fresh)
             a1 = a0.copy()
             it = _state_at(a1, x0, v0, a0, it.q, q0.size, h, k, partition, chain, settings, True, False)
             if not it.solved:
-                return _failed(q0, qd0, qdd0, correction, 1)
+                return _failed(q0, qd0, qdd0, B0, correction, 1)
             Hw = world_pseudo_inertias(it.T, chain.body_joint, chain.body_H)
             qdd, residual, B = newton_residual(it.q, it.qd, a1, it.T, it.S, Hw, it.ee_position, it.ee_jacobian, k,
                                                drive, partition, chain)
         correction = fresh
-    current = correction_at(correction, t1)
-    factor = iteration_factor(M, B, h, current, drive, partition, chain)
+    factor = iteration_factor(M, B, h, correction, drive, partition, chain)
     status = NOT_CONVERGED
     for iteration in range(settings.max_iterations):
         if iteration > 0:
@@ -504,7 +477,7 @@ def integration_step(q0, qd0, qdd0, correction: ModalCorrection, t0, h, k: Coeff
             Hw = world_pseudo_inertias(it.T, chain.body_joint, chain.body_H)
             qdd, residual, B = newton_residual(it.q, it.qd, a1, it.T, it.S, Hw, it.ee_position, it.ee_jacobian, k,
                                                drive, partition, chain)
-        residual += matvec(current.damping, it.qd[independent]) - matvec(current.inertia, a1[:n_ic])
+        residual += matvec(correction.damping, it.qd[independent]) - matvec(correction.inertia, a1[:n_ic])
         correction_step = qdd[integrated] - a1
         correction_step[:n_ic] = -(cholesky_solve(factor, residual) if not servo else matvec(factor, residual))
         a1 = a1 + correction_step
@@ -515,8 +488,9 @@ def integration_step(q0, qd0, qdd0, correction: ModalCorrection, t0, h, k: Coeff
             break
     end = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, True, True)
     if not end.solved:
-        return _failed(q0, qd0, qdd0, correction, iteration + 1)
-    return Advance(end.q, end.qd, _end_accelerations(end, a1, k, partition, chain), end.ee_position,
+        return _failed(q0, qd0, qdd0, B0, correction, iteration + 1)
+    qdd, B = _end_accelerations(end, a1, k, partition, chain)
+    return Advance(end.q, end.qd, qdd, B, end.ee_position,
                    end.T[chain.ee_joint, :3, :3].copy(), matvec(end.ee_jacobian, end.qd), correction, status,
                    iteration + 1)
 
@@ -537,10 +511,11 @@ def _at_step(k: Coefficients, i):
 
 
 @njit(cache=True, nogil=True)
-def integration_run(q, qd, qdd, correction: ModalCorrection, t0, times, k: Coefficients, drives,
+def integration_run(q, qd, qdd, B, correction: ModalCorrection, t0, times, k: Coefficients, drives,
                     partition: Partition, chain: ChainData, settings: StepSettings, evaluated):
     """:func:`integration_step` from t0 through ``times`` (N,) in one call, with the constraint
-    coefficients ``k`` (stacked per step) and drive parameters ``drives`` (N, 4) of each step's end.  The
+    coefficients ``k`` (stacked per step) and drive parameters ``drives`` (N, 4) of each step's end, B the
+    velocity map at t0.  The
     rows of the steps where ``evaluated`` (N,) is True, and of the last one, carry the full evaluation
     (:func:`step_evaluation`: reactions, residuals, accounts); the others NaN there.  Stops at the first
     step that fails; returns a :class:`Run`."""
@@ -549,7 +524,7 @@ def integration_run(q, qd, qdd, correction: ModalCorrection, t0, times, k: Coeff
                     np.full((N, n), np.nan), np.empty((N, 3)), np.empty((N, 3, 3)), np.empty((N, 3)),
                     np.full((N, m), np.nan), np.full((N, m), np.nan), np.full((N, len(ACCOUNTS)), np.nan),
                     np.empty(N, dtype=np.int64))
-    step = integration_step(q, qd, qdd, correction, t0, times[0] - t0, _at_step(k, 0), drives[0], partition, chain,
+    step = integration_step(q, qd, qdd, B, correction, t0, times[0] - t0, _at_step(k, 0), drives[0], partition, chain,
                             settings)
     completed = 0
     while step.status == CONVERGED:
@@ -562,7 +537,7 @@ def integration_run(q, qd, qdd, correction: ModalCorrection, t0, times, k: Coeff
         completed += 1
         if completed == N:
             break
-        step = integration_step(step.q, step.qd, step.qdd, step.correction, times[completed - 1],
+        step = integration_step(step.q, step.qd, step.qdd, step.velocity_map, step.correction, times[completed - 1],
                                 times[completed] - times[completed - 1], _at_step(k, completed), drives[completed],
                                 partition, chain, settings)
     if step.status == CONVERGED:

@@ -83,22 +83,16 @@ class StepSettings(NamedTuple):
 
 
 class ModalCorrection(NamedTuple):
-    """The integrator's modal terms in the independent coordinates (n_ic, n_ic), computed at the configuration
-    of ``time`` [s] for the step ``step`` [s] (see :func:`crane_reference.dynamics.kernels.modal_correction`):
-    ``inertia`` Delta M_r, removed from the reduced mass so that the trapezoidal rule turns each resolved mode
-    by exactly omega h per step, and ``damping`` D_u, which gives each resolved mode its exact decay per step
-    and damps the modes the step does not resolve; ``inertia_rate`` and ``damping_rate`` [1/s] their change
-    per second between the last two computations, with which they are extrapolated to the steps between
-    computations (:func:`crane_reference.dynamics.kernels.correction_at`); ``resolved`` the number of modes
-    the step resolves (omega h below the cutoff)."""
+    """The integrator's modal terms in the independent coordinates (n_ic, n_ic), computed at ``time`` [s]
+    for the step ``step`` [s] (see :func:`crane_reference.dynamics.kernels.modal_correction`): ``inertia``
+    Delta M_r, removed from the reduced mass so that the trapezoidal rule turns each resolved mode by
+    exactly omega h per step, and ``damping`` D_u, which gives each resolved mode its exact decay per step
+    and damps the modes the step does not resolve."""
 
     inertia: np.ndarray
     damping: np.ndarray
-    inertia_rate: np.ndarray
-    damping_rate: np.ndarray
     time: float
     step: float
-    resolved: int
 
 
 class ChainTerms(NamedTuple):
@@ -224,13 +218,14 @@ messages of the failures (formatted with t0, t1, h and iterations)."""
 
 
 class Advance(NamedTuple):
-    """One integration step's end: q, qd and the integrator's qdd, E's position, the rotation of its frame
-    and its velocity, the modal correction used, ``status`` (:data:`STATUS_MESSAGES`) and the Newton
-    iterations (the full :class:`Evaluation` there is computed only where it is read)."""
+    """One integration step's end: q, qd and the integrator's qdd, the velocity map B, E's position, the
+    rotation of its frame and its velocity, the modal correction used, ``status`` (:data:`STATUS_MESSAGES`)
+    and the Newton iterations (the full :class:`Evaluation` there is computed only where it is read)."""
 
     q: np.ndarray
     qd: np.ndarray
     qdd: np.ndarray
+    velocity_map: np.ndarray
     ee_position: np.ndarray
     ee_rotation: np.ndarray
     ee_velocity: np.ndarray

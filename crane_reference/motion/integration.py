@@ -52,8 +52,11 @@ from the constraints.
 
 The step's nonlinear equation is solved by a modified Newton method on the residual (from O(n) inverse
 dynamics, without forming M) with the iteration matrix B^T (M + h^2/4 K + h/2 D) B - Delta M_r + h/2 D_u
-at the start of the step: exact for the stiff linear springs, approximate for gravity, velocity and
-constraint-curvature terms, so each correction shrinks the next by a factor of about 1e-3; the q_vd
+with M and B at the step's predicted end (its first iterate): exact for the stiff linear springs, to first
+order in h for the configuration's change over the step, approximate for gravity, velocity and
+constraint-curvature terms, so each correction shrinks the next by a factor of about 1e-3 (taken at the
+step's start instead, an error of the slewing accelerations comes back as a boom-tip bending correction
+of the same size); the q_vd
 accelerations are iterated as a fixed point.  Each evaluation's correction is applied, and the step ends
 at the state of the corrected accelerations: after at least ``evaluations`` evaluations, once the last
 correction in velocities (h/2 |da|) is at most ``tolerance`` [rad/s or m/s].
@@ -94,9 +97,8 @@ PROJECTION_TOLERANCE = 1e-9
 Newton converges quadratically, so the residual left is ~|Phi_qq| 1e-18, far below 1e-15 m; the
 velocities and (8) are then evaluated at the projected q itself."""
 
-REFRESH_INTERVAL = 0.02
-"""[s] of motion after which the modal correction is computed again at the current configuration (between
-computations it is extrapolated linearly, :func:`crane_reference.dynamics.kernels.correction_at`)."""
+REFRESH_INTERVAL = 0.005
+"""[s] of motion after which the modal correction is computed again at the current configuration."""
 
 CUTOFF = 0.8 * math.pi
 """omega h [rad] from which a mode counts as not resolved by the step (damped, not turned exactly)."""
@@ -153,8 +155,7 @@ class ExactFrequencyTrapezoidal:
     def _fresh(self) -> ModalCorrection:
         """No modal correction yet: the first step computes it."""
         n_ic = len(self.motion.independent)
-        zero = np.zeros((n_ic, n_ic))
-        return ModalCorrection(zero, zero, zero, zero, -math.inf, 0.0, n_ic)
+        return ModalCorrection(np.zeros((n_ic, n_ic)), np.zeros((n_ic, n_ic)), -math.inf, 0.0)
 
     def start(self, t: float, q: np.ndarray, qd: np.ndarray) -> StepState:
         """Consistent start: q_dc from the position constraints, qd_dc from (7), qdd from (8)."""
@@ -172,7 +173,7 @@ class ExactFrequencyTrapezoidal:
         if not keep_modes or not math.isfinite(state.correction.time):
             return StepState(state.t, state.q, state.qd, solution, self._fresh())
         qdd = kernels.corrected_accelerations(solution.dynamics.M, solution.velocity_map, solution.qdd, state.qd,
-                                              kernels.correction_at(state.correction, state.t), self.motion.partition)
+                                              state.correction, self.motion.partition)
         return StepState(state.t, state.q, state.qd, replace(solution, qdd=qdd), state.correction)
 
     def step(self, state: StepState, t1: float, ends_on_jump: bool = False) -> StepState:
@@ -191,7 +192,7 @@ class ExactFrequencyTrapezoidal:
         if ends_on_jump:
             drives[-1] = drive.kernel_parameters(times[-1], left_limit=True)
         run = kernels.integration_run(
-            state.q, state.qd, state.solution.qdd, state.correction, state.t, times,
+            state.q, state.qd, state.solution.qdd, state.solution.velocity_map, state.correction, state.t, times,
             motion.constraints.coefficients_at(times), drives, motion.partition, motion.dynamics.chain, self.settings,
             np.ones(times.size, dtype=np.bool_))
         if run.status != CONVERGED:
