@@ -1,14 +1,14 @@
 """Accuracy of the integrator against converged runs; prints the figures the README and the closing notes quote.
 
     python benchmarks/bench_accuracy.py [--duration 10] [--cache results/bench_accuracy]
-                                        [--only vibration growth damped iterations newton first-order mechanism
+                                        [--only vibration growth damped iterations matrix newton first-order mechanism
                                                 sensitivity slow reference]
 
 The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simulate_reference``), sampled every
 0.1 ms and cached as NPZ in ``--cache`` (the first run of a section takes minutes per crane).
 
 1. [vibration] The paper's undamped crane with n_rfe = 6 (default), 3 and 12, at h = 1, 0.5 and 0.25 ms (the
-   steps of the node, ``simulate`` and the studies, and of ``analyze``): the 40-250 Hz RMS of psi2, psi(3,0),
+   steps of the studies at 1 ms, of the node and of ``analyze``): the 40-250 Hz RMS of psi2, psi(3,0),
    psi4 (4th-order Butterworth band-pass, forward-backward, at each run's own rate) over 1-5 s and 5-10 s as a
    share of the converged run's (target: 90-110 %); the largest raw error, and the controller-band error (the
    error on the 1 kHz grid low-passed at 10 Hz; a run sampled faster is first low-passed at 400 Hz so the RFE
@@ -22,21 +22,23 @@ The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simula
 4. [iterations] The Newton rules at h = 1 ms: converged (tolerance 1e-9), two evaluations and the online
    default (three), and exactly one or two evaluations whatever the correction (the route to one residual
    evaluation per step): cost per step, evaluations per step, raw and controller-band errors.
-5. [newton] Largest difference of psi2, psi(3,0), psi4 between Newton tolerances 1e-8, 1e-9, 1e-10 and 1e-12.
-6. [first-order] The paper's ellipse and height plus the first-order constraint x y' - y x' = a b omega(t)
+5. [matrix] The Newton iteration's error operator I - F^-1 J (J by central differences) with the iteration
+   matrix F at the step's first iterate (the integrator's) and at its start, at steps from 0.5, 1, 3, 6 s.
+6. [newton] Largest difference of psi2, psi(3,0), psi4 between Newton tolerances 1e-8, 1e-9, 1e-10 and 1e-12.
+7. [first-order] The paper's ellipse and height plus the first-order constraint x y' - y x' = a b omega(t)
    (rigid crane, 2 s): the parametric-angle error at h = 2, 1, 0.5 ms, the velocity residual and the
    energy-balance error relative to the constraint work.
-7. [reference] The undamped reference at rtol 1e-9 against 1e-10: their difference bounds the reference's own
+8. [reference] The undamped reference at rtol 1e-9 against 1e-10: their difference bounds the reference's own
    error.
-8. [mechanism] Why second-order schemes misreport the vibration: the constrained modes along the run (every
+9. [mechanism] Why second-order schemes misreport the vibration: the constrained modes along the run (every
    0.5 s) with the detunings of the internal resonances 2 f9 = f8 + f10 and f9 + f10 = f11, which the slow
    motion sweeps through zero; and the luffing vibration (psi(3,0), 40-250 Hz RMS over 1-3, 3-5, 5-7, 7-10 s
    against the converged run) of the plain trapezoidal rule (turning mode i by 2 arctan(omega_i h / 2) per
    step) and of the integrator (exact frequencies) at h = 0.25 and 1 ms.
-9. [sensitivity] The conditioning of the 40-250 Hz RMS: the model with its payload mass changed by +-0.5 and
+10. [sensitivity] The conditioning of the 40-250 Hz RMS: the model with its payload mass changed by +-0.5 and
    +-1 % and its boom's Young's modulus by +-1 % (h = 0.25 ms) against the nominal converged run, beside the
    nominal crane at h = 1, 0.5, 1/3 and 0.25 ms (converged Newton).
-10. [slow] The controller-band error at the node's step and at 1 ms (undamped and damped crane): the
+11. [slow] The controller-band error at the node's step and at 1 ms (undamped and damped crane): the
     integrator with its modal correction computed every step, every REFRESH_INTERVAL (the default) and every
     20 ms, and the plain trapezoidal rule; psi2's drift at 3, 5
     and 10 s. A stiff flexible drive (1e8 N m/rad) against DOP853 over 0.1 s.
@@ -55,6 +57,8 @@ from scipy.integrate import quad
 from scipy.signal import butter, sosfiltfilt
 
 from crane_reference.analysis.modal import linearise, modal_analysis, modes_at
+from crane_reference.dynamics import kernels
+from crane_reference.dynamics.inertia import world_pseudo_inertias
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import CraneParameters, Damping, FlexibleDrive
 from crane_reference.model.profiles import Constant, QuinticRise
@@ -241,6 +245,46 @@ def iteration_rules(params: CraneParameters, duration: float, cache: Path) -> No
               f"RMS kept over 5-10 s {_triple(kept, '.0%')}")
 
 
+def newton_matrix(params: CraneParameters) -> None:
+    """[matrix] The Newton iteration of a step: the 2-norm and spectral radius of its error operator
+    I - F^-1 J (J the Jacobian of the step's residual in a1, by central differences) for the iteration matrix F
+    with M and B at the step's first iterate (the integrator's) and at its start, at steps from t = 0.5, 1, 3
+    and 6 s at the node's step and at 1 ms."""
+    scenario = Scenario(params, "flexible")
+    motion = scenario.motion
+    chain, partition = motion.dynamics.chain, motion.partition
+    q0 = scenario.equilibrium.q
+    for step in (ONLINE_STEP, 1e-3):
+        stepper = MotionStepper(motion, 0.0, q0, np.zeros_like(q0), step)
+        settings = stepper.integrator.settings
+        for t in (0.5, 1.0, 3.0, 6.0):
+            stepper.advance_until(t)
+            state = stepper.state
+            t1 = state.t + step
+            k, drive = motion.constraints.coefficients(t1), motion.dynamics.drive.kernel_parameters(t1)
+            a0 = state.solution.qdd[partition.integrated]
+            jacobian = np.empty((a0.size, a0.size))
+            for j in range(a0.size):
+                delta = np.zeros_like(a0)
+                delta[j] = 1e-3 * max(1.0, abs(a0[j]))
+                plus, minus = (kernels.step_residual(a0 + sign * delta, state.q, state.qd, a0, state.correction, step,
+                                                     k, drive, partition, chain, settings) for sign in (1.0, -1.0))
+                jacobian[:, j] = (plus - minus) / (2.0 * delta[j])
+            first = kernels.first_iterate(state.q, state.qd, a0, step, k, partition, chain, settings)
+            factors = {
+                "first iterate": kernels.newton_factor(
+                    first, world_pseudo_inertias(first.T, chain.body_joint, chain.body_H),
+                    motion.solve(t1, first.q, first.qd).velocity_map, step, state.correction, drive, partition, chain),
+                "step's start": kernels.iteration_factor(state.solution.dynamics.M, state.solution.velocity_map, step,
+                                                         state.correction, drive, partition, chain)}
+            parts = []
+            for name, factor in factors.items():
+                error = np.eye(a0.size) - np.linalg.solve(factor @ factor.T, jacobian)
+                parts.append(f"M, B at the {name}: |I - F^-1 J| {np.linalg.norm(error, 2):.1e}, spectral radius "
+                             f"{np.abs(np.linalg.eigvals(error)).max():.1e}")
+            print(f"[matrix] h={step * 1e3:g} ms, step from t={t:g} s: " + "; ".join(parts))
+
+
 def newton_tolerance(params: CraneParameters, duration: float, step: float = 1e-3) -> None:
     """[newton] Differences between Newton tolerances."""
     scenario = Scenario(params, "flexible")
@@ -375,8 +419,8 @@ def slow_motion(params: CraneParameters, duration: float, cache: Path) -> None:
           f"{np.abs(run.q - converged.q).max():.1e} rad")
 
 
-SECTIONS = ("vibration", "growth", "damped", "iterations", "newton", "first-order", "mechanism", "sensitivity", "slow",
-            "reference")
+SECTIONS = ("vibration", "growth", "damped", "iterations", "matrix", "newton", "first-order", "mechanism",
+            "sensitivity", "slow", "reference")
 
 
 def main() -> None:
@@ -391,6 +435,7 @@ def main() -> None:
                          ("growth", lambda: growth(params)),
                          ("damped", lambda: damped(params, args.duration, args.cache)),
                          ("iterations", lambda: iteration_rules(params, args.duration, args.cache)),
+                         ("matrix", lambda: newton_matrix(params)),
                          ("newton", lambda: newton_tolerance(params, args.duration)),
                          ("first-order", lambda: first_order(params)),
                          ("mechanism", lambda: mechanism(params, args.duration, args.cache)),

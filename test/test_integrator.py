@@ -2,6 +2,8 @@
 
 * The modal terms of a step: Delta M_r = M_r Phi diag(c) Phi^T M_r with the modes from scipy's generalized
   symmetric eigensolver and c from the exact-frequency formula, at the crane's reduced mass.
+* The Newton iteration matrix at the step's first iterate against the Jacobian of the step's residual by
+  central differences.
 * A run's evaluated rows: which rows get the full evaluation does not change the motion (bit for bit),
   and the reactions of an evaluated row are lambda = (A A^T)^-1 A (M qdd + h - Q) assembled from the
   unconstrained terms in numpy at the row's q, qd and the integrator's qdd.
@@ -14,6 +16,7 @@ import pytest
 from scipy.linalg import eigh
 
 from crane_reference.dynamics import kernels
+from crane_reference.dynamics.inertia import world_pseudo_inertias
 from crane_reference.motion.integration import CUTOFF, ExactFrequencyTrapezoidal
 from crane_reference.motion.simulation import MotionStepper, Scenario
 
@@ -90,3 +93,42 @@ def test_evaluated_rows_do_not_change_the_motion_and_hold_the_kkt_reactions(scen
         imbalance = d.M @ every.qdd[i] + d.h - d.Q
         expected = np.linalg.solve(A @ A.T, A @ imbalance)
         np.testing.assert_allclose(every.reactions[i], expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+
+
+def test_newton_matrix_is_the_jacobian_of_the_step_residual(scenario):
+    """At a step from t = 1 s (slewing, boom vibrating) the kernel's iteration matrix F, with M and B at the
+    step's first iterate (``newton_factor``), against the Jacobian J of the step's residual in a1 by central
+    differences: the iteration's error operator I - F^-1 J has a 2-norm below 1e-2 (each correction shrinks
+    the next at least a hundredfold), where F with M and B at the step's start leaves one of at least 0.3 (a
+    slewing error comes back as boom bending)."""
+    motion = scenario.motion
+    stepper = MotionStepper(motion, 0.0, scenario.equilibrium.q, np.zeros_like(scenario.equilibrium.q), STEP)
+    stepper.advance_until(1.0)
+    state, settings, chain, partition = stepper.state, stepper.integrator.settings, motion.dynamics.chain, \
+        motion.partition
+    t1 = state.t + STEP
+    k = motion.constraints.coefficients(t1)
+    drive = motion.dynamics.drive.kernel_parameters(t1)
+    a0 = state.solution.qdd[partition.integrated]
+    correction = state.correction
+
+    def residual(a1):
+        return kernels.step_residual(a1, state.q, state.qd, a0, correction, STEP, k, drive, partition, chain, settings)
+
+    jacobian = np.empty((a0.size, a0.size))
+    for j in range(a0.size):
+        delta = np.zeros_like(a0)
+        delta[j] = 1e-3 * max(1.0, abs(a0[j]))
+        jacobian[:, j] = (residual(a0 + delta) - residual(a0 - delta)) / (2.0 * delta[j])
+    first = kernels.first_iterate(state.q, state.qd, a0, STEP, k, partition, chain, settings)
+    Hw = world_pseudo_inertias(first.T, chain.body_joint, chain.body_H)
+    B = motion.solve(t1, first.q, first.qd).velocity_map
+    at_end = kernels.newton_factor(first, Hw, B, STEP, correction, drive, partition, chain)
+    at_start = kernels.iteration_factor(state.solution.dynamics.M, state.solution.velocity_map, STEP, correction,
+                                        drive, partition, chain)
+
+    def error_norm(factor):
+        return np.linalg.norm(np.eye(a0.size) - np.linalg.solve(factor @ factor.T, jacobian), 2)
+
+    assert error_norm(at_end) < 1e-2
+    assert error_norm(at_start) > 0.3

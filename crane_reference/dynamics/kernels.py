@@ -232,6 +232,13 @@ def evaluate(q, qd, k: Coefficients, drive, partition: Partition, chain: ChainDa
 
 
 @njit(cache=True, nogil=True)
+def _reduced_mass(M, B, partition: Partition):
+    """M_r = B^T M B in the independent coordinates."""
+    return map_columns(project_rows(M, B, partition.independent, partition.dependent, False), B, partition.independent,
+                       partition.dependent)
+
+
+@njit(cache=True, nogil=True)
 def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: ChainData, settings: StepSettings):
     """The modal terms of the step h at a configuration of reduced mass M_r = B^T M B (see
     :mod:`crane_reference.motion.integration`).  The springs act on independent coordinates only, so the
@@ -315,12 +322,12 @@ def corrected_accelerations(M, B, qdd, qd, correction: ModalCorrection, partitio
     keeps the modal correction, e.g. after the forces jumped): the independent part converted from no
     correction (:func:`converted_accelerations`), the dependent part following through B (qdd = B a + e).
     Servo-constraints have no correction: qdd as it is."""
-    independent, dependent = partition.independent, partition.dependent
+    independent = partition.independent
     if partition.servo:
         return qdd.copy()
     n_ic = independent.size
     none = ModalCorrection(np.zeros((n_ic, n_ic)), np.zeros((n_ic, n_ic)), correction.time, correction.step)
-    reduced_mass = map_columns(project_rows(M, B, independent, dependent, False), B, independent, dependent)
+    reduced_mass = _reduced_mass(M, B, partition)
     exact = qdd[independent]
     return qdd + matvec(B, converted_accelerations(reduced_mass, exact, qd[independent], none, correction) - exact)
 
@@ -397,13 +404,6 @@ def newton_residual(q, qd, a1, T, S, Hw, p, C, k: Coefficients, drive, partition
 
 
 @njit(cache=True, nogil=True)
-def _reduced_mass(M, B, partition: Partition):
-    """M_r = B^T M B in the independent coordinates."""
-    return map_columns(project_rows(M, B, partition.independent, partition.dependent, False), B, partition.independent,
-                       partition.dependent)
-
-
-@njit(cache=True, nogil=True)
 def _end_accelerations(end: Iterate, a1, k: Coefficients, partition: Partition, chain: ChainData):
     """qdd = B a1_ic + e at the step's end state (the acceleration constraints of (7) there: E's velocity
     terms, A, c and B; no mass matrix), and B."""
@@ -423,19 +423,67 @@ def _failed(q0, qd0, qdd0, B0, correction: ModalCorrection, iterations):
 
 
 @njit(cache=True, nogil=True)
+def _step_residual_at(it: Iterate, a1, correction: ModalCorrection, k: Coefficients, drive, partition: Partition,
+                      chain: ChainData):
+    """The residual of the step's equation, P^T (M qdd + h - Q) - Delta M_r a1_ic + D_u v_ic, at an iterate for
+    the accelerations a1 (:func:`newton_residual` plus the modal terms); also qdd, B and the world
+    pseudo-inertias Hw there."""
+    n_ic = partition.independent.size
+    Hw = world_pseudo_inertias(it.T, chain.body_joint, chain.body_H)
+    qdd, residual, B = newton_residual(it.q, it.qd, a1, it.T, it.S, Hw, it.ee_position, it.ee_jacobian, k, drive,
+                                       partition, chain)
+    residual += matvec(correction.damping, it.qd[partition.independent]) - matvec(correction.inertia, a1[:n_ic])
+    return qdd, residual, B, Hw
+
+
+@njit(cache=True, nogil=True)
+def first_iterate(q0, qd0, a0, h, k: Coefficients, partition: Partition, chain: ChainData, settings: StepSettings):
+    """The step's first iterate: the trapezoidal state for a1 = a0 (x0 + h v0 + h^2/2 a0 for the integrated
+    coordinates, the predictor) with q_hd from the position constraints, starting from q_hd predicted as
+    q0 + h qd0 + h^2/2 qdd0 (qdd0[integrated] = a0 and its dependent part through the constraints)."""
+    integrated = partition.integrated
+    guess = q0 + h * qd0
+    guess[integrated] += (0.5 * h * h) * a0
+    return _state_at(a0, q0[integrated], qd0[integrated], a0, guess, q0.size, h, k, partition, chain, settings, True,
+                     False)
+
+
+@njit(cache=True, nogil=True)
+def newton_factor(it: Iterate, Hw, B, h, correction: ModalCorrection, drive, partition: Partition,
+                  chain: ChainData):
+    """The factor of the Newton iteration matrix (:func:`iteration_factor`) with M and B at the iterate ``it``
+    (Hw its world pseudo-inertias): at the first iterate the matrix of the step's end to first order in h."""
+    M = mass_matrix(it.S, composite_inertias(Hw, chain.body_joint, it.q.size))
+    return iteration_factor(M, B, h, correction, drive, partition, chain)
+
+
+@njit(cache=True, nogil=True)
+def step_residual(a1, q0, qd0, a0, correction: ModalCorrection, h, k: Coefficients, drive, partition: Partition,
+                  chain: ChainData, settings: StepSettings):
+    """The residual of the step's equation (:func:`_step_residual_at`) as a function of the accelerations a1 of
+    the integrated coordinates, at the trapezoidal state for a1 with q_hd on the position constraints (what
+    the Newton iteration drives to zero; its Jacobian is what :func:`newton_factor` approximates)."""
+    integrated = partition.integrated
+    guess = q0 + h * qd0
+    guess[integrated] += (0.25 * h * h) * (a0 + a1)
+    it = _state_at(a1, q0[integrated], qd0[integrated], a0, guess, q0.size, h, k, partition, chain, settings, True,
+                   True)
+    return _step_residual_at(it, a1, correction, k, drive, partition, chain)[1]
+
+
+@njit(cache=True, nogil=True)
 def integration_step(q0, qd0, qdd0, B0, correction: ModalCorrection, t0, h, k: Coefficients, drive,
                      partition: Partition, chain: ChainData, settings: StepSettings):
     """One step of the integrator (see :mod:`crane_reference.motion.integration`) from t0 to t0 + h of the
     integrated coordinates x = q[integrated] = (q_ic, q_vd): the trapezoidal rule on the residual of (8)
     with the modal terms P^T (M qdd + h - Q) - Delta M_r a_ic + D_u v_ic (the correction is computed anew
-    when ``settings.refresh_interval`` has passed since it was, or for another step size, from M and B0 at
-    t0).  The first iterate is the predictor q0 + h qd0 + h^2/2 qdd0 with q_hd from the position constraints;
-    M and B there give the iteration matrix (:func:`iteration_factor`: the matrix of the step's end to first
-    order in h).  Newton on the independent accelerations with the residual from inverse dynamics, fixed
-    point on the q_vd ones; q_hd predicted to second order in the change of x at the later iterates, qd_dc
-    from the velocity-level constraints at every iterate.  At least ``settings.evaluations`` evaluations,
-    then until the last correction is below the tolerance; the step ends at the state of the corrected
-    accelerations, on the position constraints, with qdd = B a_ic + e there (:class:`Advance`; no M).
+    when ``settings.refresh_interval`` has passed since it was, or for another step size, from M at q0 and
+    B0).  Newton on the independent accelerations with the residual from inverse dynamics, fixed point on the
+    q_vd ones, from the :func:`first_iterate`, whose M and B give the iteration matrix (:func:`newton_factor`);
+    q_hd predicted to second order in the change of x at the later iterates, qd_dc from the velocity-level
+    constraints at every iterate.  At least ``settings.evaluations`` evaluations, then until the last
+    correction is below the tolerance; the step ends at the state of the corrected accelerations, on the
+    position constraints, with qdd = B a_ic + e there (:class:`Advance`; no M).
 
     The accelerations a_n carried from step to step are those of the corrected equation; with a new
     correction they are converted so that the force they balance stays the same,
@@ -444,15 +492,6 @@ def integration_step(q0, qd0, qdd0, B0, correction: ModalCorrection, t0, h, k: C
     independent, integrated, servo = partition.independent, partition.integrated, partition.servo
     n_ic = independent.size
     x0, v0, a0 = q0[integrated], qd0[integrated], qdd0[integrated].copy()
-    q1 = q0 + h * qd0 + 0.5 * h * h * qdd0
-    a1 = a0.copy()
-    it = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, True, False)
-    if not it.solved:
-        return _failed(q0, qd0, qdd0, B0, correction, 1)
-    Hw = world_pseudo_inertias(it.T, chain.body_joint, chain.body_H)
-    M = mass_matrix(it.S, composite_inertias(Hw, chain.body_joint, q0.size))
-    qdd, residual, B = newton_residual(it.q, it.qd, a1, it.T, it.S, Hw, it.ee_position, it.ee_jacobian, k, drive,
-                                       partition, chain)
     if t0 - correction.time >= settings.refresh_interval or abs(h - correction.step) > 1e-9 * h:
         T0, S0 = forward_kinematics(q0, chain.kinds, chain.axes, chain.origins)
         M0 = mass_matrix(S0, composite_inertias(world_pseudo_inertias(T0, chain.body_joint, chain.body_H),
@@ -461,23 +500,19 @@ def integration_step(q0, qd0, qdd0, B0, correction: ModalCorrection, t0, h, k: C
         fresh = modal_correction(reduced_mass, h, t0, drive, partition, chain, settings)
         if not servo:
             a0[:n_ic] = converted_accelerations(reduced_mass, a0[:n_ic], v0[:n_ic], correction, fresh)
-            a1 = a0.copy()
-            it = _state_at(a1, x0, v0, a0, it.q, q0.size, h, k, partition, chain, settings, True, False)
-            if not it.solved:
-                return _failed(q0, qd0, qdd0, B0, correction, 1)
-            Hw = world_pseudo_inertias(it.T, chain.body_joint, chain.body_H)
-            qdd, residual, B = newton_residual(it.q, it.qd, a1, it.T, it.S, Hw, it.ee_position, it.ee_jacobian, k,
-                                               drive, partition, chain)
         correction = fresh
-    factor = iteration_factor(M, B, h, correction, drive, partition, chain)
+    a1 = a0.copy()
+    it = first_iterate(q0, qd0, a0, h, k, partition, chain, settings)
+    if not it.solved:
+        return _failed(q0, qd0, qdd0, B0, correction, 1)
+    qdd, residual, B, Hw = _step_residual_at(it, a1, correction, k, drive, partition, chain)
+    factor = newton_factor(it, Hw, B, h, correction, drive, partition, chain)
+    q1 = it.q
     status = NOT_CONVERGED
     for iteration in range(settings.max_iterations):
         if iteration > 0:
             it = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, False, False)
-            Hw = world_pseudo_inertias(it.T, chain.body_joint, chain.body_H)
-            qdd, residual, B = newton_residual(it.q, it.qd, a1, it.T, it.S, Hw, it.ee_position, it.ee_jacobian, k,
-                                               drive, partition, chain)
-        residual += matvec(correction.damping, it.qd[independent]) - matvec(correction.inertia, a1[:n_ic])
+            qdd, residual, B, Hw = _step_residual_at(it, a1, correction, k, drive, partition, chain)
         correction_step = qdd[integrated] - a1
         correction_step[:n_ic] = -(cholesky_solve(factor, residual) if not servo else matvec(factor, residual))
         a1 = a1 + correction_step
@@ -490,9 +525,8 @@ def integration_step(q0, qd0, qdd0, B0, correction: ModalCorrection, t0, h, k: C
     if not end.solved:
         return _failed(q0, qd0, qdd0, B0, correction, iteration + 1)
     qdd, B = _end_accelerations(end, a1, k, partition, chain)
-    return Advance(end.q, end.qd, qdd, B, end.ee_position,
-                   end.T[chain.ee_joint, :3, :3].copy(), matvec(end.ee_jacobian, end.qd), correction, status,
-                   iteration + 1)
+    return Advance(end.q, end.qd, qdd, B, end.ee_position, end.T[chain.ee_joint, :3, :3].copy(),
+                   matvec(end.ee_jacobian, end.qd), correction, status, iteration + 1)
 
 
 @njit(cache=True, nogil=True)
