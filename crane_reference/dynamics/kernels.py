@@ -549,10 +549,9 @@ def integration_run(q, qd, qdd, B, correction: ModalCorrection, t0, times, k: Co
                     partition: Partition, chain: ChainData, settings: StepSettings, evaluated):
     """:func:`integration_step` from t0 through ``times`` (N,) in one call, with the constraint
     coefficients ``k`` (stacked per step) and drive parameters ``drives`` (N, 4) of each step's end, B the
-    velocity map at t0.  The
-    rows of the steps where ``evaluated`` (N,) is True, and of the last one, carry the full evaluation
-    (:func:`step_evaluation`: reactions, residuals, accounts); the others NaN there.  Stops at the first
-    step that fails; returns a :class:`Run`."""
+    velocity map at t0.  The rows of the steps where ``evaluated`` (N,) is True, and of the last one, carry
+    the full evaluation (:func:`step_evaluation`: reactions, residuals, accounts); the others NaN there.
+    Stops at the first step that fails; returns a :class:`Run`."""
     N, n, m = times.size, q.size, k.order.size
     rows = StepRows(np.empty((N, n)), np.empty((N, n)), np.empty((N, n)), np.full((N, m), np.nan),
                     np.full((N, n), np.nan), np.empty((N, 3)), np.empty((N, 3, 3)), np.empty((N, 3)),
