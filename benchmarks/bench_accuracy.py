@@ -58,7 +58,6 @@ from scipy.signal import butter, sosfiltfilt
 
 from crane_reference.analysis.modal import linearise, modal_analysis, modes_at
 from crane_reference.dynamics import kernels
-from crane_reference.dynamics.inertia import world_pseudo_inertias
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import CraneParameters, Damping, FlexibleDrive
 from crane_reference.model.profiles import Constant, QuinticRise
@@ -271,10 +270,10 @@ def newton_matrix(params: CraneParameters) -> None:
                                                      k, drive, partition, chain, settings) for sign in (1.0, -1.0))
                 jacobian[:, j] = (plus - minus) / (2.0 * delta[j])
             first = kernels.first_iterate(state.q, state.qd, a0, step, k, partition, chain, settings)
+            at_first = motion.solve(t1, first.q, first.qd)
             factors = {
-                "first iterate": kernels.newton_factor(
-                    first, world_pseudo_inertias(first.T, chain.body_joint, chain.body_H),
-                    motion.solve(t1, first.q, first.qd).velocity_map, step, state.correction, drive, partition, chain),
+                "first iterate": kernels.iteration_factor(at_first.dynamics.M, at_first.velocity_map, step,
+                                                          state.correction, drive, partition, chain),
                 "step's start": kernels.iteration_factor(state.solution.dynamics.M, state.solution.velocity_map, step,
                                                          state.correction, drive, partition, chain)}
             parts = []

@@ -449,12 +449,9 @@ def first_iterate(q0, qd0, a0, h, k: Coefficients, partition: Partition, chain: 
 
 
 @njit(cache=True, nogil=True)
-def newton_factor(it: Iterate, Hw, B, h, correction: ModalCorrection, drive, partition: Partition,
-                  chain: ChainData):
-    """The factor of the Newton iteration matrix (:func:`iteration_factor`) with M and B at the iterate ``it``
-    (Hw its world pseudo-inertias): at the first iterate the matrix of the step's end to first order in h."""
-    M = mass_matrix(it.S, composite_inertias(Hw, chain.body_joint, it.q.size))
-    return iteration_factor(M, B, h, correction, drive, partition, chain)
+def mass_at(S, Hw, chain: ChainData):
+    """M at the configuration of the twists S and world pseudo-inertias Hw."""
+    return mass_matrix(S, composite_inertias(Hw, chain.body_joint, S.shape[0]))
 
 
 @njit(cache=True, nogil=True)
@@ -462,7 +459,8 @@ def step_residual(a1, q0, qd0, a0, correction: ModalCorrection, h, k: Coefficien
                   chain: ChainData, settings: StepSettings):
     """The residual of the step's equation (:func:`_step_residual_at`) as a function of the accelerations a1 of
     the integrated coordinates, at the trapezoidal state for a1 with q_hd on the position constraints (what
-    the Newton iteration drives to zero; its Jacobian is what :func:`newton_factor` approximates)."""
+    the Newton iteration drives to zero; its Jacobian is what :func:`iteration_factor` with M and B at the
+    first iterate approximates)."""
     integrated = partition.integrated
     guess = q0 + h * qd0
     guess[integrated] += (0.25 * h * h) * (a0 + a1)
@@ -476,37 +474,42 @@ def integration_step(q0, qd0, qdd0, B0, correction: ModalCorrection, t0, h, k: C
                      partition: Partition, chain: ChainData, settings: StepSettings):
     """One step of the integrator (see :mod:`crane_reference.motion.integration`) from t0 to t0 + h of the
     integrated coordinates x = q[integrated] = (q_ic, q_vd): the trapezoidal rule on the residual of (8)
-    with the modal terms P^T (M qdd + h - Q) - Delta M_r a_ic + D_u v_ic (the correction is computed anew
-    when ``settings.refresh_interval`` has passed since it was, or for another step size, from M at q0 and
-    B0).  Newton on the independent accelerations with the residual from inverse dynamics, fixed point on the
-    q_vd ones, from the :func:`first_iterate`, whose M and B give the iteration matrix (:func:`newton_factor`);
+    with the modal terms P^T (M qdd + h - Q) - Delta M_r a_ic + D_u v_ic.  Newton on the independent
+    accelerations with the residual from inverse dynamics, fixed point on the q_vd ones, from the
+    :func:`first_iterate`, whose M and B (the step end's to first order in h) give the iteration matrix
+    (:func:`iteration_factor`) and, when ``settings.refresh_interval`` has passed since the correction in use
+    was computed (or for another step size), the reduced mass of a new one (:func:`modal_correction`);
     q_hd predicted to second order in the change of x at the later iterates, qd_dc from the velocity-level
     constraints at every iterate.  At least ``settings.evaluations`` evaluations, then until the last
     correction is below the tolerance; the step ends at the state of the corrected accelerations, on the
     position constraints, with qdd = B a_ic + e there (:class:`Advance`; no M).
 
     The accelerations a_n carried from step to step are those of the corrected equation; with a new
-    correction they are converted so that the force they balance stays the same,
-    (M_r - Delta M_new) a_new + D_new v = (M_r - Delta M_old) a_old + D_old v (at a start the old terms are
-    zero: a_old is the acceleration of (8) itself)."""
+    correction they are converted so that the force they balance at the step's start stays the same,
+    (M_r - Delta M_new) a_new + D_new v = (M_r - Delta M_old) a_old + D_old v with M_r from M at q0 and B0 (at a
+    start the old terms are zero: a_old is the acceleration of (8) itself)."""
     independent, integrated, servo = partition.independent, partition.integrated, partition.servo
     n_ic = independent.size
     x0, v0, a0 = q0[integrated], qd0[integrated], qdd0[integrated].copy()
-    if t0 - correction.time >= settings.refresh_interval or abs(h - correction.step) > 1e-9 * h:
-        T0, S0 = forward_kinematics(q0, chain.kinds, chain.axes, chain.origins)
-        M0 = mass_matrix(S0, composite_inertias(world_pseudo_inertias(T0, chain.body_joint, chain.body_H),
-                                                chain.body_joint, q0.size))
-        reduced_mass = _reduced_mass(M0, B0, partition)
-        fresh = modal_correction(reduced_mass, h, t0, drive, partition, chain, settings)
-        if not servo:
-            a0[:n_ic] = converted_accelerations(reduced_mass, a0[:n_ic], v0[:n_ic], correction, fresh)
-        correction = fresh
     a1 = a0.copy()
     it = first_iterate(q0, qd0, a0, h, k, partition, chain, settings)
     if not it.solved:
         return _failed(q0, qd0, qdd0, B0, correction, 1)
     qdd, residual, B, Hw = _step_residual_at(it, a1, correction, k, drive, partition, chain)
-    factor = newton_factor(it, Hw, B, h, correction, drive, partition, chain)
+    M = mass_at(it.S, Hw, chain)
+    if t0 - correction.time >= settings.refresh_interval or abs(h - correction.step) > 1e-9 * h:
+        fresh = modal_correction(_reduced_mass(M, B, partition), h, t0, drive, partition, chain, settings)
+        if not servo:
+            T0, S0 = forward_kinematics(q0, chain.kinds, chain.axes, chain.origins)
+            M0 = mass_at(S0, world_pseudo_inertias(T0, chain.body_joint, chain.body_H), chain)
+            converted = converted_accelerations(_reduced_mass(M0, B0, partition), a0[:n_ic], v0[:n_ic], correction,
+                                                fresh)
+            # the first iterate, the trapezoidal state for a1 = a0, is that for a1 = 2 a0 - converted from converted
+            a1[:n_ic] = 2.0 * a0[:n_ic] - converted
+            a0[:n_ic] = converted
+        correction = fresh
+        qdd, residual, B, Hw = _step_residual_at(it, a1, correction, k, drive, partition, chain)
+    factor = iteration_factor(M, B, h, correction, drive, partition, chain)
     q1 = it.q
     status = NOT_CONVERGED
     for iteration in range(settings.max_iterations):
