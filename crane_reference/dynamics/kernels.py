@@ -239,6 +239,16 @@ def _reduced_mass(M, B, partition: Partition):
 
 
 @njit(cache=True, nogil=True)
+def _congruence(X, weights):
+    """X diag(weights) X^T, symmetric to the last bit."""
+    scaled = X.copy()
+    for m in range(weights.size):
+        scaled[:, m] *= weights[m]
+    product = scaled @ X.T
+    return 0.5 * (product + product.T)
+
+
+@njit(cache=True, nogil=True)
 def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: ChainData, settings: StepSettings):
     """The modal terms of the step h at a configuration of reduced mass M_r = B^T M B (see
     :mod:`crane_reference.motion.integration`).  The springs act on independent coordinates only, so the
@@ -255,10 +265,8 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
     symmetric reduced mass) get none, and so does the plain trapezoidal rule (``settings.modal`` False)."""
     independent = partition.independent
     n_ic = independent.size
-    inertia = np.zeros((n_ic, n_ic))
-    damping = np.zeros((n_ic, n_ic))
     if partition.servo or not settings.modal:
-        return ModalCorrection(inertia, damping, t, h)
+        return ModalCorrection(np.zeros((n_ic, n_ic)), np.zeros((n_ic, n_ic)), t, h)
     L = cholesky(reduced_mass)
     stiffness = np.empty((n_ic, n_ic))
     for i in range(n_ic):
@@ -296,16 +304,7 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
         mass = k / product if product != 0.0 else 1.0
         c[i] = 1.0 - mass
         d[i] = -mass * (mapped_first + mapped_second).real - modal_damping[i]
-    for i in range(n_ic):
-        for j in range(i + 1):
-            total_c = 0.0
-            total_d = 0.0
-            for m in range(n_ic):
-                total_c += LV[i, m] * c[m] * LV[j, m]
-                total_d += LV[i, m] * d[m] * LV[j, m]
-            inertia[i, j] = inertia[j, i] = total_c
-            damping[i, j] = damping[j, i] = total_d
-    return ModalCorrection(inertia, damping, t, h)
+    return ModalCorrection(_congruence(LV, c), _congruence(LV, d), t, h)
 
 
 @njit(cache=True, nogil=True)
