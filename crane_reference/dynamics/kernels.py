@@ -476,38 +476,39 @@ def integration_step(q0, qd0, qdd0, B0, correction: ModalCorrection, t0, h, k: C
     with the modal terms P^T (M qdd + h - Q) - Delta M_r a_ic + D_u v_ic.  Newton on the independent
     accelerations with the residual from inverse dynamics, fixed point on the q_vd ones, from the
     :func:`first_iterate`, whose M and B (the step end's to first order in h) give the iteration matrix
-    (:func:`iteration_factor`) and, when ``settings.refresh_interval`` has passed since the correction in use
-    was computed (or for another step size), the reduced mass of a new one (:func:`modal_correction`);
-    q_hd predicted to second order in the change of x at the later iterates, qd_dc from the velocity-level
-    constraints at every iterate.  At least ``settings.evaluations`` evaluations, then until the last
-    correction is below the tolerance; the step ends at the state of the corrected accelerations, on the
-    position constraints, with qdd = B a_ic + e there (:class:`Advance`; no M).
+    (:func:`iteration_factor`); q_hd predicted to second order in the change of x at the later iterates,
+    qd_dc from the velocity-level constraints at every iterate.  At least ``settings.evaluations``
+    evaluations, then until the last correction is below the tolerance; the step ends at the state of the
+    corrected accelerations, on the position constraints, with qdd = B a_ic + e there (:class:`Advance`; no
+    M).
 
-    The accelerations a_n carried from step to step are those of the corrected equation; with a new
-    correction they are converted so that the force they balance at the step's start stays the same,
-    (M_r - Delta M_new) a_new + D_new v = (M_r - Delta M_old) a_old + D_old v with M_r from M at q0 and B0 (at a
-    start the old terms are zero: a_old is the acceleration of (8) itself)."""
+    The modal correction is computed again from M at q0 and B0 (:func:`modal_correction`) at the step nearest
+    ``settings.refresh_interval`` after the one in use was, and for another step size.  It is a coefficient
+    of the equation that follows the configuration: the step's end is solved with the new one, its start
+    keeps the accelerations of the old one (Delta M_r piecewise constant in time, as the trapezoidal rule
+    treats any coefficient; converting them would act on the slow motion's accelerations as on free
+    vibration, a kick at every refresh).  A new step size (or a start: no correction yet) is a new
+    equation, and the start's accelerations are solved from it: converted so that the force they balance
+    stays the same, (M_r - Delta M_new) a_new + D_new v = (M_r - Delta M_old) a_old + D_old v (at a start the
+    old terms are zero: a_old is the acceleration of (8) itself)."""
     independent, integrated, servo = partition.independent, partition.integrated, partition.servo
     n_ic = independent.size
     x0, v0, a0 = q0[integrated], qd0[integrated], qdd0[integrated].copy()
+    new_step = abs(h - correction.step) > 1e-9 * h
+    if new_step or t0 - correction.time >= settings.refresh_interval - 0.5 * h:
+        T0, S0 = forward_kinematics(q0, chain.kinds, chain.axes, chain.origins)
+        reduced_mass = _reduced_mass(mass_at(S0, world_pseudo_inertias(T0, chain.body_joint, chain.body_H), chain),
+                                     B0, partition)
+        fresh = modal_correction(reduced_mass, h, t0, drive, partition, chain, settings)
+        if new_step and not servo:
+            a0[:n_ic] = converted_accelerations(reduced_mass, a0[:n_ic], v0[:n_ic], correction, fresh)
+        correction = fresh
     a1 = a0.copy()
     it = first_iterate(q0, qd0, a0, h, k, partition, chain, settings)
     if not it.solved:
         return _failed(q0, qd0, qdd0, B0, correction, 1)
     qdd, residual, B, Hw = _step_residual_at(it, a1, correction, k, drive, partition, chain)
     M = mass_at(it.S, Hw, chain)
-    if t0 - correction.time >= settings.refresh_interval or abs(h - correction.step) > 1e-9 * h:
-        fresh = modal_correction(_reduced_mass(M, B, partition), h, t0, drive, partition, chain, settings)
-        if not servo:
-            T0, S0 = forward_kinematics(q0, chain.kinds, chain.axes, chain.origins)
-            M0 = mass_at(S0, world_pseudo_inertias(T0, chain.body_joint, chain.body_H), chain)
-            converted = converted_accelerations(_reduced_mass(M0, B0, partition), a0[:n_ic], v0[:n_ic], correction,
-                                                fresh)
-            # the first iterate, the trapezoidal state for a1 = a0, is that for a1 = 2 a0 - converted from converted
-            a1[:n_ic] = 2.0 * a0[:n_ic] - converted
-            a0[:n_ic] = converted
-        correction = fresh
-        qdd, residual, B, Hw = _step_residual_at(it, a1, correction, k, drive, partition, chain)
     factor = iteration_factor(M, B, h, correction, drive, partition, chain)
     q1 = it.q
     status = NOT_CONVERGED

@@ -40,8 +40,12 @@ at h = 1 ms those above 400 Hz) cannot be turned exactly (tan has a pole at pi) 
 D_u = M_r Phi_u diag(2 zeta omega) Phi_u^T M_r damps them with zeta = 1 (they keep their static
 deflection), so that no such mode rings at a frequency it does not have.  M_r moves with the
 configuration, so Delta M_r and D_u are computed again every :data:`REFRESH_INTERVAL` of motion (an
-eigenproblem of the n_ic x n_ic reduced matrices); stale ones act on the slow motion and leak damping into
-resolved modes.
+eigenproblem of the n_ic x n_ic reduced matrices); stale ones leak damping into resolved modes.  They are
+coefficients of the equation, like M itself: a refresh changes them from the next step's end on, and the
+carried accelerations are not converted (a conversion treats the slow motion's accelerations as free
+vibration and kicks it at every refresh, which made the slow motion's error depend on the refresh cadence).
+Only a new equation (a start, a restart, another step size) solves its start's accelerations from the
+corrected equation.
 Servo-constraints (P = E_ic) have no symmetric reduced mass and use the plain trapezoidal rule.
 
 The holonomically dependent coordinates are never integrated: q_hd comes from the position constraints
