@@ -19,9 +19,9 @@ The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simula
 3. [damped] The crane with realistic damping (2 % at the first boom bending mode, 5 % at the first base mode,
    stiffness-proportional, from the constrained modal analysis) at h = 1 ms: raw and controller-band errors
    (target: raw <= 1e-4 rad over 10 s) and the 40-250 Hz RMS kept over 5-10 s.
-4. [iterations] The Newton rules at h = 1 ms: converged (tolerance 1e-9), two evaluations and the online
-   default (three), and exactly one or two evaluations whatever the correction (the route to one residual
-   evaluation per step): cost per step, evaluations per step, raw and controller-band errors.
+4. [iterations] The Newton rules at the node's step, per crane of ``--rfe``: converged (tolerance 1e-9), two
+   evaluations and the online default (three), and exactly one or two evaluations whatever the correction:
+   cost per step, evaluations per step, raw and controller-band errors.
 5. [matrix] The Newton iteration's error operator I - F^-1 J (J by central differences) with the iteration
    matrix F at the step's first iterate (the integrator's) and at its start, at steps from 0.5, 1, 3, 6 s.
 6. [newton] Largest difference of psi2, psi(3,0), psi4 between Newton tolerances 1e-8, 1e-9, 1e-10 and 1e-12.
@@ -222,26 +222,29 @@ def newton_iterations(scenario: Scenario, step: float, duration: float = 1.0, to
     return float(np.mean(counts))
 
 
-def iteration_rules(params: CraneParameters, duration: float, cache: Path) -> None:
-    """[iterations] The Newton rules at h = 1 ms against the DOP853 reference."""
-    reference = reference_run(params, duration, cache, "undamped")
-    scenario = Scenario(params, "flexible")
-    q0 = scenario.equilibrium.q
-    simulate(scenario.motion, q0, 0.01)  # compile / load the kernels
-    for evaluations, tolerance, name in ((2, 1e-9, "converged"), (2, 1e-4, "two evaluations"),
-                                         (EVALUATIONS, ONLINE_TOLERANCE, "online default"),
-                                         (1, math.inf, "exactly one evaluation"),
-                                         (2, math.inf, "exactly two evaluations")):
-        start = time.perf_counter()
-        tr = simulate(scenario.motion, q0, duration, step=1e-3, tolerance=tolerance, evaluations=evaluations)
-        wall = time.perf_counter() - start
-        raw, slow, _, ee_slow = errors(reference, tr)
-        kept = band_rms(tr, WINDOWS[1]) / band_rms(reference, WINDOWS[1])
-        print(f"[iterations] {name} (at least {evaluations} evaluations, tolerance {tolerance:g}): "
-              f"{wall / tr.t.size * 1e6:6.1f} us/step, Newton evaluations "
-              f"{newton_iterations(scenario, 1e-3, tolerance=tolerance, evaluations=evaluations):.2f}/step; "
-              f"max |error| {_triple(raw)} rad, controller band {_triple(slow)} rad, E {ee_slow:.1e} m; 40-250 Hz "
-              f"RMS kept over 5-10 s {_triple(kept, '.0%')}")
+def iteration_rules(params: CraneParameters, duration: float, cache: Path, rfe_counts: tuple[int, ...]) -> None:
+    """[iterations] The Newton rules at the node's step (ONLINE_STEP) against the DOP853 reference, per n_rfe."""
+    for n_rfe in rfe_counts:
+        p = with_rfe(params, n_rfe)
+        reference = reference_run(p, duration, cache, "undamped" if n_rfe == 6 else f"undamped-nrfe{n_rfe}")
+        scenario = Scenario(p, "flexible")
+        q0 = scenario.equilibrium.q
+        simulate(scenario.motion, q0, 0.01)  # compile / load the kernels
+        for evaluations, tolerance, name in ((2, 1e-9, "converged"), (2, 1e-4, "two evaluations"),
+                                             (EVALUATIONS, ONLINE_TOLERANCE, "online default"),
+                                             (1, math.inf, "exactly one evaluation"),
+                                             (2, math.inf, "exactly two evaluations")):
+            start = time.perf_counter()
+            tr = simulate(scenario.motion, q0, duration, step=ONLINE_STEP, tolerance=tolerance,
+                          evaluations=evaluations)
+            wall = time.perf_counter() - start
+            raw, slow, _, ee_slow = errors(reference, tr)
+            kept = band_rms(tr, WINDOWS[1]) / band_rms(reference, WINDOWS[1])
+            evaluated = newton_iterations(scenario, ONLINE_STEP, tolerance=tolerance, evaluations=evaluations)
+            print(f"[iterations] n_rfe={n_rfe} h={ONLINE_STEP * 1e3:g} ms, {name} (at least {evaluations} "
+                  f"evaluations, tolerance {tolerance:g}): {wall / tr.t.size * 1e6:6.1f} us/step, Newton evaluations "
+                  f"{evaluated:.2f}/step; max |error| {_triple(raw)} rad, controller band {_triple(slow)} rad, E "
+                  f"{ee_slow:.1e} m; 40-250 Hz RMS kept over 5-10 s {_triple(kept, '.0%')}")
 
 
 def newton_matrix(params: CraneParameters) -> None:
@@ -427,13 +430,14 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=10.0)
     parser.add_argument("--cache", type=Path, default=Path("results/bench_accuracy"))
     parser.add_argument("--only", nargs="+", choices=SECTIONS, default=SECTIONS[:-1], help="sections to run")
-    parser.add_argument("--rfe", nargs="+", type=int, default=[6, 3, 12], help="[vibration]: the cranes' n_rfe")
+    parser.add_argument("--rfe", nargs="+", type=int, default=[6, 3, 12],
+                        help="[vibration], [iterations]: the cranes' n_rfe")
     args = parser.parse_args()
     params = load_config()
     for section, run in (("vibration", lambda: vibration(params, args.duration, args.cache, tuple(args.rfe))),
                          ("growth", lambda: growth(params)),
                          ("damped", lambda: damped(params, args.duration, args.cache)),
-                         ("iterations", lambda: iteration_rules(params, args.duration, args.cache)),
+                         ("iterations", lambda: iteration_rules(params, args.duration, args.cache, tuple(args.rfe))),
                          ("matrix", lambda: newton_matrix(params)),
                          ("newton", lambda: newton_tolerance(params, args.duration)),
                          ("first-order", lambda: first_order(params)),
