@@ -5,6 +5,7 @@ clock of plain integers drives it; what it serves is compared with an independen
 from __future__ import annotations
 
 import os
+import threading
 import time
 from collections.abc import Iterator
 
@@ -15,9 +16,10 @@ from crane_reference.model.config import load_config
 from crane_reference.model.parameters import Task
 from crane_reference.motion.programmed_motion import ConstraintSingularityError
 from crane_reference.motion.simulation import MotionStepper
-from crane_reference.stream.reference_stream import ERROR, PAUSED, RUNNING, ReferenceStream
+from crane_reference.stream.reference_stream import CHUNK_STEPS, ERROR, PAUSED, RUNNING, ReferenceStream
+from crane_reference.stream.schedule import FrameSchedule
 from crane_reference.stream.server import CommandRefusedError, Preview, ReferenceServer
-from crane_reference.stream.solver import LocalSolver, SolverProcess, StreamSpec
+from crane_reference.stream.solver import LocalSolver, SolverProcess, StreamSolver, StreamSpec
 from crane_reference.stream.targets import UnreachableTargetError
 
 RATE = 100  # [Hz]
@@ -183,3 +185,42 @@ def test_the_solver_process_serves_the_same_frames_and_raises_its_errors() -> No
         there.close()
     with pytest.raises(ProcessLookupError):
         os.kill(process.pid, 0)  # ended and reaped
+
+
+def test_an_interrupt_stops_computing_ahead_after_the_compiled_run_under_way() -> None:
+    """A request that computes ahead without a budget stops at the first check after a command says it
+    waits: here the second, so exactly one compiled run of CHUNK_STEPS steps is computed, and the batch says
+    the motion is short of what was asked (busy)."""
+    checks = []
+
+    def interrupted() -> bool:
+        checks.append(None)
+        return len(checks) > 1
+
+    solver = StreamSolver(spec(), interrupted)
+    schedule = FrameSchedule(RATE, RATE, LEAD, 1.0, solver.stream.sample(0.0))
+    batch = solver.frames(schedule.request(schedule.plan(), 10, 5.0, 4, 10, None), 2.0)
+    assert batch.busy
+    assert solver.stream.computed_until == pytest.approx(CHUNK_STEPS * STEP, abs=1e-12)
+
+
+def test_the_solver_process_clears_an_interrupt_at_each_request_and_obeys_one_that_comes_during_it() -> None:
+    """An interrupt sent before a request does not cut it (each request starts with it cleared); one sent
+    while a request computes a minute of motion ahead ends that request early (busy), and the process goes on
+    answering."""
+    process = SolverProcess(spec())
+    try:
+        schedule = FrameSchedule(RATE, RATE, LEAD, 1.0, process.info.start)
+        process.interrupt()
+        assert not process.call("frames", schedule.request(schedule.plan(), 10, 1.0, 4, 10, None), 4.0).busy
+        replies = []
+        long = schedule.request(schedule.plan(), 10, 60.0, 4, 10, None)
+        worker = threading.Thread(target=lambda: replies.append(process.call("frames", long, 4.0)))
+        worker.start()
+        time.sleep(0.5)
+        process.interrupt()
+        worker.join(60.0)
+        assert replies and replies[0].busy
+        assert process.call("status") is not None
+    finally:
+        process.close()

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -155,9 +156,11 @@ class ReferenceStream:
 
     # -- computing and sampling ---------------------------------------------------------------------
 
-    def compute(self, until: float, wall_budget: float | None = None) -> None:
+    def compute(self, until: float, wall_budget: float | None = None,
+                interrupted: Callable[[], bool] | None = None) -> None:
         """Advance the solver until samples up to publish time ``until`` are available, or until
-        ``wall_budget`` seconds of wall time are spent.  Failures switch to ERROR and hold."""
+        ``wall_budget`` seconds of wall time are spent, or ``interrupted()`` turns true (both checked
+        between compiled runs of CHUNK_STEPS steps).  Failures switch to ERROR and hold."""
         if self.state != RUNNING:
             return
         deadline = None if wall_budget is None else time.perf_counter() + wall_budget
@@ -165,6 +168,8 @@ class ReferenceStream:
         times = self._history.times
         while times[-1] < target:
             if deadline is not None and time.perf_counter() > deadline:
+                return
+            if interrupted is not None and interrupted():
                 return
             try:
                 chunk_end = min(target, times[-1] + CHUNK_STEPS * self.step)

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -119,12 +120,14 @@ def _unpacked_batch(packed, *rest) -> FrameBatch:
     return FrameBatch(frames, *rest)
 
 
-def make_frames(stream: ReferenceStream, request: FrameRequest) -> FrameBatch:
+def make_frames(stream: ReferenceStream, request: FrameRequest,
+                interrupted: Callable[[], bool] | None = None) -> FrameBatch:
     """The frames of ``request`` as far as the motion is computed, after computing ahead far enough for
-    them and for their previews.  A frame due a preview waits until its horizon is computed, so previews
-    keep their cadence; an urgent frame (just after a command) is made as soon as its own motion is
-    computed, and passes a preview due to the first frame after the urgent window.  A frame that is not
-    finite is replaced by the last valid sample held (:func:`checked`)."""
+    them and for their previews (or until ``interrupted()``: a command is waiting for the solver).  A
+    frame due a preview waits until its horizon is computed, so previews keep their cadence; an urgent
+    frame (just after a command) is made as soon as its own motion is computed, and passes a preview due
+    to the first frame after the urgent window.  A frame that is not finite is replaced by the last valid
+    sample held (:func:`checked`)."""
     plan, count, horizon = request.plan, request.count, request.horizon
     dt = 1.0 / request.rate
     tau, next_preview_k = plan.tau, plan.next_preview_k
@@ -135,7 +138,7 @@ def make_frames(stream: ReferenceStream, request: FrameRequest) -> FrameBatch:
     if before < ahead:
         start = time.perf_counter()
         urgent = plan.k < request.urgent_until and before < frames_until
-        stream.compute(frames_until if urgent else ahead, request.compute_budget)
+        stream.compute(frames_until if urgent else ahead, request.compute_budget, interrupted)
         if math.isfinite(stream.computed_until):
             wall, motion = time.perf_counter() - start, stream.computed_until - before
     last = request.last_valid  # the last sample of the frames made so far (finite)

@@ -69,6 +69,8 @@ class Solver(Protocol):
 
     def call(self, method: str, *args: Any) -> Any: ...
 
+    def interrupt(self) -> None: ...
+
     def close(self) -> None: ...
 
 
@@ -312,6 +314,7 @@ class ReferenceServer:
             plan = self.schedule.plan()
             frames = self._frame_request(plan, self._urgent_batch)
         batch = None
+        self.solver.interrupt()  # the worker's request in progress stops computing ahead at its next run
         try:
             answer, batch = self._request("command", request[0], tau, request[1:], frames, RELEASE_KEEP + LOOKAHEAD)
         finally:

@@ -9,7 +9,12 @@ stream time, target checks, the crane's reach.  Two clients carry the requests t
 * :class:`SolverProcess` runs it in a child process (``python -m crane_reference.stream.solver``: a fresh
   interpreter that imports no ROS and not the caller's main module), so the integrator's Python parts never
   wait for, or delay, a publisher's thread behind Python's GIL.  Requests and replies are pickled over two
-  pipes; an exception raised by the solver is raised again in the caller.  The child runs in a session of
+  pipes; an exception raised by the solver is raised again in the caller.
+
+Both clients have :meth:`interrupt`: a caller with a command waiting for the solver cuts the request in
+progress short, so the command waits at most one compiled run of computing ahead, not a whole slice
+(:func:`~.schedule.make_frames` returns the frames computed so far).  A third pipe carries it to the
+process; each request starts with it cleared.  The child runs in a session of
   its own and ignores SIGINT (a Ctrl-C is the caller's to handle), and exits when its request pipe closes,
   also if the caller dies.  It runs at a lower scheduling priority (:data:`SOLVER_NICENESS`): it computes
   a second of frames ahead and can wait, the caller's publisher cannot.
@@ -17,6 +22,7 @@ stream time, target checks, the crane's reach.  Two clients carry the requests t
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import os
 import pickle
@@ -100,9 +106,11 @@ class StreamStatus:
 class StreamSolver:
     """The stream and the requests it answers (see the module)."""
 
-    def __init__(self, spec: StreamSpec):
+    def __init__(self, spec: StreamSpec, interrupted: Callable[[], bool] = lambda: False):
         """Build the stream of ``spec`` (after making the kernels ready if ``spec.warm_up``) and check its
-        targets (:class:`~.targets.UnreachableTargetError` or a solver failure if there is no start)."""
+        targets (:class:`~.targets.UnreachableTargetError` or a solver failure if there is no start);
+        ``interrupted()`` says that a command waits (computing ahead stops at the next compiled run)."""
+        self.interrupted = interrupted
         self.kernels = warm_up((spec.model,)).describe() if spec.warm_up else ""
         config = spec.config
         self.stream = ReferenceStream(config, spec.model, spec.step, spec.blend_time, spec.targets,
@@ -123,7 +131,7 @@ class StreamSolver:
     def frames(self, request: FrameRequest, keep: float) -> FrameBatch:
         """The frames of ``request`` (:func:`~.schedule.make_frames`); then the motion older than ``keep``
         seconds before the request's first frame is forgotten."""
-        batch = make_frames(self.stream, request)
+        batch = make_frames(self.stream, request, self.interrupted)
         self.stream.release(request.plan.tau, keep)
         return batch
 
@@ -176,12 +184,18 @@ class LocalSolver:
     """A :class:`StreamSolver` called in the caller's thread."""
 
     def __init__(self, spec: StreamSpec):
-        self.solver = StreamSolver(spec)
+        self._interrupt = threading.Event()
+        self.solver = StreamSolver(spec, self._interrupt.is_set)
         self.info = self.solver.info()
         self.status = self.solver.status()
 
+    def interrupt(self) -> None:
+        """Cut the call in progress short (see the module)."""
+        self._interrupt.set()
+
     def call(self, method: str, *args: Any) -> Any:
         """``method(*args)`` of the solver; :attr:`status` is the stream's after it (also if it raised)."""
+        self._interrupt.clear()
         try:
             return getattr(self.solver, method)(*args)
         finally:
@@ -192,12 +206,13 @@ class LocalSolver:
         pass
 
 
-def _serve(requests: Connection, replies: Connection) -> None:
+def _serve(requests: Connection, replies: Connection, interrupts: Connection) -> None:
     """The solver process: read the :class:`StreamSpec`, build the solver, then answer (method, args)
-    requests until the pipe closes or None comes.  Replies are (ok, result or exception, status)."""
+    requests until the pipe closes or None comes, each with the interrupts that came before it cleared.
+    Replies are (ok, result or exception, status)."""
     try:
         spec = requests.recv()
-        solver = StreamSolver(spec)
+        solver = StreamSolver(spec, interrupts.poll)
     except (EOFError, OSError):
         return
     except Exception as error:  # reported to the caller, which raises it
@@ -212,6 +227,8 @@ def _serve(requests: Connection, replies: Connection) -> None:
             return
         if request is None:
             return
+        while interrupts.poll():
+            interrupts.recv_bytes()
         method, args = request
         try:
             reply = (True, getattr(solver, method)(*args))
@@ -240,15 +257,18 @@ class SolverProcess:
         ``stopped()`` turns true meanwhile (checked every POLL_PERIOD) or the process dies."""
         request_read, request_write = os.pipe()
         reply_read, reply_write = os.pipe()
+        interrupt_read, interrupt_write = os.pipe()
         package_root = str(Path(__file__).resolve().parents[2])
         path = os.pathsep.join(p for p in (package_root, os.environ.get("PYTHONPATH", "")) if p)
         self._process = subprocess.Popen(
-            [sys.executable, "-m", __name__, str(request_read), str(reply_write)],
-            pass_fds=(request_read, reply_write), env={**os.environ, "PYTHONPATH": path}, start_new_session=True)
-        os.close(request_read)
-        os.close(reply_write)
+            [sys.executable, "-m", __name__, str(request_read), str(reply_write), str(interrupt_read)],
+            pass_fds=(request_read, reply_write, interrupt_read), env={**os.environ, "PYTHONPATH": path},
+            start_new_session=True)
+        for fd in (request_read, reply_write, interrupt_read):
+            os.close(fd)
         self._requests = Connection(request_write, readable=False)
         self._replies = Connection(reply_read, writable=False)
+        self._interrupts = Connection(interrupt_write, readable=False)
         self._stopped = stopped
         self._lock = threading.Lock()
         try:
@@ -278,6 +298,11 @@ class SolverProcess:
             raise result
         return result
 
+    def interrupt(self) -> None:
+        """Cut the request in progress short (see the module)."""
+        with contextlib.suppress(OSError, ValueError):  # the process is gone: the next call says so
+            self._interrupts.send_bytes(b"!")
+
     def call(self, method: str, *args: Any) -> Any:
         """``method(*args)`` of the solver in the process; :attr:`status` is the stream's after it."""
         with self._lock:
@@ -297,6 +322,7 @@ class SolverProcess:
             finally:
                 self._lock.release()
         self._requests.close()
+        self._interrupts.close()
         try:
             self._process.wait(timeout)
         except subprocess.TimeoutExpired:
@@ -310,4 +336,5 @@ if __name__ == "__main__":
     os.nice(SOLVER_NICENESS)
     from crane_reference.stream import solver  # the classes under their importable names (pickled replies)
 
-    solver._serve(Connection(int(sys.argv[1]), writable=False), Connection(int(sys.argv[2]), readable=False))
+    solver._serve(Connection(int(sys.argv[1]), writable=False), Connection(int(sys.argv[2]), readable=False),
+                  Connection(int(sys.argv[3]), writable=False))
