@@ -68,7 +68,7 @@ def warm_up(variants: Iterable[str] = VARIANTS) -> WarmUp:
         scenario.motion.solve(0.0, q, np.zeros_like(q))
         stream = ReferenceStream(params, variant)
         stream.compute(WARM_UP_STEPS * ONLINE_STEP)
-        stream.sample(0.5e-3)
+        stream.sample(0.5 * ONLINE_STEP)  # between two computed steps: interpolated (E's poses from q)
         stream.check_targets(params.task)
         stream.retarget(1e-3, params.task, checked=True)
     now_compiled, now_loaded = _cache_counts()
