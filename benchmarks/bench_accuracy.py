@@ -157,14 +157,20 @@ def _triple(x: np.ndarray, form: str = ".1e") -> str:
     return "/".join(f"{v:{form}}" for v in x)
 
 
+def undamped_crane(params: CraneParameters, n_rfe: int, duration: float, cache: Path) -> tuple[Trajectory, Scenario]:
+    """The undamped crane with ``n_rfe`` boom elements: its converged run and its scenario (kernels ready)."""
+    p = with_rfe(params, n_rfe)
+    reference = reference_run(p, duration, cache, "undamped" if n_rfe == 6 else f"undamped-nrfe{n_rfe}")
+    scenario = Scenario(p, "flexible")
+    simulate(scenario.motion, scenario.equilibrium.q, 0.01)  # compile / load the kernels
+    return reference, scenario
+
+
 def vibration(params: CraneParameters, duration: float, cache: Path, rfe_counts: tuple[int, ...]) -> None:
     """[vibration] The 40-250 Hz RMS kept per window, raw and controller-band errors, per n_rfe."""
     for n_rfe in rfe_counts:
-        p = with_rfe(params, n_rfe)
-        reference = reference_run(p, duration, cache, "undamped" if n_rfe == 6 else f"undamped-nrfe{n_rfe}")
-        scenario = Scenario(p, "flexible")
+        reference, scenario = undamped_crane(params, n_rfe, duration, cache)
         q0 = scenario.equilibrium.q
-        simulate(scenario.motion, q0, 0.01)  # compile / load the kernels
         kept_reference = [band_rms(reference, w) for w in WINDOWS]
         for step in STEPS:
             start = time.perf_counter()
@@ -225,11 +231,8 @@ def newton_iterations(scenario: Scenario, step: float, duration: float = 1.0, to
 def iteration_rules(params: CraneParameters, duration: float, cache: Path, rfe_counts: tuple[int, ...]) -> None:
     """[iterations] The Newton rules at the node's step (ONLINE_STEP) against the DOP853 reference, per n_rfe."""
     for n_rfe in rfe_counts:
-        p = with_rfe(params, n_rfe)
-        reference = reference_run(p, duration, cache, "undamped" if n_rfe == 6 else f"undamped-nrfe{n_rfe}")
-        scenario = Scenario(p, "flexible")
+        reference, scenario = undamped_crane(params, n_rfe, duration, cache)
         q0 = scenario.equilibrium.q
-        simulate(scenario.motion, q0, 0.01)  # compile / load the kernels
         for evaluations, tolerance, name in ((2, 1e-9, "converged"), (2, 1e-4, "two evaluations"),
                                              (EVALUATIONS, ONLINE_TOLERANCE, "online default"),
                                              (1, math.inf, "exactly one evaluation"),
