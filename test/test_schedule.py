@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from crane_reference.model.parameters import Task
+from crane_reference.model.units import NANOSECONDS
 from crane_reference.stream.reference_stream import ReferenceStream
-from crane_reference.stream.schedule import NANOSECONDS, Frame, FrameBatch, FrameSchedule, checked, make_frames
+from crane_reference.stream.schedule import Frame, FrameBatch, FrameSchedule, checked, make_frames
 
 RATE = 100  # [Hz]
 LEAD = 0.25  # [s]

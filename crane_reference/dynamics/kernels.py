@@ -85,6 +85,10 @@ def projection_matrix(B, independent, servo):
 ROUND_OFF_STEP = 1e-15
 """[rad or m]: a Newton correction of the position constraints this small is at the round-off of q."""
 
+PROJECTION_ITERATIONS = 25
+"""Newton iterations on the position constraints at most, at an iterate of a step (from a guess good to
+second order in h they take one or two)."""
+
 
 @njit(cache=True, nogil=True)
 def project_positions(q, k: Coefficients, holonomic_dependent, chain: ChainData, tolerance, max_iterations,
@@ -358,7 +362,8 @@ def _state_at(a1, x0, v0, a0, q_guess, qd_size, h, k: Coefficients, partition: P
     q1 = q_guess.copy()
     q1[integrated] = x0 + h * v0 + (0.25 * h * h) * (a0 + a1)
     if project:
-        at = project_positions(q1, k, partition.holonomic_dependent, chain, settings.projection_tolerance, 25,
+        at = project_positions(q1, k, partition.holonomic_dependent, chain, settings.projection_tolerance,
+                               PROJECTION_ITERATIONS,
                                exact_frames)
     else:
         T, S = forward_kinematics(q1, chain.kinds, chain.axes, chain.origins)

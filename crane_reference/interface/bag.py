@@ -40,6 +40,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from ..model.drive import column_drive
 from ..model.parameters import CraneParameters
+from ..model.units import NANOSECONDS
 from ..motion.steps import ONLINE_STEP
 from ..stream.reference_stream import ERROR, ReferenceStream
 from ..stream.sample import ReferenceSample
@@ -59,7 +60,7 @@ TOPIC_TYPES = {
 }
 DEFAULT_TOPICS = tuple(TOPIC_TYPES)
 MAX_RATE = messages.MAX_PUBLISH_RATE
-DIAGNOSTICS_PERIOD_NS = round(messages.DIAGNOSTICS_PERIOD * messages.NANOSECONDS)
+DIAGNOSTICS_PERIOD_NS = round(messages.DIAGNOSTICS_PERIOD * NANOSECONDS)
 QUEUE_SIZE = 100_000  # messages waiting for the writer thread before write() blocks
 RELEASE_KEEP = 1.0  # [s] of computed motion kept behind the sample being exported
 INFINITE = QosTime(sec=9223372036, nsec=854775807)  # RMW_DURATION_INFINITE as rosbag2 writes it

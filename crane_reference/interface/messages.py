@@ -25,11 +25,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..model.units import NANOSECONDS
+
 if TYPE_CHECKING:
     from ..model.parameters import Task
     from ..stream.sample import ReferenceSample
 
-NANOSECONDS = 10**9
 # The node's interface, shared by the node and the offline bag export (which must not import rclpy)
 NODE_NAME = "crane_reference"
 # Every reference topic lives in the node's namespace (~/...), never on a topic that measured state uses.

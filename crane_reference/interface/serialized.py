@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .messages import NANOSECONDS
+from ..model.units import NANOSECONDS
 
 if TYPE_CHECKING:
     from ..stream.sample import ReferenceSample

@@ -93,12 +93,6 @@ def stack_samples(samples: list[Sample]) -> dict[str, np.ndarray]:
     return {f.name: np.array([getattr(s, f.name) for s in samples]) for f in fields(Sample)}
 
 
-def unstack_samples(arrays: dict[str, np.ndarray]) -> list[Sample]:
-    """The samples whose fields :func:`stack_samples` stacked."""
-    columns = [arrays[f.name] for f in fields(Sample)]
-    return [Sample(*row) for row in zip(*(c.tolist() if c.ndim == 1 else list(c) for c in columns), strict=True)]
-
-
 @dataclass(frozen=True)
 class Trajectory:
     """Samples of one run stacked into arrays (first axis: time)."""

@@ -79,6 +79,7 @@ from ..interface import messages
 from ..interface.serialized import SerializedJointState, SerializedPose
 from ..model.config import ConfigError, load_config
 from ..model.parameters import Task
+from ..model.units import NANOSECONDS
 from ..motion.simulation import SOLVER_FAILURES
 from ..stream.reference_stream import ERROR, PAUSED, RUNNING
 from ..stream.server import CommandRefusedError, Outgoing, Preview, ReferenceServer
@@ -101,7 +102,6 @@ MAX_WAIT = 0.1  # [s] of wall time the publisher sleeps at most before reading t
 MARKER_RATE = 10.0  # [Hz]
 TRAIL_RATE = 50.0  # [Hz] of points added to E's trail
 TRAIL_POINTS = 500
-NANOSECONDS = messages.NANOSECONDS
 RCLError = rclpy_implementation.RCLError
 
 

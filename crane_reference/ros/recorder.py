@@ -47,16 +47,14 @@ from rclpy.topic_endpoint_info import TopicEndpointInfo
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 
 from ..interface.bag import BagError, BagWriter
-from ..interface.messages import NODE_NAME
+from ..model.units import NANOSECONDS
 
-NANOSECONDS = 10**9
 RECORD_DEPTH = 1000  # history depth of the recording subscriptions
 DISCOVERY_PERIOD = 0.2  # [s] between two looks at the ROS graph for topics not yet recorded
 STATUS_PERIOD = 1.0  # [s] between two status lines
 SPIN_TIMEOUT = 0.05  # [s], longest wait for a message before the loop looks at signals, discovery and status
 DRAIN_TIME = 0.2  # [s], longest time spent taking the messages already queued when stopping
 IGNORED_TOPICS = ("/rosout", "/parameter_events")  # published by every node
-DEFAULT_NODE = f"/{NODE_NAME}"
 
 
 def rosbags_qos(profile: QoSProfile) -> Qos:

@@ -28,13 +28,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..model.units import NANOSECONDS
 from .reference_stream import ERROR, ReferenceStream
 from .sample import ReferenceSample, columns, from_columns
 
 TIME_TOLERANCE = 1e-9  # [s], rounding slack when comparing stream times
 COMPUTE_MARGIN = 0.05  # [s] of motion computed beyond the preview horizon
 URGENT_PART = 4  # frames within lookahead / URGENT_PART of publishing are made before their preview horizon
-NANOSECONDS = 10**9
 
 
 def stamp_at(start_ns: int, k: int, rate: int) -> int:

@@ -46,9 +46,10 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from ..model.parameters import Task
+from ..model.units import NANOSECONDS
 from .reference_stream import RUNNING
 from .sample import ReferenceSample
-from .schedule import NANOSECONDS, Frame, FrameBatch, FrameRequest, FrameSchedule, Plan, stamp_at
+from .schedule import Frame, FrameBatch, FrameRequest, FrameSchedule, Plan, stamp_at
 from .solver import SolverStoppedError, StreamInfo, StreamStatus
 
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
