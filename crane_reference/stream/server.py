@@ -168,7 +168,8 @@ class ReferenceServer:
         (``{name}_accepted_s``, ``{name}_stamp_s``, ``{name}_stream_time_s``, the last exact: it locates the
         command in a recording or an offline run), and the last restart's jump (``restart_jump_rad``,
         ``restart_jump_joint``)."""
-        return dict(self._commands)
+        with self._lock:
+            return dict(self._commands)
 
     @property
     def publishing(self) -> bool:
@@ -207,9 +208,11 @@ class ReferenceServer:
                         self._lock.wait(timeout=LOOKAHEAD)
         except SolverStoppedError as error:
             if not self._halt.is_set():
-                schedule.fault = str(error)
+                with self._lock:
+                    schedule.fault = str(error)
         except Exception as error:  # publishing goes on (holding) and reports it
-            schedule.fault = f"solver thread stopped: {type(error).__name__}: {error}"
+            with self._lock:
+                schedule.fault = f"solver thread stopped: {type(error).__name__}: {error}"
 
     def _frame_request(self, plan: Plan, count: int) -> FrameRequest:
         """The solver's next request for ``plan`` (the server's lock held): up to ``count`` frames, with one
@@ -324,9 +327,10 @@ class ReferenceServer:
                     self._accept(batch, plan)
                 self._commands_pending -= 1
                 self._lock.notify_all()  # the worker goes on after these frames, not at the next publish
-        self._commands[f"{name}_stamp_s"] = f"{self.stamp_of(k):.6f}"
-        self._commands[f"{name}_accepted_s"] = f"{accepted_ns / NANOSECONDS:.6f}"
-        self._commands[f"{name}_stream_time_s"] = repr(tau)
+        with self._lock:
+            self._commands[f"{name}_stamp_s"] = f"{self.stamp_of(k):.6f}"
+            self._commands[f"{name}_accepted_s"] = f"{accepted_ns / NANOSECONDS:.6f}"
+            self._commands[f"{name}_stream_time_s"] = repr(tau)
         return k, tau, answer
 
     @property
@@ -384,9 +388,10 @@ class ReferenceServer:
             raise CommandRefusedError("a restart makes the reference jump to the start: stop publishing first")
         k, _, (before, after) = self._at_command_point("restart", accepted_ns, "restart")
         jump = abs(after - before)
-        self.schedule.fault = ""
         restart = Restart(k, float(jump.max()), self.info.joint_names[int(jump.argmax())])
-        self._commands.update(restart_jump_rad=f"{restart.jump:.6g}", restart_jump_joint=restart.joint)
+        with self._lock:
+            self.schedule.fault = ""
+            self._commands.update(restart_jump_rad=f"{restart.jump:.6g}", restart_jump_joint=restart.joint)
         return restart
 
     def come_to_rest(self, accepted_ns: int, stop: threading.Event | None = None) -> None:
