@@ -86,8 +86,7 @@ ROUND_OFF_STEP = 1e-15
 """[rad or m]: a Newton correction of the position constraints this small is at the round-off of q."""
 
 PROJECTION_ITERATIONS = 25
-"""Newton iterations on the position constraints at most, at an iterate of a step (from a guess good to
-second order in h they take one or two)."""
+"""Newton iterations on the position constraints at most, at an iterate of a step."""
 
 
 @njit(cache=True, nogil=True)
