@@ -20,12 +20,13 @@ from .kinematics import forward_kinematics, point_bias, point_jacobian, velocity
 from .linalg import (
     cholesky,
     cholesky_solve,
+    largest_magnitude,
     map_columns,
     matmul,
     matvec,
     project_rows,
     smallest_singular_value,
-    solve_small,
+    solve_small_in_place,
     solve_small_vector,
 )
 from .quadrics import acceleration_terms, constraint_values, holonomic_values, velocity_residual
@@ -52,21 +53,27 @@ from .structures import (
 from .terms import energy_accounts, frame_terms, generalized_forces, inverse_dynamics, velocity_products
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def constraint_map(A, c_acc, independent, dependent):
     """The solution set of the acceleration constraints A qdd = c (eq. (7)): qdd = B qdd_ic + e with the
     velocity map B = d qd / d qd_ic (n, n_ic) (identity rows on ic, Gamma = -K_dc^-1 K_ic rows on dc)
     and the particular solution e (e_ic = 0, K_dc e_dc = c); returns B and e_dc."""
-    n_ic = independent.size
-    right = np.empty((dependent.size, n_ic + 1))
-    right[:, :n_ic] = A[:, independent]
-    right[:, n_ic] = c_acc
-    solution = solve_small(np.ascontiguousarray(A[:, dependent]), right)
+    n_ic, m = independent.size, dependent.size
+    K_dc = np.empty((m, m))
+    solution = np.empty((m, n_ic + 1))  # [K_ic c], then K_dc^-1 [K_ic c]
+    for row in range(m):
+        for j in range(m):
+            K_dc[row, j] = A[row, dependent[j]]
+        for j in range(n_ic):
+            solution[row, j] = A[row, independent[j]]
+        solution[row, n_ic] = c_acc[row]
+    solve_small_in_place(K_dc, solution)
     B = np.zeros((A.shape[1], n_ic))
     for col in range(n_ic):
         B[independent[col], col] = 1.0
-    for row in range(dependent.size):
-        B[dependent[row]] = -solution[row, :n_ic]
+    for row in range(m):
+        for col in range(n_ic):
+            B[dependent[row], col] = -solution[row, col]
     return B, solution[:, n_ic]
 
 
@@ -89,7 +96,7 @@ PROJECTION_ITERATIONS = 25
 """Newton iterations on the position constraints at most, at an iterate of a step."""
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def project_positions(q, k: Coefficients, holonomic_dependent, chain: ChainData, tolerance, max_iterations,
                       exact_frames=True):
     """q with the holonomically dependent coordinates solved from Phi(q) = 0 by Newton (Jacobian
@@ -102,9 +109,9 @@ def project_positions(q, k: Coefficients, holonomic_dependent, chain: ChainData,
         p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
         if holonomic_dependent.size == 0:
             return Projection(q, T, S, p, C, True)
-        residual, grads = holonomic_values(p, k)
-        step = solve_small_vector(matmul(grads, C, holonomic_dependent), residual)
-        size = np.max(np.abs(step))
+        step, grads = holonomic_values(p, k)  # the residual, solved in place for the Newton step
+        solve_small_in_place(matmul(grads, C, holonomic_dependent), step.reshape((step.size, 1)))
+        size = largest_magnitude(step)
         if size <= ROUND_OFF_STEP:
             return Projection(q, T, S, p, C, True)
         for i in range(holonomic_dependent.size):
@@ -117,27 +124,30 @@ def project_positions(q, k: Coefficients, holonomic_dependent, chain: ChainData,
     return Projection(q, T, S, p, C, False)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def dependent_velocities(qd, p, C, k: Coefficients, dependent):
     """qd with qd_dc solved from the velocity-level constraints (eq. (7): K_dc qd_dc = b - K_ic qd_ic for
     rows linear in qd); Newton on qd_dc (Jacobian K_dc = A[:, dc]), one step when every row is linear in
     qd, until the step is below 1e-14 otherwise.  Also whether it converged."""
     linear = True
-    for i in range(k.order.size):
-        if k.order[i] == 1 and np.any(k.Q[i, 0, 3:, 3:] != 0.0):
-            linear = False
+    order, Q = k.order, k.Q
+    for i in range(order.size):
+        if order[i] == 1:
+            for a in range(3, 6):
+                for b in range(3, 6):
+                    linear = linear and Q[i, 0, a, b] == 0.0
     qd = qd.copy()
     for _ in range(1 if linear else 30):
-        residual, grads = velocity_residual(p, matvec(C, qd), k)
-        step = solve_small_vector(matmul(grads, C, dependent), residual)
+        step, grads = velocity_residual(p, matvec(C, qd), k)  # the residual, solved in place for the step
+        solve_small_in_place(matmul(grads, C, dependent), step.reshape((step.size, 1)))
         for i in range(dependent.size):
             qd[dependent[i]] -= step[i]
-        if linear or np.max(np.abs(step)) <= 1e-14:
+        if linear or largest_magnitude(step) <= 1e-14:
             return qd, True
     return qd, False
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _accelerations_from(qdd_independent, B, e_dc, independent, dependent):
     """qdd = B qdd_ic + e (the acceleration constraints of (7) for given independent accelerations): qdd_ic
     itself, qdd_dc = Gamma qdd_ic + e_dc."""
@@ -349,7 +359,7 @@ def iteration_factor(M, B, h, correction: ModalCorrection, drive, partition: Par
     return cholesky(reduced) if not servo else np.linalg.inv(reduced)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _state_at(a1, x0, v0, a0, q_guess, qd_size, h, k: Coefficients, partition: Partition, chain: ChainData,
               settings: StepSettings, project, exact_frames):
     """The trapezoidal state for the accelerations a1 of the integrated coordinates,
@@ -359,7 +369,10 @@ def _state_at(a1, x0, v0, a0, q_guess, qd_size, h, k: Coefficients, partition: P
     (:class:`Iterate`)."""
     integrated = partition.integrated
     q1 = q_guess.copy()
-    q1[integrated] = x0 + h * v0 + (0.25 * h * h) * (a0 + a1)
+    qd1 = np.zeros(qd_size)
+    for i in range(integrated.size):
+        q1[integrated[i]] = x0[i] + h * v0[i] + (0.25 * h * h) * (a0[i] + a1[i])
+        qd1[integrated[i]] = v0[i] + (0.5 * h) * (a0[i] + a1[i])
     if project:
         at = project_positions(q1, k, partition.holonomic_dependent, chain, settings.projection_tolerance,
                                PROJECTION_ITERATIONS,
@@ -368,28 +381,26 @@ def _state_at(a1, x0, v0, a0, q_guess, qd_size, h, k: Coefficients, partition: P
         T, S = forward_kinematics(q1, chain.kinds, chain.axes, chain.origins)
         p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
         at = Projection(q1, T, S, p, C, True)
-    qd1 = np.zeros(qd_size)
-    qd1[integrated] = v0 + (0.5 * h) * (a0 + a1)
     solved = at.solved
     if solved:
         qd1, solved = dependent_velocities(qd1, at.ee_position, at.ee_jacobian, k, partition.dependent)
     return Iterate(at.q, qd1, at.T, at.S, at.ee_position, at.ee_jacobian, solved)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _predict_dependent(q, B, dx, holonomic_dependent):
     """q with q_hd moved by B[hd] dx (dx the change of the independent coordinates; B = d q / d q_ic)."""
     out = q.copy()
     for i in range(holonomic_dependent.size):
         row = holonomic_dependent[i]
         total = 0.0
-        for j in range(dx.size):
+        for j in range(B.shape[1]):
             total += B[row, j] * dx[j]
         out[row] += total
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def newton_residual(q, qd, a1, T, S, Hw, p, C, k: Coefficients, drive, partition: Partition, chain: ChainData):
     """At an iterate (q, qd) that meets the constraints, with the integrator's accelerations a1 of the
     integrated coordinates: the full qdd = B a1_ic + e (the acceleration constraints of (7); for q_vd this
@@ -406,7 +417,7 @@ def newton_residual(q, qd, a1, T, S, Hw, p, C, k: Coefficients, drive, partition
     return qdd, project_rows(imbalance.reshape((q.size, 1)), B, independent, dependent, partition.servo)[:, 0], B
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _end_accelerations(end: Iterate, a1, k: Coefficients, partition: Partition, chain: ChainData):
     """qdd = B a1_ic + e at the step's end state (the acceleration constraints of (7) there: E's velocity
     terms, A, c and B; no mass matrix), and B."""
@@ -425,7 +436,7 @@ def _failed(q0, qd0, qdd0, B0, correction: ModalCorrection, iterations):
                    iterations)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _step_residual_at(it: Iterate, a1, correction: ModalCorrection, k: Coefficients, drive, partition: Partition,
                       chain: ChainData):
     """The residual of the step's equation, P^T (M qdd + h - Q) - Delta M_r a1_ic + D_u v_ic, at an iterate for
@@ -435,11 +446,16 @@ def _step_residual_at(it: Iterate, a1, correction: ModalCorrection, k: Coefficie
     Hw = world_pseudo_inertias(it.T, chain.body_joint, chain.body_H)
     qdd, residual, B = newton_residual(it.q, it.qd, a1, it.T, it.S, Hw, it.ee_position, it.ee_jacobian, k, drive,
                                        partition, chain)
-    residual += matvec(correction.damping, it.qd[partition.independent]) - matvec(correction.inertia, a1[:n_ic])
+    independent, qd, damping, inertia = partition.independent, it.qd, correction.damping, correction.inertia
+    for i in range(n_ic):
+        total = 0.0
+        for j in range(n_ic):
+            total += damping[i, j] * qd[independent[j]] - inertia[i, j] * a1[j]
+        residual[i] += total
     return qdd, residual, B, Hw
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def first_iterate(q0, qd0, a0, h, k: Coefficients, partition: Partition, chain: ChainData, settings: StepSettings):
     """The step's first iterate: the trapezoidal state for a1 = a0 (x0 + h v0 + h^2/2 a0 for the integrated
     coordinates, the predictor) with q_hd from the position constraints, starting from q_hd predicted as
@@ -520,12 +536,19 @@ def integration_step(q0, qd0, qdd0, B0, correction: ModalCorrection, t0, h, k: C
         if iteration > 0:
             it = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, False, False)
             qdd, residual, B, Hw = _step_residual_at(it, a1, correction, k, drive, partition, chain)
-        correction_step = qdd[integrated] - a1
-        correction_step[:n_ic] = -(cholesky_solve(factor, residual) if not servo else matvec(factor, residual))
-        a1 = a1 + correction_step
+        solved = cholesky_solve(factor, residual) if not servo else matvec(factor, residual)
+        largest = 0.0
+        for i in range(integrated.size):  # Newton on a_ic, fixed point on a_vd
+            if i < n_ic:
+                change = -solved[i]
+                solved[i] = (0.25 * h * h) * change
+            else:
+                change = qdd[integrated[i]] - a1[i]
+            a1[i] += change
+            largest = max(largest, abs(change))
         # q_hd of the next iterate to second order in the change of x: dx = h^2/4 da
-        q1 = _predict_dependent(it.q, B, (0.25 * h * h) * correction_step[:n_ic], partition.holonomic_dependent)
-        if iteration + 1 >= settings.evaluations and 0.5 * h * np.max(np.abs(correction_step)) <= settings.tolerance:
+        q1 = _predict_dependent(it.q, B, solved, partition.holonomic_dependent)
+        if iteration + 1 >= settings.evaluations and 0.5 * h * largest <= settings.tolerance:
             status = CONVERGED
             break
     end = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, True, True)

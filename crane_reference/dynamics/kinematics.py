@@ -28,17 +28,10 @@ PRISMATIC = 0
 
 
 @njit(cache=True)
-def matmul4_into(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
-    """out = a b for 4x4 matrices (out distinct from a and b), without BLAS call overhead or allocation."""
-    for i in range(4):
-        for j in range(4):
-            out[i, j] = 0.0
-    for i in range(4):
-        for k in range(4):
-            aik = a[i, k]
-            if aik != 0.0:
-                for j in range(4):
-                    out[i, j] += aik * b[k, j]
+def _is_identity(origins, k):
+    """Whether the offset of joint k is the identity (no rotation, no translation)."""
+    return (origins[k, 0, 0] == 1.0 and origins[k, 1, 1] == 1.0 and origins[k, 2, 2] == 1.0
+            and origins[k, 0, 3] == 0.0 and origins[k, 1, 3] == 0.0 and origins[k, 2, 3] == 0.0)
 
 
 @njit(cache=True)
@@ -47,32 +40,34 @@ def forward_kinematics(q: np.ndarray, kinds: np.ndarray, axes: np.ndarray, origi
 
     The joint motion is applied column-wise (a rotation about local axis a mixes the two other
     columns; a translation adds q times column a to the position), and identity offsets are skipped.
+    Elements are addressed by index throughout (no array views: each would cost a reference count).
     """
     n = q.size
     T = np.empty((n, 4, 4))
     S = np.zeros((n, 4, 4))
-    product = np.empty((4, 4))
     for k in range(n):
-        origin = origins[k]
-        frame = T[k]  # built in place from the frame before the joint
-        if k > 0:
-            frame[:, :] = T[k - 1]
+        # T[k] = T[k - 1] origin_k (the frame before the joint; T[-1] = I)
+        if k == 0:
+            for r in range(4):
+                for c in range(4):
+                    T[k, r, c] = origins[k, r, c]
+        elif _is_identity(origins, k):
+            for r in range(4):
+                for c in range(4):
+                    T[k, r, c] = T[k - 1, r, c]
         else:
             for r in range(4):
                 for c in range(4):
-                    frame[r, c] = 1.0 if r == c else 0.0
-        if not (origin[0, 0] == 1.0 and origin[1, 1] == 1.0 and origin[2, 2] == 1.0
-                and origin[0, 3] == 0.0 and origin[1, 3] == 0.0 and origin[2, 3] == 0.0):
-            matmul4_into(frame, origin, product)
-            frame[:, :] = product
+                    T[k, r, c] = (T[k - 1, r, 0] * origins[k, 0, c] + T[k - 1, r, 1] * origins[k, 1, c]
+                                  + T[k - 1, r, 2] * origins[k, 2, c] + T[k - 1, r, 3] * origins[k, 3, c])
         a = axes[k]
         if kinds[k] == PRISMATIC:
             for r in range(3):
-                S[k, r, 3] = frame[r, a]
-                T[k, r, 3] += frame[r, a] * q[k]
+                S[k, r, 3] = T[k, r, a]
+                T[k, r, 3] += T[k, r, a] * q[k]
             continue
-        wx, wy, wz = frame[0, a], frame[1, a], frame[2, a]
-        px, py, pz = frame[0, 3], frame[1, 3], frame[2, 3]
+        wx, wy, wz = T[k, 0, a], T[k, 1, a], T[k, 2, a]
+        px, py, pz = T[k, 0, 3], T[k, 1, 3], T[k, 2, 3]
         S[k, 0, 1] = -wz
         S[k, 0, 2] = wy
         S[k, 1, 0] = wz
@@ -86,7 +81,7 @@ def forward_kinematics(q: np.ndarray, kinds: np.ndarray, axes: np.ndarray, origi
         c, s = np.cos(q[k]), np.sin(q[k])
         i, j = (a + 1) % 3, (a + 2) % 3
         for r in range(3):
-            fi, fj = frame[r, i], frame[r, j]
+            fi, fj = T[k, r, i], T[k, r, j]
             T[k, r, i] = c * fi + s * fj
             T[k, r, j] = c * fj - s * fi
     return T, S

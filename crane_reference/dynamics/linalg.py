@@ -56,12 +56,10 @@ def cholesky(A):
 
 
 @njit(cache=True, nogil=True)
-def solve_small(A, B):
-    """X = A^-1 B for a small square A (Gaussian elimination with partial pivoting; K_dc is 2 x 2 or
-    3 x 3 here, where a LAPACK call costs more than the arithmetic), B of shape (m, k)."""
-    m = A.shape[0]
-    a = A.copy()
-    x = B.copy()
+def solve_small_in_place(a, x):
+    """x <- a^-1 x for a small square a (Gaussian elimination with partial pivoting; K_dc is 2 x 2 or
+    3 x 3 here, where a LAPACK call costs more than the arithmetic), x of shape (m, k); a is overwritten."""
+    m = a.shape[0]
     for col in range(m):
         pivot = col
         for row in range(col + 1, m):
@@ -86,13 +84,31 @@ def solve_small(A, B):
             for j in range(col + 1, m):
                 total -= a[col, j] * x[j, k]
             x[col, k] = total / a[col, col]
+
+
+@njit(cache=True, nogil=True)
+def solve_small(A, B):
+    """X = A^-1 B for a small square A (:func:`solve_small_in_place` on copies), B of shape (m, k)."""
+    x = B.copy()
+    solve_small_in_place(A.copy(), x)
     return x
 
 
 @njit(cache=True, nogil=True)
 def solve_small_vector(A, b):
-    """x = A^-1 b for a small square A (see :func:`solve_small`)."""
-    return solve_small(A, b.reshape((b.size, 1)))[:, 0]
+    """x = A^-1 b for a small square A (see :func:`solve_small_in_place`)."""
+    x = b.copy()
+    solve_small_in_place(A.copy(), x.reshape((x.size, 1)))
+    return x
+
+
+@njit(cache=True, nogil=True)
+def largest_magnitude(x):
+    """max |x_i| (0 for an empty x)."""
+    largest = 0.0
+    for i in range(x.size):
+        largest = max(largest, abs(x[i]))
+    return largest
 
 
 @njit(cache=True, nogil=True)

@@ -56,7 +56,7 @@ def velocity_products(qd, S, Hw, chain: ChainData, p):
     return h, point_bias(B, chain.ee_joint, p)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def inverse_dynamics(S, Hw, velocity_term, qdd, chain: ChainData):
     """M qdd + h - Q_g (inertia minus gravity forces) in O(n), without forming M (see :mod:`.inertia`);
     ``velocity_term`` is B of :func:`.kinematics.velocity_terms` at qd."""
@@ -104,7 +104,7 @@ def drive_torque(drive, psi2):
     return drive[0] + drive[1] * (drive[2] - psi2)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def generalized_forces(q, qd, gravity, chain: ChainData, drive):
     """Q = Q_g - K q - D qd + t_dr e_psi2 + tau_a with the gravity forces Q_g (the sign convention above) and
     the actuators' generalized forces tau_a = ``drive[4:]`` if ``drive`` carries them (see
