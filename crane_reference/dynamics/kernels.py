@@ -186,7 +186,7 @@ def _solve_accelerations(M, f, A, B, e_dc, c_acc, partition: Partition):
     return _accelerations_from(a, B, e_dc, independent, dependent)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _terms_at(q, qd, T, S, k: Coefficients, drive, partition: Partition, chain: ChainData):
     """The position and velocity terms of (7)-(8) at (q, qd) from the frames there (:class:`StateTerms`)."""
     Hw, M, Qg, Vg, p, R, C = frame_terms(T, S, chain)
@@ -206,14 +206,14 @@ def accelerations_at(q, qd, k: Coefficients, drive, partition: Partition, chain:
     return _with_accelerations(s, qdd)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _with_accelerations(s: StateTerms, qdd):
     """:class:`Accelerations` from :class:`StateTerms` and qdd."""
     return Accelerations(s.M, s.h, s.forces, s.gravity_potential, s.ee_position, s.ee_rotation, s.ee_jacobian,
                          s.ee_bias, s.A, s.c, s.velocity_map, qdd)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _evaluation(q, qd, acc: Accelerations, k: Coefficients, drive, partition: Partition, chain: ChainData):
     """The full :class:`Evaluation` from :class:`Accelerations`: adds the constraint residuals, gradients,
     distances and velocity residuals, the reactions, their generalized force and the accounts.  The

@@ -203,7 +203,7 @@ def acceleration_terms(p, v, C, d, k: Coefficients):
     return matmul(grads, C), c_acc
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def constraint_values(p, v, k: Coefficients):
     """Residuals (Phi or Psi), gradients (Phi_p or Psi_v), distances |residual| / |gradient| and the
     velocity-level residuals (dPhi/dt or Psi)."""

@@ -36,7 +36,7 @@ def position_terms(q, chain: ChainData):
     return (T, S, *frame_terms(T, S, chain))
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def frame_terms(T, S, chain: ChainData):
     """From the frames T and twists S at q: world pseudo-inertias Hw, M, gravity forces, the total
     gravity potential, E's position p, the rotation R of its frame and its Jacobian C."""
@@ -48,7 +48,7 @@ def frame_terms(T, S, chain: ChainData):
     return Hw, M, Qg, chain.gravity * Hc[0, 2, 3], p, T[chain.ee_joint, :3, :3].copy(), C
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def velocity_products(qd, S, Hw, chain: ChainData, p):
     """What is quadratic in qd: the velocity terms h of (8) and E's d (C qdd + d is E's acceleration)."""
     B = velocity_terms(qd, S)
@@ -118,7 +118,7 @@ def generalized_forces(q, qd, gravity, chain: ChainData, drive):
     return forces
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def energy_accounts(q, qd, M, gravity_potential, chain: ChainData, drive):
     """Energies and powers at (q, qd) for the energy balance, with ``drive`` = (tau0, s_dr, psi_a, dpsi_a/dt):
 
