@@ -27,6 +27,10 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
   invalid values of ellipse.*, z.*, speed_scaling and unknown names; single and atomic requests), then
   stamp gaps longer than two periods, non-finite positions or velocities, requests without a response
   and whether a valid change still takes effect afterwards;
+* the node's CPU over its floor (issue 29's ratio): the floor is the CPU share of a process that only publishes
+  the node's serialized messages at the rate, paced, with a subscriber in another process, plus that of the
+  compiled steps alone at the node's ``integrator.step`` for real-time motion, both measured in this run
+  (``floor_percent``, ``cpu_over_floor``);
 * first (``--message-costs``), in this process: what the node's publisher spends per sample to fill and
   publish ~/joint_states and ~/end_effector_pose (serialized and filled in place, as the node does, and as
   message objects, for comparison), alone and with a subscriber in another process, the CPU share of a
@@ -52,6 +56,7 @@ from typing import Any
 
 import numpy as np
 import rclpy
+from bench_speed import run_times
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
@@ -67,6 +72,8 @@ from visualization_msgs.msg import MarkerArray
 from crane_reference.interface import messages
 from crane_reference.interface.serialized import SerializedJointState, SerializedPose
 from crane_reference.model.config import load_config
+from crane_reference.motion.simulation import Scenario
+from crane_reference.motion.steps import ONLINE_STEP
 from crane_reference.ros.message_types import rclpy_types
 from crane_reference.ros.node import MARKER_RATE, TRAIL_POINTS
 from crane_reference.stream.reference_stream import ReferenceStream
@@ -315,11 +322,11 @@ except (KeyboardInterrupt, ExternalShutdownException):
 """
 
 
-def message_costs(model: str, domain: int, rates: list[int]) -> None:
-    """Print the publisher's per-sample costs alone and with a subscriber in another process, this process's
-    CPU share when it only publishes at each of ``rates`` (the floor of the node's publishing in rclpy: no
-    stream, no clock, no schedule), both for the serialized messages the node publishes and for message
-    objects, and the markers' cost."""
+def message_costs(model: str, domain: int, rates: list[int], details: bool) -> dict[int, float]:
+    """This process's CPU share [%] when it only publishes the node's serialized messages at each of ``rates``,
+    with a subscriber in another process (the floor of the node's publishing in rclpy: no stream, no clock,
+    no schedule); with ``details``, print the publisher's per-sample costs alone and with the subscriber and
+    that share both for the serialized messages and for message objects, and the markers' cost."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     context = rclpy.Context()
@@ -366,13 +373,17 @@ def message_costs(model: str, domain: int, rates: list[int]) -> None:
             return 100.0 * (time.process_time() - cpu) / (time.monotonic() - start)
 
         ways = {"serialized (the node)": one_sample, "message objects": one_message_object}
-        alone = {way: per_sample(publish) for way, publish in ways.items()}
+        alone = {way: per_sample(publish) for way, publish in ways.items()} if details else {}
         subscriber = subprocess.Popen([sys.executable, "-c", SUBSCRIBER], env=env)
         if not spin_until_matched(joints, poses, timeout=30.0):
             raise RuntimeError("the subscriber process did not match the bench topics within 30 s")
+        if not details:
+            return {rate: paced(rate, one_sample) for rate in rates}
+        node_floors = {}
         for way, publish in ways.items():
             (alone_wall, alone_cpu), (with_wall, with_cpu) = alone[way], per_sample(publish)
             floors = {rate: paced(rate, publish) for rate in rates}
+            node_floors = node_floors or floors
             print(f"[messages] {way}: joint_states and pose filled and published, per sample: alone "
                   f"{alone_wall * 1e6:.1f} us (CPU {alone_cpu * 1e6:.1f} us), with a subscriber in another process "
                   f"{with_wall * 1e6:.1f} us (CPU {with_cpu * 1e6:.1f} us, every thread of this process)")
@@ -387,12 +398,29 @@ def message_costs(model: str, domain: int, rates: list[int]) -> None:
         per_markers = (time.perf_counter() - start) / 50
         print(f"[messages] ~/markers built and published with {TRAIL_POINTS} trail points: {per_markers * 1e3:.2f} ms "
               f"(at {MARKER_RATE:g} Hz while subscribed)")
+        return node_floors
     finally:
         if subscriber is not None:
             subscriber.send_signal(signal.SIGINT)
             subscriber.wait(timeout=10)
         node.destroy_node()
         context.try_shutdown()
+
+
+def steps_alone_percent(model: str, step: float, seconds: float = 5.0) -> float:
+    """CPU share [%] of the integrator's compiled steps alone at ``step`` [s] for motion in real time (compiled
+    runs of 0.25 s from rest, only each run's last row evaluated): the least a solver of this motion spends."""
+    scenario = Scenario(load_config(), model)
+    run_times(scenario, step, 0.25, every_row=False)  # kernels loaded
+    cpu = time.process_time()
+    run_times(scenario, step, seconds, every_row=False)
+    return 100.0 * (time.process_time() - cpu) / seconds
+
+
+def node_step(parameters: list[str]) -> float:
+    """The node's integrator step [s]: ``integrator.step`` if given among ``parameters``, else the default."""
+    given = [float(p.split(":=", 1)[1]) for p in parameters if p.split(":=", 1)[0] == "integrator.step"]
+    return given[-1] if given else ONLINE_STEP
 
 
 def spin_until_matched(*publishers: Any, timeout: float) -> bool:
@@ -417,10 +445,16 @@ def main() -> int:
     parser.add_argument("-p", "--parameter", action="append", default=[], metavar="NAME:=VALUE",
                         help="a further node parameter, e.g. -p command_lead:=0.05 (repeatable)")
     args = parser.parse_args()
-    if args.message_costs:
-        message_costs(args.model, args.domain_id, args.rates)
+    publishing = message_costs(args.model, args.domain_id, args.rates, args.message_costs)
+    step = node_step(args.parameter)
+    steps = steps_alone_percent(args.model, step)
+    print(f"[floor] the compiled steps alone at h = {step * 1e3:g} ms: {steps:.1f} % of a core for real-time motion")
     rows = [run(rate, args.duration, args.model, args.changes, args.domain_id, args.flood, args.parameter)
             for rate in args.rates]
+    for rate, row in zip(args.rates, rows, strict=True):
+        floor = publishing[rate] + steps
+        row["floor_percent"] = floor
+        row["cpu_over_floor"] = row["cpu_percent"] / floor
     print_table(f"crane_reference node, {args.model} model, {args.duration:g} s per rate, {os.cpu_count()} CPUs", rows)
     return 0
 

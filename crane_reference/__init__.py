@@ -30,3 +30,7 @@ def _numba_cache_dir() -> str:
 
 
 os.environ.setdefault("NUMBA_CACHE_DIR", _numba_cache_dir())
+# One BLAS thread (unless the user chose otherwise; read when numpy loads OpenBLAS, so before it is imported):
+# the matrices here are tens of rows, which a second thread does not speed up, and OpenBLAS's threads wait for
+# work spinning, a whole core taken from the publisher and a plant beside the solver.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
