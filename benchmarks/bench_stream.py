@@ -1,12 +1,12 @@
 """Benchmark of the online stream without ROS: what the node's worker spends per sample and per command.
 
-For the flexible crane (h = 1 ms), in one process:
+For the flexible crane at the node's default step (``ONLINE_STEP``), in one process:
 
 * the quaternion of a rotation matrix by scipy's ``Rotation``: one call per matrix, and one call for 50
   (what the stream now does once per compiled run of CHUNK_STEPS steps);
 * ``ReferenceStream.compute``: CPU milliseconds per second of motion (solver plus bookkeeping);
 * ``ReferenceStream.samples``: microseconds per sample, one at a time and in batches of 20 (the node's
-  FRAME_BATCH), at the computed steps (a 1 kHz grid) and between them (interpolated);
+  FRAME_BATCH), at the computed steps and between them (interpolated);
 * a re-target: the reachability check (``check_targets``, run in the node's parameter callback before
   the change is accepted), ``retarget`` itself (restart at the computed step, blend), then the motion of
   20 samples after it;
@@ -30,13 +30,14 @@ from scipy.spatial.transform import Rotation
 
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import Task
+from crane_reference.motion.steps import ONLINE_STEP
 from crane_reference.stream.reference_stream import CHUNK_STEPS, ReferenceStream
 from crane_reference.stream.schedule import FrameSchedule
 from crane_reference.stream.server import COMPUTE_SLICE, FRAME_BATCH, LOOKAHEAD, RELEASE_KEEP
 from crane_reference.stream.solver import StreamSolver, StreamSpec
 from crane_reference.stream.targets import reach
 
-STEP = 1e-3  # [s]
+STEP = ONLINE_STEP  # [s], the node's default
 BATCH = 20
 
 

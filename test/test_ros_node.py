@@ -47,7 +47,7 @@ from crane_reference.model.drive import make_drive
 from crane_reference.model.parameters import Task
 from crane_reference.ros.message_types import rclpy_types
 from crane_reference.ros.node import CraneReferenceNode
-from crane_reference.ros.parameters import PARAMETERS, SPECS
+from crane_reference.ros.parameters import PARAMETERS, SPECS, NodeParameters, field_name
 from crane_reference.stream.reference_stream import ReferenceStream
 from crane_reference.stream.server import LOOKAHEAD
 
@@ -432,6 +432,24 @@ def test_parameters_are_declared_from_one_table(ros: Harness) -> None:
         assert descriptor.type == spec.type.value and descriptor.read_only == spec.read_only
         assert descriptor.description
         assert bool(descriptor.floating_point_range or descriptor.integer_range) == (spec.bounds is not None)
+
+
+def test_typed_parameters_have_one_field_per_declared_parameter() -> None:
+    """NodeParameters has the table's parameters in its order, each with the Python type of its ROS type, and
+    a change of one parameter (as the post-set callback gets it) changes that field alone."""
+    python_types = {Parameter.Type.BOOL: "bool", Parameter.Type.INTEGER: "int", Parameter.Type.DOUBLE: "float",
+                    Parameter.Type.STRING: "str", Parameter.Type.STRING_ARRAY: "tuple[str, ...]"}
+    fields = dataclasses.fields(NodeParameters)
+    assert [f.name for f in fields] == [field_name(spec.name) for spec in PARAMETERS]
+    assert [f.type for f in fields] == [python_types[spec.type] for spec in PARAMETERS]
+    defaults = NodeParameters.from_values({spec.name: spec.default for spec in PARAMETERS})
+    changed = defaults.changed([Parameter("ellipse.a", Parameter.Type.INTEGER, 3),
+                                Parameter("preview.joints", Parameter.Type.STRING_ARRAY, ["knuckle"])])
+    assert changed.ellipse_a == 3.0 and isinstance(changed.ellipse_a, float)
+    assert changed.preview_joints == ("knuckle",)
+    restored = dataclasses.replace(changed, ellipse_a=defaults.ellipse_a, preview_joints=defaults.preview_joints)
+    assert restored == defaults
+    assert changed.targets() == Task(3.0, defaults.ellipse_b, defaults.z_increment, defaults.z_rise_time)
 
 
 def test_ellipse_ranges_are_the_cranes_reach(ros: Harness) -> None:

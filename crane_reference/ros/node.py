@@ -78,7 +78,6 @@ from visualization_msgs.msg import MarkerArray
 from ..interface import messages
 from ..interface.serialized import SerializedJointState, SerializedPose
 from ..model.config import ConfigError, load_config
-from ..model.parameters import Task
 from ..model.units import NANOSECONDS
 from ..motion.simulation import SOLVER_FAILURES
 from ..stream.reference_stream import ERROR, PAUSED, RUNNING
@@ -91,6 +90,7 @@ from .parameters import (
     PARAMETERS,
     SPECS,
     TARGET_PARAMETERS,
+    NodeParameters,
     ParameterError,
     check,
     coerce_parameters,
@@ -134,8 +134,10 @@ class CraneReferenceNode(LifecycleNode):
         self._start_thread("diagnostics", self._diagnostics_loop)
         try:
             config_file = declare(self, SPECS["config_file"])
-            self._values = {spec.name: declare(self, spec, load_config(config_file or None))
-                            for spec in PARAMETERS if spec.name != "config_file"}
+            config = load_config(config_file or None)
+            self._params = NodeParameters.from_values(
+                {"config_file": config_file,
+                 **{spec.name: declare(self, spec, config) for spec in PARAMETERS if spec.name != "config_file"}})
             self._check_overrides()
         except Exception as error:
             self._fail_start(error)
@@ -143,7 +145,7 @@ class CraneReferenceNode(LifecycleNode):
         except BaseException:  # KeyboardInterrupt while starting
             self._stop.set()
             raise
-        self._rate = int(self._values["publish_rate"])
+        self._rate = self._params.publish_rate
         self.add_pre_set_parameters_callback(coerce_parameters)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -151,8 +153,8 @@ class CraneReferenceNode(LifecycleNode):
         self.create_service(SetBool, "~/pause", self._on_pause)
         self.create_subscription(Float64, messages.SPEED_SCALING_TOPIC, self._on_speed_scaling,
                                  messages.PUBLISHER_DEPTH)
-        self._status_timer = self.create_timer(self._values["status_period"], self._log_status)
-        if self._values["autostart"]:
+        self._status_timer = self.create_timer(self._params.status_period, self._log_status)
+        if self._params.autostart:
             if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
                 self._stop.set()
                 raise StartupError(self._starting.removeprefix("cannot configure: "))
@@ -187,17 +189,17 @@ class CraneReferenceNode(LifecycleNode):
         """Load the crane and the task, start the solver (kernels made ready, the start and the first second
         of motion computed), create the publishers; the server computes ahead from here on."""
         try:
-            config_file = self._values["config_file"] = self.get_parameter("config_file").value
+            config_file = self._params.config_file
             config = load_config(config_file or None)
-            where = "in its own process" if self._values["solver_process"] else "in this process"
+            where = "in its own process" if self._params.solver_process else "in this process"
             self._starting = (f"configuring: starting the solver {where}; it makes its kernels ready (compiled on a "
                               "first start, else loaded) and computes the start")
             self.get_logger().info(f"starting the solver {where} (with an empty kernel cache it compiles for a minute "
                                    "or two; `crane-reference compile` after installing does it ahead)")
-            server = ReferenceServer(self._start_solver(config), self._rate, self._values["command_lead"],
+            server = ReferenceServer(self._start_solver(config), self._rate, self._params.command_lead,
                                      self._preview())
             self._joint_names = list(server.info.joint_names)
-            self._preview_indices = self._joint_indices(self._values["preview.joints"])
+            self._preview_indices = self._joint_indices(self._params.preview_joints)
         except (StartupError, ConfigError, ParameterError) as error:
             self._starting = f"cannot configure: {error}"
             self.get_logger().error(self._starting)
@@ -227,19 +229,20 @@ class CraneReferenceNode(LifecycleNode):
         self._marker_timer = self.create_timer(1.0 / MARKER_RATE, self._publish_markers)
         self._resume_on_activate = False
         self._starting = "inactive: configured, computing ahead; activate to publish"
-        self.get_logger().info(f"configured: the {self._values['model']} crane ({len(self._joint_names)} joints, "
+        self.get_logger().info(f"configured: the {self._params.model} crane ({len(self._joint_names)} joints, "
                                f"config {config_file or 'packaged default'})")
         return TransitionCallbackReturn.SUCCESS
 
     def _start_solver(self, config) -> LocalSolver | SolverProcess:
         """The solver of the parameters' stream, in its own process or here (StartupError if the targets
         have no consistent start)."""
-        v = self._values
-        targets = self._targets()
-        spec = StreamSpec(config, v["model"], v["integrator.step"], v["blend_time"], targets, v["drive.torque"],
-                          v["drive.duration"], v["speed_scaling"], v["speed_scaling.ramp_time"])
+        v = self._params
+        targets = v.targets()
+        spec = StreamSpec(config=config, model=v.model, step=v.integrator_step, blend_time=v.blend_time,
+                          targets=targets, drive_torque=v.drive_torque, drive_duration=v.drive_duration,
+                          speed_scaling=v.speed_scaling, ramp_time=v.speed_scaling_ramp_time)
         try:
-            return SolverProcess(spec, self._stopping) if v["solver_process"] else LocalSolver(spec)
+            return SolverProcess(spec, self._stopping) if v.solver_process else LocalSolver(spec)
         except UnreachableTargetError as error:
             raise StartupError(f"ellipse.* / z.* = {targets}: {error}") from error
         except SOLVER_FAILURES as error:
@@ -249,7 +252,7 @@ class CraneReferenceNode(LifecycleNode):
         """Narrow the ranges of ellipse.a and ellipse.b (what rqt_reconfigure's sliders and rclpy's range check
         use) to the crane's reach at its start and target heights (:func:`~crane_reference.stream.targets.reach`);
         every change is still checked around the whole ellipse."""
-        low, high = server.reach(self._values["ellipse.b"], (0.0, self._values["z.increment"]))
+        low, high = server.reach(self._params.ellipse_b, (0.0, self._params.z_increment))
         for name in ("ellipse.a", "ellipse.b"):
             spec = SPECS[name]
             descriptor = spec.descriptor()
@@ -268,7 +271,7 @@ class CraneReferenceNode(LifecycleNode):
         self._resume_on_activate = False
         self._quiet.clear()
         self._start_thread("publisher", self._publish_loop)
-        self.get_logger().info(f"publishing the {self._values['model']} crane's reference at {self._rate} Hz")
+        self.get_logger().info(f"publishing the {self._params.model} crane's reference at {self._rate} Hz")
         return super().on_activate(state)
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -336,24 +339,19 @@ class CraneReferenceNode(LifecycleNode):
             raise StartupError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
                                f"{', '.join(sorted(self._parameters))}")
 
-    def _joint_indices(self, names: list[str]) -> list[int]:
+    def _joint_indices(self, names: tuple[str, ...]) -> list[int]:
         """Coordinates of the joints ``names`` (ParameterError naming the unknown ones)."""
         unknown = [name for name in names if name not in self._joint_names]
         if unknown:
             raise ParameterError(f"preview.joints = {names!r}: {', '.join(unknown)} not joints of the "
-                                 f"{self._values['model']} model; its joints are {', '.join(self._joint_names)}")
+                                 f"{self._params.model} model; its joints are {', '.join(self._joint_names)}")
         return [self._joint_names.index(name) for name in names]
-
-    def _targets(self, overrides: dict[str, float] | None = None) -> Task:
-        """Targets of the current parameter values, with ``overrides`` (parameter name -> value)."""
-        values = {**self._values, **(overrides or {})}
-        return Task(**{field: float(values[name]) for name, field in TARGET_PARAMETERS.items()})
 
     def _preview(self) -> Preview:
         """The preview of the parameters: its horizon, its points after the sample's own, and the samples
         between two previews."""
-        v = self._values
-        return Preview(v["preview.horizon"], v["preview.points"] - 1, max(1, round(self._rate / v["preview.rate"])))
+        v = self._params
+        return Preview(v.preview_horizon, v.preview_points - 1, max(1, round(self._rate / v.preview_rate)))
 
     def _lifecycle_state(self) -> str:
         """The primary lifecycle state, from what the transitions set up: a server after configure, a
@@ -426,7 +424,7 @@ class CraneReferenceNode(LifecycleNode):
         joints = next((p.value for p in parameters if p.name == "preview.joints"), None)
         if reason is None and joints is not None and self._server is not None:  # else checked at configure
             try:
-                self._joint_indices(list(joints))
+                self._joint_indices(tuple(joints))
             except ParameterError as error:
                 reason = str(error)
         commanding = [p.name for p in parameters if p.name in COMMANDING_PARAMETERS]
@@ -439,7 +437,7 @@ class CraneReferenceNode(LifecycleNode):
         changed = {p.name: p.value for p in parameters if p.name in TARGET_PARAMETERS}
         if reason is None and changed and self._server is not None:  # else checked at configure
             try:
-                self._server.check_targets(self._targets(changed))
+                self._server.check_targets(self._params.changed(parameters).targets())
             except UnreachableTargetError as error:
                 names = ", ".join(f"{name} = {value!r}" for name, value in changed.items())
                 reason = f"{names}: target not reachable: {error}"
@@ -447,10 +445,10 @@ class CraneReferenceNode(LifecycleNode):
 
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
         """Post-set callback: apply accepted values (one re-target for all target parameters)."""
-        names = [p.name for p in parameters if p.name in self._values]
-        self._values.update({p.name: p.value for p in parameters if p.name in self._values})
+        names = [p.name for p in parameters if p.name in SPECS]
+        self._params = self._params.changed(parameters)
         if "status_period" in names:
-            self._status_timer.timer_period_ns = round(self._values["status_period"] * NANOSECONDS)
+            self._status_timer.timer_period_ns = round(self._params.status_period * NANOSECONDS)
             self._status_timer.reset()
         server = self._server
         if server is None:  # the values are read at configure
@@ -461,24 +459,25 @@ class CraneReferenceNode(LifecycleNode):
             self.get_logger().error(f"{', '.join(names)} set but not applied: {error}")
 
     def _apply_to_server(self, server: ReferenceServer, names: list[str]) -> None:
-        """Send the server the changes of the parameters ``names`` (their values in self._values)."""
+        """Send the server the changes of the parameters ``names`` (their values in self._params)."""
+        v = self._params
         if "blend_time" in names:
-            server.set_blend_time(self._values["blend_time"])
+            server.set_blend_time(v.blend_time)
         if "command_lead" in names:
-            server.set_lead(self._values["command_lead"])
+            server.set_lead(v.command_lead)
         if any(name.startswith("preview.") for name in names):
             server.preview = self._preview()
         if "preview.joints" in names:
-            self._preview_indices = self._joint_indices(list(self._values["preview.joints"]))
+            self._preview_indices = self._joint_indices(v.preview_joints)
         if "speed_scaling" in names:
-            rate = self._values["speed_scaling"]
+            rate = v.speed_scaling
             k = server.command("set_speed_scaling", rate, accepted_ns=self._now())
             self.get_logger().info(f"speed scaling {rate:g} from the sample stamped {server.stamp_of(k):.6f} s")
-        if any(name in TARGET_PARAMETERS for name in names) and self._targets() != server.stream.targets:
-            targets = self._targets()  # they passed check_targets in the on-set callback
+        if any(name in TARGET_PARAMETERS for name in names) and v.targets() != server.stream.targets:
+            targets = v.targets()  # they passed check_targets in the on-set callback
             k = server.command("retarget", targets, accepted_ns=self._now())
             self.get_logger().info(f"re-targeting to {targets} from the sample stamped {server.stamp_of(k):.6f} s "
-                                   f"over {self._values['blend_time']:g} s")
+                                   f"over {v.blend_time:g} s")
 
     # -- publishing (publisher thread and timers) ------------------------------------------------------
 
@@ -512,7 +511,7 @@ class CraneReferenceNode(LifecycleNode):
         as bytes), the preview if the frame has one; E's trail."""
         frame, stamp = outgoing.frame, outgoing.stamp_ns
         sample = frame.sample
-        types, frame_id = self._types, self._values["frame_id"]
+        types, frame_id = self._types, self._params.frame_id
         if self._joint_writer is None:
             self._joint_writer = SerializedJointState(serialize_message(
                 messages.joint_state(types, stamp, self._joint_names, sample)))
@@ -527,7 +526,7 @@ class CraneReferenceNode(LifecycleNode):
             names = [self._joint_names[i] for i in self._preview_indices]
             self._preview_pub.publish(messages.reference_preview(
                 types, stamp, frame_id, names, self._preview_indices, offsets, [sample, *frame.preview],
-                self._values["preview.effort"]))
+                self._params.preview_effort))
         if outgoing.k % max(1, round(self._rate / TRAIL_RATE)) == 0:
             self._trail.append(messages.point(types, sample.ee_position))
 
@@ -542,7 +541,7 @@ class CraneReferenceNode(LifecycleNode):
         ellipse = (targets.ellipse_a, targets.ellipse_b, server.info.z_static + targets.z_increment)
         if ellipse != self._ellipse[0]:
             self._ellipse = ellipse, messages.points(self._types, messages.ellipse_points(*ellipse))
-        self._marker_pub.publish(messages.markers(self._types, stamp, self._values["frame_id"], self._ellipse[1],
+        self._marker_pub.publish(messages.markers(self._types, stamp, self._params.frame_id, self._ellipse[1],
                                                   list(self._trail)))
 
     def _diagnostics_loop(self) -> None:

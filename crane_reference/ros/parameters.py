@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -33,7 +33,7 @@ from rclpy.parameter import Parameter
 
 from ..interface.messages import ACTUATED_JOINTS, MAX_PUBLISH_RATE
 from ..model.chain import VARIANTS
-from ..model.parameters import CraneParameters, TorqueDrive
+from ..model.parameters import CraneParameters, Task, TorqueDrive
 from ..motion.steps import ONLINE_STEP
 
 Value = bool | int | float | str | list[str]
@@ -182,6 +182,60 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "the node's process", read_only=True),
 )
 SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PARAMETERS}
+
+
+def field_name(name: str) -> str:
+    """The :class:`NodeParameters` field of the parameter ``name`` (dots become underscores)."""
+    return name.replace(".", "_")
+
+
+@dataclass(frozen=True)
+class NodeParameters:
+    """The node's parameter values, one typed field per entry of :data:`PARAMETERS` in its order (the field of
+    ``ellipse.a`` is ``ellipse_a``: :func:`field_name`), as generate_parameter_library gives a controller its
+    ``Params`` struct.  Immutable: a change is a new instance (:meth:`changed`)."""
+
+    config_file: str
+    model: str
+    integrator_step: float
+    publish_rate: int
+    frame_id: str
+    ellipse_a: float
+    ellipse_b: float
+    z_increment: float
+    z_rise_time: float
+    drive_torque: float
+    drive_duration: float
+    blend_time: float
+    command_lead: float
+    preview_horizon: float
+    preview_points: int
+    preview_rate: float
+    preview_joints: tuple[str, ...]
+    preview_effort: bool
+    speed_scaling: float
+    speed_scaling_ramp_time: float
+    autostart: bool
+    status_period: float
+    solver_process: bool
+
+    @classmethod
+    def from_values(cls, values: dict[str, Value]) -> NodeParameters:
+        """From every parameter's value by parameter name (string arrays become tuples)."""
+        return cls(**{field_name(name): _frozen(value) for name, value in values.items()})
+
+    def changed(self, parameters: Iterable[Parameter]) -> NodeParameters:
+        """These values with the table's ``parameters`` set (others ignored)."""
+        return replace(self, **{field_name(p.name): _frozen(SPECS[p.name].coerce(p.value))
+                                for p in parameters if p.name in SPECS})
+
+    def targets(self) -> Task:
+        """The task of the target parameters (ellipse.*, z.*)."""
+        return Task(**{field: getattr(self, field_name(name)) for name, field in TARGET_PARAMETERS.items()})
+
+
+def _frozen(value: Value) -> Value | tuple[str, ...]:
+    return tuple(value) if isinstance(value, list | tuple) else value
 TARGET_PARAMETERS = {"ellipse.a": "ellipse_a", "ellipse.b": "ellipse_b", "z.increment": "z_increment",
                      "z.rise_time": "rise_time"}
 # parameters whose change is a request to the running solver (refused once it has stopped)
