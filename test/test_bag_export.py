@@ -32,6 +32,7 @@ from crane_reference.interface.bag import (
     node_stream,
 )
 from crane_reference.model.config import load_config
+from crane_reference.stream.health import Level
 
 RATE = 50
 DURATION = 2.0  # [s]: samples 0 .. 100, diagnostics at 1 s and 2 s
@@ -121,7 +122,7 @@ def test_stamps_and_values_equal_the_stream(offline):
         assert timestamp == stamp_ns(diagnostics.header) == second * 10**9
         (status,) = diagnostics.status
         values = {kv.key: kv.value for kv in status.values}
-        assert status.level == messages.OK and status.name == "crane_reference: reference"
+        assert status.level == Level.OK and status.name == "crane_reference: reference"
         assert status.hardware_id == "/crane_reference"
         assert values["state"] == "RUNNING" and values["published"] == str(second * RATE + 1)
         assert float(values["motion_time_s"]) == pytest.approx(second, abs=1e-6)
@@ -206,7 +207,7 @@ def test_reference_bag_with_a_node_s_topic_names(tmp_path):
     with BagWriter(tmp_path / "self") as bag:
         reference = ReferenceBag(bag, **names)
         reference.write_sample(7, stream.joint_names, "map", sample)
-        reference.write_diagnostics(9, "reference: reference", "/crane1/reference", messages.WARN, "late",
+        reference.write_diagnostics(9, "reference: reference", "/crane1/reference", Level.WARN, "late",
                                     {"held_late": 3})
     connections, by_topic = read_bag(tmp_path / "self")
     assert {t: c.msgtype for t, c in connections.items()} == {
@@ -218,7 +219,7 @@ def test_reference_bag_with_a_node_s_topic_names(tmp_path):
     assert t == 7 and pose.header.frame_id == "map"
     ((t, diagnostics, _),) = by_topic[names["diagnostics"]]
     (status,) = diagnostics.status
-    assert t == 9 and status.level == messages.WARN and status.values[0].value == "3"
+    assert t == 9 and status.level == Level.WARN and status.values[0].value == "3"
 
 
 def test_bag_writer_errors(tmp_path):

@@ -48,6 +48,7 @@ from crane_reference.model.parameters import Task
 from crane_reference.ros.message_types import rclpy_types
 from crane_reference.ros.node import CraneReferenceNode
 from crane_reference.ros.parameters import PARAMETERS, SPECS, NodeParameters, field_name
+from crane_reference.stream.health import Level
 from crane_reference.stream.reference_stream import ReferenceStream
 from crane_reference.stream.server import LOOKAHEAD
 
@@ -350,7 +351,7 @@ def test_preview_markers_diagnostics_and_robot_description(ros: Harness) -> None
     diagnostics = [d for _, d in list(ros.received["diagnostics"]) if d.status[0].values][-1]
     status = diagnostics.status[0]
     values = {kv.key: kv.value for kv in status.values}
-    assert status.level == rclpy_types().byte(messages.OK), status.message
+    assert status.level == rclpy_types().byte(Level.OK), status.message
     assert values["state"] == "RUNNING" and float(values["constraint_residual_m"]) < 1e-9
     assert float(values["real_time_factor"]) > 0 and float(values["achieved_rate_hz"]) > 0
     numbers = {key: float(value) for key, value in values.items() if key not in ("state", "last_error")}
@@ -728,7 +729,7 @@ def test_a_dead_solver_holds_reports_error_and_a_new_configure_recovers(ros: Har
     os.kill(pid, signal.SIGKILL)
     ros.wait_for(lambda: any("solver stopped" in m for m in diagnostic_messages(ros)), "the solver's end reported")
     status = next(d.status[0] for _, d in list(ros.received["diagnostics"]) if "solver stopped" in d.status[0].message)
-    assert status.level == rclpy_types().byte(messages.ERROR) and "configure" in status.message, status.message
+    assert status.level == rclpy_types().byte(Level.ERROR) and "configure" in status.message, status.message
     ros.wait_until_stamp(ros.samples()["stamp"][-1] + round((LOOKAHEAD + 0.5) * NS))  # past the frames made before
     data = ros.samples()
     held = held_samples(data)
@@ -791,7 +792,7 @@ def test_rclpy_and_rosbags_messages_agree() -> None:
         "pose": lambda t: messages.end_effector_pose(t, stamp, "world", sample),
         "preview": lambda t: messages.reference_preview(t, stamp, "world", names, indices, offsets,
                                                         [sample, *preview], effort=True),
-        "diagnostics": lambda t: messages.diagnostics(t, stamp, "crane", "node", messages.WARN, "late",
+        "diagnostics": lambda t: messages.diagnostics(t, stamp, "crane", "node", Level.WARN, "late",
                                                       {"rate": 99.5, "state": "RUNNING"}),
         "markers": lambda t: messages.markers(t, stamp, "world",
                                               messages.points(t, messages.ellipse_points(3.0, 2.0, 2.3)),

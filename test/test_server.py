@@ -4,6 +4,7 @@ clock of plain integers drives it; what it serves is compared with an independen
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import threading
 import time
@@ -16,10 +17,11 @@ from crane_reference.model.config import load_config
 from crane_reference.model.parameters import Task
 from crane_reference.motion.programmed_motion import ConstraintSingularityError
 from crane_reference.motion.simulation import MotionStepper
+from crane_reference.stream.health import Health, Level, serving_health, startup_health
 from crane_reference.stream.reference_stream import CHUNK_STEPS, ERROR, PAUSED, RUNNING, ReferenceStream
 from crane_reference.stream.schedule import FrameSchedule
-from crane_reference.stream.server import CommandRefusedError, Preview, ReferenceServer
-from crane_reference.stream.solver import LocalSolver, SolverProcess, StreamSolver, StreamSpec
+from crane_reference.stream.server import CommandRefusedError, Preview, ReferenceServer, ServerStatus
+from crane_reference.stream.solver import LocalSolver, SolverProcess, StreamSolver, StreamSpec, StreamStatus
 from crane_reference.stream.targets import UnreachableTargetError
 
 RATE = 100  # [Hz]
@@ -224,3 +226,26 @@ def test_the_solver_process_clears_an_interrupt_at_each_request_and_obeys_one_th
         assert process.call("status") is not None
     finally:
         process.close()
+
+
+def test_health_ranks_what_is_wrong_worst_first() -> None:
+    """Diagnostics' level and message (ROS-free): before publishing, what the node does or, at ERROR, why it
+    cannot start; while publishing, a stopped solver over a failed stream over a clock that went back over a
+    forward leap over samples held late, else OK with the stream's state."""
+    assert startup_health("configuring: starting the solver") == Health(Level.OK, "configuring: starting the solver")
+    assert startup_health("cannot configure: bad file").level == Level.ERROR
+    stream = StreamStatus(RUNNING, Task(), 1.0, "", 1.0, 0.0, 2.0)
+    status = ServerStatus(stream=stream, publishing=True, last=None, counters={"held_late": 0}, fault="",
+                          frames_ready=100)
+    assert serving_health(status, 0) == Health(Level.OK, RUNNING)
+    late = serving_health(status, 3)
+    assert late.level == Level.WARN and "3 samples held" in late.message
+    leapt = dataclasses.replace(status, clock_note="ROS time leapt forward by 5 s")
+    assert serving_health(leapt, 3) == Health(Level.WARN, f"{RUNNING}: ROS time leapt forward by 5 s")
+    behind = dataclasses.replace(leapt, clock_behind=0.25)
+    assert serving_health(behind, 3).level == Level.WARN and "went back" in serving_health(behind, 3).message
+    failed = dataclasses.replace(behind, stream=dataclasses.replace(stream, state=ERROR, last_error="singular"))
+    assert serving_health(failed, 3) == Health(Level.ERROR, f"{ERROR}: singular")
+    stopped = dataclasses.replace(failed, computing=False, fault="the solver process ended")
+    health = serving_health(stopped, 3)
+    assert health.level == Level.ERROR and health.message.startswith("solver stopped: the solver process ended")

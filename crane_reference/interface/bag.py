@@ -42,6 +42,7 @@ from ..model.drive import column_drive
 from ..model.parameters import CraneParameters
 from ..model.units import NANOSECONDS
 from ..motion.steps import ONLINE_STEP
+from ..stream.health import Level
 from ..stream.reference_stream import ERROR, ReferenceStream
 from ..stream.sample import ReferenceSample
 from ..stream.schedule import stamp_at
@@ -284,8 +285,8 @@ def export_reference(bag: BagWriter, stream: ReferenceStream, rate: int, duratio
             wall = time.perf_counter()
             factor = (sample.t - last_motion) / (wall - last_wall)
             last_wall, last_motion = wall, sample.t
-            level, message = ((messages.ERROR, f"{ERROR}: {stream.last_error}") if stream.state == ERROR
-                              else (messages.OK, stream.state))
+            level, message = ((Level.ERROR, f"{ERROR}: {stream.last_error}") if stream.state == ERROR
+                              else (Level.OK, stream.state))
             counters = {"published": k + 1, "held_late": 0, "stamp_leaps": 0, "held_non_finite": 0}
             values = messages.diagnostic_values(stream.state, sample, factor, rate, float(rate), counters,
                                                 stream.targets, stream.rate, stream.last_error)

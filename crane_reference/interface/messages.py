@@ -52,7 +52,6 @@ LINE_WIDTH = 0.03  # [m], width of the marker lines
 ELLIPSE_COLOR = (0.1, 0.6, 1.0, 1.0)  # r, g, b, a
 TRAIL_COLOR = (1.0, 0.4, 0.1, 1.0)
 # diagnostic_msgs/DiagnosticStatus levels
-OK, WARN, ERROR, STALE = 0, 1, 2, 3
 
 
 @dataclass(frozen=True)

@@ -80,6 +80,7 @@ from ..interface.serialized import SerializedJointState, SerializedPose
 from ..model.config import ConfigError, load_config
 from ..model.units import NANOSECONDS
 from ..motion.simulation import SOLVER_FAILURES
+from ..stream.health import CANNOT, Level, serving_health, startup_health
 from ..stream.reference_stream import ERROR, PAUSED, RUNNING
 from ..stream.server import CommandRefusedError, Outgoing, Preview, ReferenceServer
 from ..stream.solver import LocalSolver, SolverProcess, SolverStoppedError, StreamSpec
@@ -157,7 +158,7 @@ class CraneReferenceNode(LifecycleNode):
         if self._params.autostart:
             if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
                 self._stop.set()
-                raise StartupError(self._starting.removeprefix("cannot configure: "))
+                raise StartupError(self._starting.removeprefix(f"{CANNOT} configure: "))
             self.trigger_activate()
 
     def _start_thread(self, name: str, target: Callable[[], None]) -> None:
@@ -171,7 +172,7 @@ class CraneReferenceNode(LifecycleNode):
 
     def _fail_start(self, error: Exception) -> None:
         """Report in /diagnostics (ERROR) and stop the diagnostics thread: the node cannot start."""
-        self._starting = f"cannot start: {error}"
+        self._starting = f"{CANNOT} start: {error}"
         with suppress(RCLError):  # the context may be shutting down already
             self._publish_diagnostics()
         self._stop.set()
@@ -201,11 +202,11 @@ class CraneReferenceNode(LifecycleNode):
             self._joint_names = list(server.info.joint_names)
             self._preview_indices = self._joint_indices(self._params.preview_joints)
         except (StartupError, ConfigError, ParameterError) as error:
-            self._starting = f"cannot configure: {error}"
+            self._starting = f"{CANNOT} configure: {error}"
             self.get_logger().error(self._starting)
             return TransitionCallbackReturn.FAILURE
         except SolverStoppedError as error:  # shutting down while the solver started
-            self._starting = f"cannot configure: {error}"
+            self._starting = f"{CANNOT} configure: {error}"
             return TransitionCallbackReturn.FAILURE
         self._server = server
         self.get_logger().info(f"solver {server.info.kernels}")
@@ -560,35 +561,23 @@ class CraneReferenceNode(LifecycleNode):
         server, now = self._server, self._now()
         name, hardware_id = f"{self.get_name()}: reference", self.get_fully_qualified_name()
         if server is None or not server.publishing:
-            level = messages.ERROR if self._starting.startswith("cannot") else messages.OK
-            self._diagnostics_pub.publish(messages.diagnostics(self._types, now, name, hardware_id, level,
-                                                               self._starting, {}))
+            health = startup_health(self._starting)
+            self._diagnostics_pub.publish(messages.diagnostics(self._types, now, name, hardware_id, health.level,
+                                                               health.message, {}))
             return
         status = server.status(now)
         stream, counters = status.stream, status.counters
-        late, self._late_reported = counters["held_late"] - self._late_reported, counters["held_late"]
-        level, message = messages.OK, stream.state
-        if not status.computing:
-            level, message = messages.ERROR, (f"solver stopped: {status.fault}; holding the last sample (deactivate, "
-                                              "cleanup, configure and activate start a new solver)")
-        elif stream.state == ERROR or status.fault:
-            level, message = messages.ERROR, f"{stream.state}: {stream.last_error or status.fault}"
-        elif status.clock_behind:
-            level, message = messages.WARN, (f"{stream.state}: ROS time went back: waiting until it reaches the last "
-                                             f"stamp again ({status.clock_behind:.3f} s ahead)")
-        elif status.clock_note:
-            level, message = messages.WARN, f"{stream.state}: {status.clock_note}"
-        elif late > 0:
-            level, message = messages.WARN, f"{stream.state}: {late} samples held (solver late)"
+        health = serving_health(status, counters["held_late"] - self._late_reported)
+        self._late_reported = counters["held_late"]
         self._achieved_rate = status.achieved_rate
         values = messages.diagnostic_values(
             stream.state, status.last, status.real_time_factor, self._rate, status.achieved_rate, counters,
             stream.targets, stream.rate, stream.last_error or status.fault,
             {"frames_ready": status.frames_ready, "blend_time_s": f"{stream.blend_time:g}", **status.commands})
-        self._diagnostics_pub.publish(messages.diagnostics(self._types, self._now(), name, hardware_id, level,
-                                                           message, values))
-        if level == messages.ERROR:
-            self.get_logger().error(message, throttle_duration_sec=10.0)
+        self._diagnostics_pub.publish(messages.diagnostics(self._types, self._now(), name, hardware_id, health.level,
+                                                           health.message, values))
+        if health.level == Level.ERROR:
+            self.get_logger().error(health.message, throttle_duration_sec=10.0)
 
     def _log_status(self) -> None:
         """One-line status: stream time, E, residual, achieved rate, state."""
