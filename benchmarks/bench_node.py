@@ -75,7 +75,7 @@ from crane_reference.model.config import load_config
 from crane_reference.motion.simulation import Scenario
 from crane_reference.motion.steps import ONLINE_STEP
 from crane_reference.ros.message_types import rclpy_types
-from crane_reference.ros.node import MARKER_RATE, TRAIL_POINTS
+from crane_reference.ros.publishing import MARKER_RATE, TRAIL_POINTS
 from crane_reference.stream.reference_stream import ReferenceStream
 
 NS = 10**9

@@ -189,6 +189,13 @@ def end_effector_pose(types: MessageTypes, stamp_ns: int, frame_id: str, sample:
     return message
 
 
+def preview_offsets(horizon: float, count: int) -> list[int]:
+    """time_from_start [ns] of a preview's sample and its ``count`` points after it, evenly spaced over
+    ``horizon`` [s] (integer nanoseconds, strictly increasing for a horizon of at least ``count`` ns)."""
+    horizon_ns = round(horizon * NANOSECONDS)
+    return [i * horizon_ns // count for i in range(count + 1)]
+
+
 def reference_preview(types: MessageTypes, stamp_ns: int, frame_id: str, joint_names: Sequence[str],
                       indices: Sequence[int], offsets_ns: Sequence[int], samples: Sequence[ReferenceSample],
                       effort: bool = False) -> Any:

@@ -17,14 +17,12 @@ Lifecycle
 
 Clocks and stamps
     Sample k is stamped ``start + k / publish_rate`` (integer nanoseconds), where ``start`` is the node
-    clock's time when publishing begins; it is never the time a message happens to be sent.  A publisher
-    thread sleeps until the next sample's stamp on the node clock and publishes every sample due (normally
-    one), so no sample is skipped or duplicated even when it wakes late.  ``use_sim_time`` is honoured:
+    clock's time when publishing begins; it is never the time a message happens to be sent
+    (:mod:`~crane_reference.ros.publishing` publishes each at its stamp).  ``use_sim_time`` is honoured:
     the samples follow /clock; with no /clock published ROS time stays at zero, so nothing is published
     (/diagnostics says why) until /clock runs; the services and parameters keep working.  Jumps of the
     clock never make stamps go back or skip motion (the server re-anchors), and diagnostics WARN about
-    them.  A thread rather than an rclpy timer publishes because rclpy's executor adds its overhead to
-    every timer callback and runs the (slow) parameter validation on the same thread.
+    them.
 
 Commands
     A re-target (``ellipse.*``, ``z.*`` parameters), a speed change (``speed_scaling``) and ``~/pause``
@@ -53,36 +51,24 @@ from __future__ import annotations
 import gc
 import sys
 import threading
-from collections import deque
-from collections.abc import Callable
 from contextlib import suppress
-from typing import Any
 
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import FloatingPointRange, SetParametersResult
 from rclpy.exceptions import ParameterNotDeclaredException
 from rclpy.executors import ExternalShutdownException
-from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile
-from rclpy.serialization import serialize_message
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64, String
+from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
-from trajectory_msgs.msg import JointTrajectory
-from visualization_msgs.msg import MarkerArray
 
 from ..interface import messages
-from ..interface.serialized import SerializedJointState, SerializedPose
 from ..model.config import ConfigError, load_config
 from ..model.units import NANOSECONDS
 from ..motion.simulation import SOLVER_FAILURES
-from ..stream.health import CANNOT, Level, serving_health, startup_health
+from ..stream.health import CANNOT
 from ..stream.reference_stream import ERROR, PAUSED, RUNNING
-from ..stream.server import CommandRefusedError, Outgoing, Preview, ReferenceServer
+from ..stream.server import CommandRefusedError, Preview, ReferenceServer
 from ..stream.solver import LocalSolver, SolverProcess, SolverStoppedError, StreamSpec
 from ..stream.targets import UnreachableTargetError
 from .message_types import rclpy_types
@@ -97,13 +83,9 @@ from .parameters import (
     coerce_parameters,
     declare,
 )
+from .publishing import DiagnosticsPublisher, PublishSettings, SamplePublisher
 
 NODE_NAME = messages.NODE_NAME
-MAX_WAIT = 0.1  # [s] of wall time the publisher sleeps at most before reading the clock again
-MARKER_RATE = 10.0  # [Hz]
-TRAIL_RATE = 50.0  # [Hz] of points added to E's trail
-TRAIL_POINTS = 500
-RCLError = rclpy_implementation.RCLError
 
 
 class StartupError(RuntimeError):
@@ -125,14 +107,10 @@ class CraneReferenceNode(LifecycleNode):
         super().__init__(node_name, **kwargs)
         self._types = rclpy_types()
         self._server: ReferenceServer | None = None
+        self._publisher: SamplePublisher | None = None
         self._stop = threading.Event()  # the node is being destroyed
-        self._quiet = threading.Event()  # the publisher thread stops (deactivate)
         self._starting = "unconfigured"  # the diagnostics' message while not publishing
-        self._achieved_rate = 0.0
-        self._diagnostics_pub = self.create_publisher(DiagnosticArray, messages.DIAGNOSTICS_TOPIC,
-                                                      messages.PUBLISHER_DEPTH)
-        self._threads: dict[str, threading.Thread] = {}
-        self._start_thread("diagnostics", self._diagnostics_loop)
+        self._diagnostics = DiagnosticsPublisher(self, self._types, self._doing, lambda: self._server, self._stop)
         try:
             config_file = declare(self, SPECS["config_file"])
             config = load_config(config_file or None)
@@ -161,21 +139,18 @@ class CraneReferenceNode(LifecycleNode):
                 raise StartupError(self._starting.removeprefix(f"{CANNOT} configure: "))
             self.trigger_activate()
 
-    def _start_thread(self, name: str, target: Callable[[], None]) -> None:
-        self._threads[name] = threading.Thread(target=target, name=f"crane_reference_{name}", daemon=True)
-        self._threads[name].start()
-
-    def _join_thread(self, name: str) -> None:
-        thread = self._threads.pop(name, None)
-        if thread is not None and thread is not threading.current_thread():
-            thread.join()
-
     def _fail_start(self, error: Exception) -> None:
         """Report in /diagnostics (ERROR) and stop the diagnostics thread: the node cannot start."""
         self._starting = f"{CANNOT} start: {error}"
-        with suppress(RCLError):  # the context may be shutting down already
-            self._publish_diagnostics()
+        with suppress(Exception):  # the context may be shutting down already
+            self._diagnostics.publish()
         self._stop.set()
+
+    def _doing(self) -> str:
+        """What the node is doing, for the diagnostics while it does not publish."""
+        if self._publisher is not None and self._publisher.waiting_for_clock:
+            return "activating: waiting for /clock (use_sim_time is true and ROS time is 0)"
+        return self._starting
 
     def _stopping(self) -> bool:
         """Whether the node is being destroyed or its context shut down (SIGINT, SIGTERM)."""
@@ -199,8 +174,7 @@ class CraneReferenceNode(LifecycleNode):
                                    "or two; `crane-reference compile` after installing does it ahead)")
             server = ReferenceServer(self._start_solver(config), self._rate, self._params.command_lead,
                                      self._preview())
-            self._joint_names = list(server.info.joint_names)
-            self._preview_indices = self._joint_indices(self._params.preview_joints)
+            settings = self._publish_settings(server)
         except (StartupError, ConfigError, ParameterError) as error:
             self._starting = f"{CANNOT} configure: {error}"
             self.get_logger().error(self._starting)
@@ -211,26 +185,10 @@ class CraneReferenceNode(LifecycleNode):
         self._server = server
         self.get_logger().info(f"solver {server.info.kernels}")
         self._offer_reach(server)
-        self._late_reported = 0
-        # the per-sample messages, serialized once and filled in place (interface.serialized)
-        self._joint_writer: SerializedJointState | None = None
-        self._pose_writer: SerializedPose | None = None
-        self._trail: deque[Any] = deque(maxlen=TRAIL_POINTS)  # E's positions as Point messages
-        self._ellipse: tuple[tuple[float, ...], list[Any]] = ((), [])  # (a, b, z) and its Point messages
-        depth = messages.PUBLISHER_DEPTH
-        self._publishers_managed = [
-            self.create_lifecycle_publisher(JointState, messages.JOINT_STATES_TOPIC, depth),
-            self.create_lifecycle_publisher(PoseStamped, messages.END_EFFECTOR_POSE_TOPIC, depth),
-            self.create_lifecycle_publisher(JointTrajectory, messages.REFERENCE_PREVIEW_TOPIC, depth),
-            self.create_lifecycle_publisher(MarkerArray, messages.MARKERS_TOPIC, depth)]
-        self._joint_pub, self._pose_pub, self._preview_pub, self._marker_pub = self._publishers_managed
-        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self._description_pub = self.create_publisher(String, messages.ROBOT_DESCRIPTION_TOPIC, latched)
-        self._description_pub.publish(messages.robot_description(self._types, server.info.urdf))
-        self._marker_timer = self.create_timer(1.0 / MARKER_RATE, self._publish_markers)
+        self._publisher = SamplePublisher(self, self._types, server, settings)
         self._resume_on_activate = False
         self._starting = "inactive: configured, computing ahead; activate to publish"
-        self.get_logger().info(f"configured: the {self._params.model} crane ({len(self._joint_names)} joints, "
+        self.get_logger().info(f"configured: the {self._params.model} crane ({len(server.info.joint_names)} joints, "
                                f"config {config_file or 'packaged default'})")
         return TransitionCallbackReturn.SUCCESS
 
@@ -270,8 +228,7 @@ class CraneReferenceNode(LifecycleNode):
         if self._server.stream.state == PAUSED and self._resume_on_activate and self._server.computing:
             self._server.command("resume", accepted_ns=self._now())
         self._resume_on_activate = False
-        self._quiet.clear()
-        self._start_thread("publisher", self._publish_loop)
+        self._publisher.start()
         self.get_logger().info(f"publishing the {self._params.model} crane's reference at {self._rate} Hz")
         return super().on_activate(state)
 
@@ -305,20 +262,15 @@ class CraneReferenceNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def _stop_publishing(self) -> None:
-        self._quiet.set()
-        self._join_thread("publisher")
-        if self._server is not None:
-            self._server.end()
+        if self._publisher is not None:
+            self._publisher.stop()
 
     def _release(self) -> None:
-        server, self._server = self._server, None
-        if server is None:
-            return
-        server.close()
-        for publisher in self._publishers_managed:
-            self.destroy_lifecycle_publisher(publisher)
-        self.destroy_publisher(self._description_pub)
-        self.destroy_timer(self._marker_timer)
+        server, publisher, self._server, self._publisher = self._server, self._publisher, None, None
+        if server is not None:
+            server.close()
+        if publisher is not None:
+            publisher.destroy()
 
     # -- set-up ---------------------------------------------------------------------------------------
 
@@ -340,13 +292,16 @@ class CraneReferenceNode(LifecycleNode):
             raise StartupError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
                                f"{', '.join(sorted(self._parameters))}")
 
-    def _joint_indices(self, names: tuple[str, ...]) -> list[int]:
-        """Coordinates of the joints ``names`` (ParameterError naming the unknown ones)."""
-        unknown = [name for name in names if name not in self._joint_names]
+    def _publish_settings(self, server: ReferenceServer, names: tuple[str, ...] | None = None) -> PublishSettings:
+        """What the parameters choose of the messages, with the preview's joints ``names`` (default: the
+        parameter's); ParameterError naming joints the model lacks."""
+        v, joints = self._params, list(server.info.joint_names)
+        names = v.preview_joints if names is None else names
+        unknown = [name for name in names if name not in joints]
         if unknown:
-            raise ParameterError(f"preview.joints = {names!r}: {', '.join(unknown)} not joints of the "
-                                 f"{self._params.model} model; its joints are {', '.join(self._joint_names)}")
-        return [self._joint_names.index(name) for name in names]
+            raise ParameterError(f"preview.joints = {list(names)!r}: {', '.join(unknown)} not joints of the "
+                                 f"{v.model} model; its joints are {', '.join(joints)}")
+        return PublishSettings(v.frame_id, tuple(joints.index(name) for name in names), v.preview_effort)
 
     def _preview(self) -> Preview:
         """The preview of the parameters: its horizon, its points after the sample's own, and the samples
@@ -359,7 +314,7 @@ class CraneReferenceNode(LifecycleNode):
         publisher thread after activate."""
         if self._server is None:
             return "unconfigured"
-        return "active" if "publisher" in self._threads else "inactive"
+        return "active" if self._publisher.active else "inactive"
 
     # -- commands (executor threads) ------------------------------------------------------------------
 
@@ -380,7 +335,7 @@ class CraneReferenceNode(LifecycleNode):
         except (*SOLVER_FAILURES, CommandRefusedError) as error:
             response.success, response.message = False, f"restart failed, stream unchanged: {error}"
         else:
-            self._trail.clear()
+            self._publisher.trail.clear()
             self._resume_on_activate = False
             response.success = True
             response.message = (f"restarted from the static equilibrium at sample {restart.k}, published once active: "
@@ -425,7 +380,7 @@ class CraneReferenceNode(LifecycleNode):
         joints = next((p.value for p in parameters if p.name == "preview.joints"), None)
         if reason is None and joints is not None and self._server is not None:  # else checked at configure
             try:
-                self._joint_indices(tuple(joints))
+                self._publish_settings(self._server, tuple(joints))
             except ParameterError as error:
                 reason = str(error)
         commanding = [p.name for p in parameters if p.name in COMMANDING_PARAMETERS]
@@ -468,8 +423,8 @@ class CraneReferenceNode(LifecycleNode):
             server.set_lead(v.command_lead)
         if any(name.startswith("preview.") for name in names):
             server.preview = self._preview()
-        if "preview.joints" in names:
-            self._preview_indices = self._joint_indices(v.preview_joints)
+        if {"frame_id", "preview.joints", "preview.effort"} & set(names):
+            self._publisher.settings = self._publish_settings(server)
         if "speed_scaling" in names:
             rate = v.speed_scaling
             k = server.command("set_speed_scaling", rate, accepted_ns=self._now())
@@ -480,105 +435,6 @@ class CraneReferenceNode(LifecycleNode):
             self.get_logger().info(f"re-targeting to {targets} from the sample stamped {server.stamp_of(k):.6f} s "
                                    f"over {v.blend_time:g} s")
 
-    # -- publishing (publisher thread and timers) ------------------------------------------------------
-
-    def _publish_loop(self) -> None:
-        """Publisher thread: wakes at each sample's stamp on the node clock to publish it.
-
-        It starts once the server's look-ahead of frames is ready and the clock runs (ROS time is 0 until the
-        first /clock with use_sim_time).  It sleeps in wall time for the time left on the node clock and checks
-        that clock again (at least every MAX_WAIT), so it follows ROS time and stops at once when the node is
-        deactivated or destroyed.
-        """
-        clock, server = self.get_clock(), self._server
-        try:
-            while not self._quiet.is_set() and (not server.ready() or clock.now().nanoseconds == 0):
-                if server.ready():
-                    self._starting = "activating: waiting for /clock (use_sim_time is true and ROS time is 0)"
-                self._quiet.wait(1.0 / self._rate)
-            server.begin(clock.now().nanoseconds)
-            while not self._quiet.is_set():
-                for outgoing in server.due(clock.now().nanoseconds):
-                    self._send(outgoing)
-                left = server.next_stamp() - clock.now().nanoseconds
-                if left > 0:
-                    self._quiet.wait(min(left / NANOSECONDS, MAX_WAIT))
-        except RCLError:
-            if self.context.ok():
-                raise  # not a shutdown: let the thread report it
-
-    def _send(self, outgoing: Outgoing) -> None:
-        """Publish one sample: joint states and E's pose (serialized once, then filled in place and published
-        as bytes), the preview if the frame has one; E's trail."""
-        frame, stamp = outgoing.frame, outgoing.stamp_ns
-        sample = frame.sample
-        types, frame_id = self._types, self._params.frame_id
-        if self._joint_writer is None:
-            self._joint_writer = SerializedJointState(serialize_message(
-                messages.joint_state(types, stamp, self._joint_names, sample)))
-        if self._pose_writer is None or self._pose_writer.frame_id != frame_id:
-            self._pose_writer = SerializedPose(serialize_message(
-                messages.end_effector_pose(types, stamp, frame_id, sample)))
-        self._joint_pub.publish(self._joint_writer.fill(stamp, sample))
-        self._pose_pub.publish(self._pose_writer.fill(stamp, sample))
-        if frame.preview is not None:
-            horizon_ns, count = round(frame.horizon * NANOSECONDS), len(frame.preview)
-            offsets = [i * horizon_ns // count for i in range(count + 1)]
-            names = [self._joint_names[i] for i in self._preview_indices]
-            self._preview_pub.publish(messages.reference_preview(
-                types, stamp, frame_id, names, self._preview_indices, offsets, [sample, *frame.preview],
-                self._params.preview_effort))
-        if outgoing.k % max(1, round(self._rate / TRAIL_RATE)) == 0:
-            self._trail.append(messages.point(types, sample.ee_position))
-
-    def _publish_markers(self) -> None:
-        """~/markers (timer): the target ellipse at the final height and E's trail, stamped like the last sample;
-        built and published only while something subscribes (RViz; the trail is kept meanwhile)."""
-        server = self._server
-        sample, stamp = server.last_sample() if server is not None else (None, 0)
-        if sample is None or self._marker_pub.get_subscription_count() == 0:  # nobody looks: nothing to build
-            return
-        targets = server.stream.targets
-        ellipse = (targets.ellipse_a, targets.ellipse_b, server.info.z_static + targets.z_increment)
-        if ellipse != self._ellipse[0]:
-            self._ellipse = ellipse, messages.points(self._types, messages.ellipse_points(*ellipse))
-        self._marker_pub.publish(messages.markers(self._types, stamp, self._params.frame_id, self._ellipse[1],
-                                                  list(self._trail)))
-
-    def _diagnostics_loop(self) -> None:
-        """Diagnostics thread: /diagnostics every DIAGNOSTICS_PERIOD of wall time from the node's creation on
-        (while it starts, and whether or not the ROS clock runs)."""
-        try:
-            while not self._stop.wait(messages.DIAGNOSTICS_PERIOD):
-                self._publish_diagnostics()
-        except RCLError:
-            if self.context.ok():
-                raise  # not a shutdown: let the thread report it
-
-    def _publish_diagnostics(self) -> None:
-        """/diagnostics: before publishing starts, what the node is doing (or why it cannot start); then
-        state, constraint residual, real-time factor, achieved rate, counters."""
-        server, now = self._server, self._now()
-        name, hardware_id = f"{self.get_name()}: reference", self.get_fully_qualified_name()
-        if server is None or not server.publishing:
-            health = startup_health(self._starting)
-            self._diagnostics_pub.publish(messages.diagnostics(self._types, now, name, hardware_id, health.level,
-                                                               health.message, {}))
-            return
-        status = server.status(now)
-        stream, counters = status.stream, status.counters
-        health = serving_health(status, counters["held_late"] - self._late_reported)
-        self._late_reported = counters["held_late"]
-        self._achieved_rate = status.achieved_rate
-        values = messages.diagnostic_values(
-            stream.state, status.last, status.real_time_factor, self._rate, status.achieved_rate, counters,
-            stream.targets, stream.rate, stream.last_error or status.fault,
-            {"frames_ready": status.frames_ready, "blend_time_s": f"{stream.blend_time:g}", **status.commands})
-        self._diagnostics_pub.publish(messages.diagnostics(self._types, self._now(), name, hardware_id, health.level,
-                                                           health.message, values))
-        if health.level == Level.ERROR:
-            self.get_logger().error(health.message, throttle_duration_sec=10.0)
-
     def _log_status(self) -> None:
         """One-line status: stream time, E, residual, achieved rate, state."""
         server = self._server
@@ -588,7 +444,7 @@ class CraneReferenceNode(LifecycleNode):
         x, y, z = sample.ee_position
         self.get_logger().info(
             f"t={sample.t:.3f} s E=({x:.3f}, {y:.3f}, {z:.3f}) m residual={sample.residual_distance:.1e} m "
-            f"rate={self._achieved_rate:.1f} Hz state={server.stream.state}")
+            f"rate={self._diagnostics.achieved_rate:.1f} Hz state={server.stream.state}")
 
     def destroy_node(self) -> None:
         """Stop the publisher and diagnostics threads and the solver, then destroy the node."""
@@ -597,8 +453,7 @@ class CraneReferenceNode(LifecycleNode):
         if self._server is not None:
             self._server.close()
             self._server = None
-        for name in list(self._threads):
-            self._join_thread(name)
+        self._diagnostics.join()
         super().destroy_node()
 
 
@@ -619,7 +474,7 @@ def main(args: list[str] | None = None) -> int:
     except (StartupError, ConfigError, ParameterError) as error:
         rclpy.logging.get_logger(NODE_NAME).fatal(f"cannot start: {error}")
         return 1
-    except RCLError:
+    except Exception:
         if rclpy.ok():
             raise  # a real failure; otherwise SIGINT / SIGTERM shut the context down while starting
     finally:

@@ -1,0 +1,218 @@
+"""What the node publishes and when: the samples at their stamps (a thread), ~/markers (a timer) and
+/diagnostics (a thread, every second of wall time from the node's creation on).
+
+Sample k is stamped ``start + k / publish_rate`` (integer nanoseconds) by the
+:class:`~crane_reference.stream.server.ReferenceServer`; the publisher thread sleeps until the next stamp on
+the node clock and publishes every sample due (normally one), so no sample is skipped or duplicated when it
+wakes late.  A thread rather than an rclpy timer publishes because rclpy's executor adds its overhead to every
+timer callback and runs the (slow) parameter validation on the same thread.  ~/joint_states and
+~/end_effector_pose are serialized once and then filled in place (:mod:`crane_reference.interface.serialized`).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+from rclpy.lifecycle import LifecycleNode
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
+
+from ..interface import messages
+from ..interface.serialized import SerializedJointState, SerializedPose
+from ..model.units import NANOSECONDS
+from ..stream.health import Level, serving_health, startup_health
+from ..stream.server import Outgoing, ReferenceServer
+
+MAX_WAIT = 0.1  # [s] of wall time the publisher sleeps at most before reading the clock again
+MARKER_RATE = 10.0  # [Hz]
+TRAIL_RATE = 50.0  # [Hz] of points added to E's trail
+TRAIL_POINTS = 500
+
+
+def run_until_shutdown(node: LifecycleNode, loop: Callable[[], None]) -> Callable[[], None]:
+    """``loop`` for a thread of ``node``: an error once its context is shut down (SIGINT, SIGTERM while it
+    publishes) ends it quietly; any other propagates (the thread reports it)."""
+    def run() -> None:
+        try:
+            loop()
+        except Exception:
+            if node.context.ok():
+                raise
+    return run
+
+
+@dataclass(frozen=True)
+class PublishSettings:
+    """What the parameters choose of the messages: the frame of poses, previews and markers, the preview's
+    joints (coordinate indices) and whether previews carry efforts."""
+
+    frame_id: str
+    preview_indices: tuple[int, ...]
+    preview_effort: bool
+
+
+class SamplePublisher:
+    """The reference's lifecycle publishers (made at configure), its publisher thread (while active) and
+    the ~/markers timer; ``settings`` may be replaced at any time (parameter changes)."""
+
+    def __init__(self, node: LifecycleNode, types: messages.MessageTypes, server: ReferenceServer,
+                 settings: PublishSettings):
+        self.node, self.types, self.server, self.settings = node, types, server, settings
+        self.joint_names = list(server.info.joint_names)
+        self.trail: deque[Any] = deque(maxlen=TRAIL_POINTS)  # E's positions as Point messages
+        self._ellipse: tuple[tuple[float, ...], list[Any]] = ((), [])  # (a, b, z) and its Point messages
+        self._joint_writer: SerializedJointState | None = None
+        self._pose_writer: SerializedPose | None = None
+        depth = messages.PUBLISHER_DEPTH
+        self._managed = [node.create_lifecycle_publisher(JointState, messages.JOINT_STATES_TOPIC, depth),
+                         node.create_lifecycle_publisher(PoseStamped, messages.END_EFFECTOR_POSE_TOPIC, depth),
+                         node.create_lifecycle_publisher(JointTrajectory, messages.REFERENCE_PREVIEW_TOPIC, depth),
+                         node.create_lifecycle_publisher(MarkerArray, messages.MARKERS_TOPIC, depth)]
+        self._joints, self._poses, self._previews, self._markers = self._managed
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self._description = node.create_publisher(String, messages.ROBOT_DESCRIPTION_TOPIC, latched)
+        self._description.publish(messages.robot_description(types, server.info.urdf))
+        self._marker_timer = node.create_timer(1.0 / MARKER_RATE, self.publish_markers)
+        self._quiet = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.waiting_for_clock = False
+
+    @property
+    def active(self) -> bool:
+        return self._thread is not None
+
+    def start(self) -> None:
+        """Start the publisher thread (activate)."""
+        self._quiet.clear()
+        self._thread = threading.Thread(target=run_until_shutdown(self.node, self._loop),
+                                        name="crane_reference_publisher", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the publisher thread (deactivate, shutdown); the server ends publishing."""
+        self._quiet.set()
+        thread, self._thread = self._thread, None
+        if thread is not None and thread is not threading.current_thread():
+            thread.join()
+        self.server.end()
+
+    def destroy(self) -> None:
+        """Destroy the publishers and the timer (cleanup)."""
+        for publisher in self._managed:
+            self.node.destroy_lifecycle_publisher(publisher)
+        self.node.destroy_publisher(self._description)
+        self.node.destroy_timer(self._marker_timer)
+
+    def _loop(self) -> None:
+        """Wake at each sample's stamp on the node clock to publish it.
+
+        It starts once the server's look-ahead of frames is ready and the clock runs (ROS time is 0 until the
+        first /clock with use_sim_time).  It sleeps in wall time for the time left on the node clock and checks
+        that clock again (at least every MAX_WAIT), so it follows ROS time and stops at once when stopped.
+        """
+        clock, server, rate = self.node.get_clock(), self.server, self.server.rate
+        while not self._quiet.is_set() and (not server.ready() or clock.now().nanoseconds == 0):
+            self.waiting_for_clock = server.ready()
+            self._quiet.wait(1.0 / rate)
+        self.waiting_for_clock = False
+        server.begin(clock.now().nanoseconds)
+        while not self._quiet.is_set():
+            for outgoing in server.due(clock.now().nanoseconds):
+                self.send(outgoing)
+            left = server.next_stamp() - clock.now().nanoseconds
+            if left > 0:
+                self._quiet.wait(min(left / NANOSECONDS, MAX_WAIT))
+
+    def send(self, outgoing: Outgoing) -> None:
+        """Publish one sample: joint states and E's pose (serialized once, then filled in place and published
+        as bytes), the preview if the frame has one; E's trail."""
+        frame, stamp, settings = outgoing.frame, outgoing.stamp_ns, self.settings
+        sample = frame.sample
+        if self._joint_writer is None:
+            self._joint_writer = SerializedJointState(serialize_message(
+                messages.joint_state(self.types, stamp, self.joint_names, sample)))
+        if self._pose_writer is None or self._pose_writer.frame_id != settings.frame_id:
+            self._pose_writer = SerializedPose(serialize_message(
+                messages.end_effector_pose(self.types, stamp, settings.frame_id, sample)))
+        self._joints.publish(self._joint_writer.fill(stamp, sample))
+        self._poses.publish(self._pose_writer.fill(stamp, sample))
+        if frame.preview is not None:
+            indices = list(settings.preview_indices)
+            self._previews.publish(messages.reference_preview(
+                self.types, stamp, settings.frame_id, [self.joint_names[i] for i in indices], indices,
+                messages.preview_offsets(frame.horizon, len(frame.preview)), [sample, *frame.preview],
+                settings.preview_effort))
+        if outgoing.k % max(1, round(self.server.rate / TRAIL_RATE)) == 0:
+            self.trail.append(messages.point(self.types, sample.ee_position))
+
+    def publish_markers(self) -> None:
+        """~/markers (timer): the target ellipse at the final height and E's trail, stamped like the last sample;
+        built and published only while something subscribes (RViz; the trail is kept meanwhile)."""
+        sample, stamp = self.server.last_sample()
+        if sample is None or self._markers.get_subscription_count() == 0:  # nobody looks: nothing to build
+            return
+        targets = self.server.stream.targets
+        ellipse = (targets.ellipse_a, targets.ellipse_b, self.server.info.z_static + targets.z_increment)
+        if ellipse != self._ellipse[0]:
+            self._ellipse = ellipse, messages.points(self.types, messages.ellipse_points(*ellipse))
+        self._markers.publish(messages.markers(self.types, stamp, self.settings.frame_id, self._ellipse[1],
+                                               list(self.trail)))
+
+
+class DiagnosticsPublisher:
+    """/diagnostics every DIAGNOSTICS_PERIOD of wall time from the node's creation on, in every state: before
+    publishing, what ``doing()`` says the node does (or why it cannot start); then the server's status
+    (:mod:`crane_reference.stream.health`).  ``server()`` is the node's server (None unconfigured)."""
+
+    def __init__(self, node: LifecycleNode, types: messages.MessageTypes, doing: Callable[[], str],
+                 server: Callable[[], ReferenceServer | None], stopped: threading.Event):
+        self.node, self.types, self._doing, self._server, self._stopped = node, types, doing, server, stopped
+        self._publisher = node.create_publisher(DiagnosticArray, messages.DIAGNOSTICS_TOPIC, messages.PUBLISHER_DEPTH)
+        self._held_reported = 0
+        self.achieved_rate = 0.0
+        self._thread = threading.Thread(target=run_until_shutdown(node, self._loop), name="crane_reference_diagnostics",
+                                        daemon=True)
+        self._thread.start()
+
+    def join(self) -> None:
+        if self._thread is not threading.current_thread():
+            self._thread.join()
+
+    def _loop(self) -> None:
+        while not self._stopped.wait(messages.DIAGNOSTICS_PERIOD):
+            self.publish()
+
+    def publish(self) -> None:
+        """One /diagnostics message: before publishing starts, what the node is doing (or why it cannot start);
+        then state, constraint residual, real-time factor, achieved rate, counters."""
+        node, server = self.node, self._server()
+        now = node.get_clock().now().nanoseconds
+        name, hardware_id = f"{node.get_name()}: reference", node.get_fully_qualified_name()
+        if server is None or not server.publishing:
+            health = startup_health(self._doing())
+            self._publisher.publish(messages.diagnostics(self.types, now, name, hardware_id, health.level,
+                                                         health.message, {}))
+            return
+        status = server.status(now)
+        stream, counters = status.stream, status.counters
+        health = serving_health(status, counters["held_late"] - self._held_reported)
+        self._held_reported = counters["held_late"]
+        self.achieved_rate = status.achieved_rate
+        values = messages.diagnostic_values(
+            stream.state, status.last, status.real_time_factor, server.rate, status.achieved_rate, counters,
+            stream.targets, stream.rate, stream.last_error or status.fault,
+            {"frames_ready": status.frames_ready, "blend_time_s": f"{stream.blend_time:g}", **status.commands})
+        self._publisher.publish(messages.diagnostics(self.types, node.get_clock().now().nanoseconds, name,
+                                                     hardware_id, health.level, health.message, values))
+        if health.level == Level.ERROR:
+            node.get_logger().error(health.message, throttle_duration_sec=10.0)
