@@ -26,6 +26,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
+from rclpy.exceptions import ParameterNotDeclaredException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -451,6 +452,20 @@ def test_typed_parameters_have_one_field_per_declared_parameter() -> None:
     restored = dataclasses.replace(changed, ellipse_a=defaults.ellipse_a, preview_joints=defaults.preview_joints)
     assert restored == defaults
     assert changed.targets() == Task(3.0, defaults.ellipse_b, defaults.z_increment, defaults.z_rise_time)
+
+
+def test_an_unknown_parameter_is_refused_naming_the_nodes_parameters(ros: Harness) -> None:
+    """Setting a parameter the node lacks is refused as rclpy refuses it (ParameterNotDeclaredException), with a
+    message naming the unknown name and the node's parameters; the stream goes on."""
+    node = ros.start(publish_rate=100)
+    with pytest.raises(ParameterNotDeclaredException) as refused:
+        node.set_parameters_atomically([Parameter("elipse.a", value=3.5), Parameter("ellipse.b", value=2.1)])
+    message = str(refused.value)
+    assert "elipse.a: not a parameter of /crane_reference; its parameters are" in message
+    assert all(spec.name in message for spec in PARAMETERS)
+    assert node.get_parameter("ellipse.b").value == 2.0  # nothing of the atomic request was set
+    count = len(ros.received["joint_states"])
+    ros.wait_for(lambda: len(ros.received["joint_states"]) > count + 10, "joint_states after the refusal")
 
 
 def test_ellipse_ranges_are_the_cranes_reach(ros: Harness) -> None:

@@ -125,6 +125,7 @@ class CraneReferenceNode(LifecycleNode):
             self._stop.set()
             raise
         self._rate = self._params.publish_rate
+        self.add_pre_set_parameters_callback(self._known_parameters)
         self.add_pre_set_parameters_callback(coerce_parameters)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -274,15 +275,18 @@ class CraneReferenceNode(LifecycleNode):
 
     # -- set-up ---------------------------------------------------------------------------------------
 
-    def _check_undeclared_parameters(self, parameter_list: list[Parameter]) -> None:
-        """Reject parameters this node does not have, naming them and the node's parameters (rclpy's own
-        message lists none of them)."""
-        unknown = [p.name for p in parameter_list if not self.has_parameter(p.name)]
+    def _known_parameters(self, parameters: list[Parameter]) -> list[Parameter]:
+        """Pre-set callback (run before rclpy's own check of undeclared names): reject parameters this node
+        does not have, naming them and the node's parameters (rclpy's own message lists neither)."""
+        unknown = [p.name for p in parameters if not self.has_parameter(p.name)]
         if unknown:
             raise ParameterNotDeclaredException(
                 f"{', '.join(unknown)}: not a parameter of {self.get_fully_qualified_name()}; its parameters are "
-                f"{', '.join(sorted(self._parameters))}")
-        super()._check_undeclared_parameters(parameter_list)
+                f"{self._parameter_names()}")
+        return parameters
+
+    def _parameter_names(self) -> str:
+        return ", ".join(sorted(self.get_parameters_by_prefix("")))
 
     def _check_overrides(self) -> None:
         """Refuse to start with a parameter override (``-p``, a params file) for a name the node lacks."""
@@ -290,7 +294,7 @@ class CraneReferenceNode(LifecycleNode):
                          if not self.has_parameter(name) and not name.startswith("qos_overrides."))
         if unknown:
             raise StartupError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
-                               f"{', '.join(sorted(self._parameters))}")
+                               f"{self._parameter_names()}")
 
     def _publish_settings(self, server: ReferenceServer, names: tuple[str, ...] | None = None) -> PublishSettings:
         """What the parameters choose of the messages, with the preview's joints ``names`` (default: the
