@@ -125,8 +125,7 @@ class CraneReferenceNode(LifecycleNode):
             self._stop.set()
             raise
         self._rate = self._params.publish_rate
-        self.add_pre_set_parameters_callback(self._known_parameters)
-        self.add_pre_set_parameters_callback(coerce_parameters)
+        self.add_pre_set_parameters_callback(self._pre_set_parameters)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.create_service(Trigger, "~/restart", self._on_restart)
@@ -275,15 +274,16 @@ class CraneReferenceNode(LifecycleNode):
 
     # -- set-up ---------------------------------------------------------------------------------------
 
-    def _known_parameters(self, parameters: list[Parameter]) -> list[Parameter]:
-        """Pre-set callback (run before rclpy's own check of undeclared names): reject parameters this node
-        does not have, naming them and the node's parameters (rclpy's own message lists neither)."""
+    def _pre_set_parameters(self, parameters: list[Parameter]) -> list[Parameter]:
+        """The pre-set callback (the only one: rclpy concatenates the lists its pre-set callbacks return), run
+        before rclpy's own checks: reject parameters this node does not have, naming them and the node's
+        parameters (rclpy's own message lists neither), then :func:`~.parameters.coerce_parameters`."""
         unknown = [p.name for p in parameters if not self.has_parameter(p.name)]
         if unknown:
             raise ParameterNotDeclaredException(
                 f"{', '.join(unknown)}: not a parameter of {self.get_fully_qualified_name()}; its parameters are "
                 f"{self._parameter_names()}")
-        return parameters
+        return coerce_parameters(parameters)
 
     def _parameter_names(self) -> str:
         return ", ".join(sorted(self.get_parameters_by_prefix("")))
