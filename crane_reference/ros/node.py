@@ -67,23 +67,21 @@ from ..model.config import ConfigError, load_config
 from ..model.units import NANOSECONDS
 from ..motion.simulation import SOLVER_FAILURES
 from ..stream.health import CANNOT
-from ..stream.reference_stream import ERROR, PAUSED, RUNNING
-from ..stream.server import CommandRefusedError, Preview, ReferenceServer
+from ..stream.reference_stream import PAUSED, RUNNING
+from ..stream.server import CommandRefusedError, ReferenceServer, Reply
 from ..stream.solver import LocalSolver, SolverProcess, SolverStoppedError, StreamSpec
 from ..stream.targets import UnreachableTargetError
+from . import settings
 from .message_types import rclpy_types
 from .parameters import (
-    COMMANDING_PARAMETERS,
     PARAMETERS,
     SPECS,
-    TARGET_PARAMETERS,
     NodeParameters,
     ParameterError,
-    check,
     coerce_parameters,
     declare,
 )
-from .publishing import DiagnosticsPublisher, PublishSettings, SamplePublisher
+from .publishing import DiagnosticsPublisher, SamplePublisher
 
 NODE_NAME = messages.NODE_NAME
 
@@ -173,8 +171,8 @@ class CraneReferenceNode(LifecycleNode):
             self.get_logger().info(f"starting the solver {where} (with an empty kernel cache it compiles for a minute "
                                    "or two; `crane-reference compile` after installing does it ahead)")
             server = ReferenceServer(self._start_solver(config), self._rate, self._params.command_lead,
-                                     self._preview())
-            settings = self._publish_settings(server)
+                                     settings.preview(self._params))
+            messages_settings = settings.publish_settings(self._params, server.info.joint_names)
         except (StartupError, ConfigError, ParameterError) as error:
             self._starting = f"{CANNOT} configure: {error}"
             self.get_logger().error(self._starting)
@@ -185,7 +183,7 @@ class CraneReferenceNode(LifecycleNode):
         self._server = server
         self.get_logger().info(f"solver {server.info.kernels}")
         self._offer_reach(server)
-        self._publisher = SamplePublisher(self, self._types, server, settings)
+        self._publisher = SamplePublisher(self, self._types, server, messages_settings)
         self._resume_on_activate = False
         self._starting = "inactive: configured, computing ahead; activate to publish"
         self.get_logger().info(f"configured: the {self._params.model} crane ({len(server.info.joint_names)} joints, "
@@ -296,23 +294,6 @@ class CraneReferenceNode(LifecycleNode):
             raise StartupError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
                                f"{self._parameter_names()}")
 
-    def _publish_settings(self, server: ReferenceServer, names: tuple[str, ...] | None = None) -> PublishSettings:
-        """What the parameters choose of the messages, with the preview's joints ``names`` (default: the
-        parameter's); ParameterError naming joints the model lacks."""
-        v, joints = self._params, list(server.info.joint_names)
-        names = v.preview_joints if names is None else names
-        unknown = [name for name in names if name not in joints]
-        if unknown:
-            raise ParameterError(f"preview.joints = {list(names)!r}: {', '.join(unknown)} not joints of the "
-                                 f"{v.model} model; its joints are {', '.join(joints)}")
-        return PublishSettings(v.frame_id, tuple(joints.index(name) for name in names), v.preview_effort)
-
-    def _preview(self) -> Preview:
-        """The preview of the parameters: its horizon, its points after the sample's own, and the samples
-        between two previews."""
-        v = self._params
-        return Preview(v.preview_horizon, v.preview_points - 1, max(1, round(self._rate / v.preview_rate)))
-
     def _lifecycle_state(self) -> str:
         """The primary lifecycle state, from what the transitions set up: a server after configure, a
         publisher thread after activate."""
@@ -324,52 +305,27 @@ class CraneReferenceNode(LifecycleNode):
 
     def _on_restart(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """~/restart (while inactive): back to the static-equilibrium start of the current targets, also out of
-        ERROR.  The position jumps to the start, so it is refused while active: consumers see the stream
-        stop (deactivate), and it goes on from the start when activated again; the response and the
-        diagnostics (restart_*) say by how much it jumps."""
+        ERROR (refused while active: the reference would jump under a controller that follows it)."""
         state = self._lifecycle_state()
-        if state != "inactive":
-            response.success = False
-            response.message = (f"refused while {state}: a restart makes the reference jump to the start, so it is "
-                                "done while inactive (deactivate, restart, activate)" if state == "active" else
-                                f"refused while {state}: configure the node first")
-            return response
-        try:
-            restart = self._server.restart(self._now())
-        except (*SOLVER_FAILURES, CommandRefusedError) as error:
-            response.success, response.message = False, f"restart failed, stream unchanged: {error}"
+        if state == "inactive":
+            reply = self._server.restart_reply(self._now())
+            if reply.success:
+                self._publisher.trail.clear()
+                self._resume_on_activate = False
         else:
-            self._publisher.trail.clear()
-            self._resume_on_activate = False
-            response.success = True
-            response.message = (f"restarted from the static equilibrium at sample {restart.k}, published once active: "
-                                f"position jump up to {restart.jump:.6g} (SI units) on {restart.joint}")
-        self.get_logger().info(response.message)
+            reply = Reply(False, f"refused while {state}: " + (
+                "a restart makes the reference jump to the start, so it is done while inactive (deactivate, restart, "
+                "activate)" if state == "active" else "configure the node first"))
+        response.success, response.message = reply.success, reply.message
+        self.get_logger().info(reply.message)
         return response
 
     def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
         """~/pause: data true holds the reference (zero velocity), data false resumes it."""
-        if self._server is None:
-            response.success, response.message = False, f"refused while {self._lifecycle_state()}: configure first"
-            return response
-        stream = self._server.stream
-        wanted = PAUSED if request.data else RUNNING
-        if not self._server.computing:
-            response.success = False
-            response.message = "the solver stopped; deactivate, cleanup, configure and activate start a new one"
-        elif stream.state == ERROR:
-            response.success = False
-            response.message = (f"the stream is in ERROR ({stream.last_error}); deactivate, call ~/restart "
-                                "and activate")
-        elif stream.state == wanted:
-            response.success, response.message = True, f"already {stream.state.lower()}"
-        else:
-            k = self._server.command("pause" if request.data else "resume", accepted_ns=self._now())
-            verb = "coming to rest" if request.data else "resuming"
-            response.success = True
-            response.message = (f"{verb} from the sample stamped {self._server.stamp_of(k):.6f} s over "
-                                f"{self._server.stream.ramp_time:g} s")
-        self.get_logger().info(f"~/pause {request.data}: {response.message}")
+        reply = (self._server.pause(request.data, self._now()) if self._server is not None
+                 else Reply(False, f"refused while {self._lifecycle_state()}: configure first"))
+        response.success, response.message = reply.success, reply.message
+        self.get_logger().info(f"~/pause {request.data}: {reply.message}")
         return response
 
     def _on_speed_scaling(self, msg: Float64) -> None:
@@ -379,32 +335,12 @@ class CraneReferenceNode(LifecycleNode):
             self.get_logger().error(f"~/speed_scaling rejected: {result.reason}", throttle_duration_sec=1.0)
 
     def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        """On-set callback: the table's checks, then the reachability of changed targets."""
-        reason = check(parameters)
-        joints = next((p.value for p in parameters if p.name == "preview.joints"), None)
-        if reason is None and joints is not None and self._server is not None:  # else checked at configure
-            try:
-                self._publish_settings(self._server, tuple(joints))
-            except ParameterError as error:
-                reason = str(error)
-        commanding = [p.name for p in parameters if p.name in COMMANDING_PARAMETERS]
-        if reason is None and commanding and self._server is not None:
-            try:
-                self._server.check_computing()
-            except CommandRefusedError as error:
-                reason = (f"{', '.join(commanding)}: {error} (deactivate, cleanup, configure and activate start a "
-                          "new solver)")
-        changed = {p.name: p.value for p in parameters if p.name in TARGET_PARAMETERS}
-        if reason is None and changed and self._server is not None:  # else checked at configure
-            try:
-                self._server.check_targets(self._params.changed(parameters).targets())
-            except UnreachableTargetError as error:
-                names = ", ".join(f"{name} = {value!r}" for name, value in changed.items())
-                reason = f"{names}: target not reachable: {error}"
+        """On-set callback: :func:`.settings.refusal`."""
+        reason = settings.refusal(parameters, self._params, self._server)
         return SetParametersResult(successful=reason is None, reason=reason or "")
 
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
-        """Post-set callback: apply accepted values (one re-target for all target parameters)."""
+        """Post-set callback: apply accepted values (:func:`.settings.apply`)."""
         names = [p.name for p in parameters if p.name in SPECS]
         self._params = self._params.changed(parameters)
         if "status_period" in names:
@@ -413,31 +349,13 @@ class CraneReferenceNode(LifecycleNode):
         server = self._server
         if server is None:  # the values are read at configure
             return
+        if set(settings.MESSAGE_PARAMETERS) & set(names):
+            self._publisher.settings = settings.publish_settings(self._params, server.info.joint_names)
         try:
-            self._apply_to_server(server, names)
+            for line in settings.apply(server, self._params, names, self._now()):
+                self.get_logger().info(line)
         except CommandRefusedError as error:  # the solver stopped since the on-set check
             self.get_logger().error(f"{', '.join(names)} set but not applied: {error}")
-
-    def _apply_to_server(self, server: ReferenceServer, names: list[str]) -> None:
-        """Send the server the changes of the parameters ``names`` (their values in self._params)."""
-        v = self._params
-        if "blend_time" in names:
-            server.set_blend_time(v.blend_time)
-        if "command_lead" in names:
-            server.set_lead(v.command_lead)
-        if any(name.startswith("preview.") for name in names):
-            server.preview = self._preview()
-        if {"frame_id", "preview.joints", "preview.effort"} & set(names):
-            self._publisher.settings = self._publish_settings(server)
-        if "speed_scaling" in names:
-            rate = v.speed_scaling
-            k = server.command("set_speed_scaling", rate, accepted_ns=self._now())
-            self.get_logger().info(f"speed scaling {rate:g} from the sample stamped {server.stamp_of(k):.6f} s")
-        if any(name in TARGET_PARAMETERS for name in names) and v.targets() != server.stream.targets:
-            targets = v.targets()  # they passed check_targets in the on-set callback
-            k = server.command("retarget", targets, accepted_ns=self._now())
-            self.get_logger().info(f"re-targeting to {targets} from the sample stamped {server.stamp_of(k):.6f} s "
-                                   f"over {v.blend_time:g} s")
 
     def _log_status(self) -> None:
         """One-line status: stream time, E, residual, achieved rate, state."""

@@ -47,7 +47,8 @@ from typing import Any, Protocol
 
 from ..model.parameters import Task
 from ..model.units import NANOSECONDS
-from .reference_stream import RUNNING
+from ..motion.simulation import SOLVER_FAILURES
+from .reference_stream import ERROR, PAUSED, RUNNING
 from .sample import ReferenceSample
 from .schedule import Frame, FrameBatch, FrameRequest, FrameSchedule, Plan, stamp_at
 from .solver import SolverStoppedError, StreamInfo, StreamStatus
@@ -104,6 +105,14 @@ class Restart:
     k: int
     jump: float
     joint: str
+
+
+@dataclass(frozen=True)
+class Reply:
+    """The answer to a request of the node's services: whether it was done, and what was done or why not."""
+
+    success: bool
+    message: str
 
 
 @dataclass(frozen=True)
@@ -393,6 +402,30 @@ class ReferenceServer:
             self.schedule.fault = ""
             self._commands.update(restart_jump_rad=f"{restart.jump:.6g}", restart_jump_joint=restart.joint)
         return restart
+
+    def restart_reply(self, accepted_ns: int) -> Reply:
+        """:meth:`restart` as ~/restart answers: how far the position jumps, or why the stream is unchanged."""
+        try:
+            restart = self.restart(accepted_ns)
+        except (*SOLVER_FAILURES, CommandRefusedError) as error:
+            return Reply(False, f"restart failed, stream unchanged: {error}")
+        return Reply(True, f"restarted from the static equilibrium at sample {restart.k}, published once active: "
+                           f"position jump up to {restart.jump:.6g} (SI units) on {restart.joint}")
+
+    def pause(self, hold: bool, accepted_ns: int) -> Reply:
+        """~/pause: ``hold`` brings the reference to rest along the speed ramp and holds it there, else it resumes;
+        done already if the stream is so; refused once computing ahead stopped or in ERROR (with the remedy)."""
+        stream = self.stream
+        if not self.computing:
+            return Reply(False, "the solver stopped; deactivate, cleanup, configure and activate start a new one")
+        if stream.state == ERROR:
+            return Reply(False, f"the stream is in ERROR ({stream.last_error}); deactivate, call ~/restart and "
+                                "activate")
+        if stream.state == (PAUSED if hold else RUNNING):
+            return Reply(True, f"already {stream.state.lower()}")
+        k = self.command("pause" if hold else "resume", accepted_ns=accepted_ns)
+        verb = "coming to rest" if hold else "resuming"
+        return Reply(True, f"{verb} from the sample stamped {self.stamp_of(k):.6f} s over {self.stream.ramp_time:g} s")
 
     def come_to_rest(self, accepted_ns: int, stop: threading.Event | None = None) -> None:
         """Pause a moving stream (a speed ramp to rest) and wait, while publishing, until its first sample at

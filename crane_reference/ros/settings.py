@@ -1,0 +1,87 @@
+"""What the node's parameters mean for the reference server and the messages, decided apart from the node:
+the messages' settings and the preview a set of values gives, the reason to refuse a change (the on-set
+callback) and the server calls that apply an accepted one (the post-set callback).
+"""
+
+from __future__ import annotations
+
+from rclpy.parameter import Parameter
+
+from ..stream.server import CommandRefusedError, Preview, ReferenceServer
+from ..stream.targets import UnreachableTargetError
+from .parameters import COMMANDING_PARAMETERS, TARGET_PARAMETERS, NodeParameters, ParameterError, check
+from .publishing import PublishSettings
+
+MESSAGE_PARAMETERS = ("frame_id", "preview.joints", "preview.effort")
+"""The parameters that change the messages' :class:`~.publishing.PublishSettings`."""
+
+
+def publish_settings(params: NodeParameters, joint_names: tuple[str, ...],
+                     preview_joints: tuple[str, ...] | None = None) -> PublishSettings:
+    """The messages' settings of ``params``, with the preview's joints ``preview_joints`` (default: the
+    parameter's); :class:`~.parameters.ParameterError` naming the joints the model lacks."""
+    names = params.preview_joints if preview_joints is None else preview_joints
+    unknown = [name for name in names if name not in joint_names]
+    if unknown:
+        raise ParameterError(f"preview.joints = {list(names)!r}: {', '.join(unknown)} not joints of the "
+                             f"{params.model} model; its joints are {', '.join(joint_names)}")
+    return PublishSettings(params.frame_id, tuple(joint_names.index(name) for name in names), params.preview_effort)
+
+
+def preview(params: NodeParameters) -> Preview:
+    """The preview of ``params``: its horizon, its points after the sample's own, and the samples between two
+    previews (at least one)."""
+    return Preview(params.preview_horizon, params.preview_points - 1,
+                   max(1, round(params.publish_rate / params.preview_rate)))
+
+
+def refusal(parameters: list[Parameter], params: NodeParameters, server: ReferenceServer | None) -> str | None:
+    """Why the change ``parameters`` of the values ``params`` is refused, or None: the table's checks, then
+    with a ``server`` (else they are checked at configure) the preview's joints, a solver that stopped for a
+    commanding parameter, and the reachability of changed targets."""
+    reason = check(parameters)
+    if reason is not None or server is None:
+        return reason
+    joints = next((p.value for p in parameters if p.name == "preview.joints"), None)
+    try:
+        if joints is not None:
+            publish_settings(params, server.info.joint_names, tuple(joints))
+    except ParameterError as error:
+        return str(error)
+    commanding = [p.name for p in parameters if p.name in COMMANDING_PARAMETERS]
+    try:
+        if commanding:
+            server.check_computing()
+    except CommandRefusedError as error:
+        return f"{', '.join(commanding)}: {error} (deactivate, cleanup, configure and activate start a new solver)"
+    changed = {p.name: p.value for p in parameters if p.name in TARGET_PARAMETERS}
+    try:
+        if changed:
+            server.check_targets(params.changed(parameters).targets())
+    except UnreachableTargetError as error:
+        names = ", ".join(f"{name} = {value!r}" for name, value in changed.items())
+        return f"{names}: target not reachable: {error}"
+    return None
+
+
+def apply(server: ReferenceServer, params: NodeParameters, names: list[str], accepted_ns: int) -> list[str]:
+    """Send ``server`` the changes of the parameters ``names`` (their values in ``params``) accepted at
+    ``accepted_ns``: one re-target for all target parameters, none if the targets are those in force.  Returns
+    what was commanded, for the log.  Raises :class:`~crane_reference.stream.server.CommandRefusedError` if the
+    solver stopped since the on-set check."""
+    done = []
+    if "blend_time" in names:
+        server.set_blend_time(params.blend_time)
+    if "command_lead" in names:
+        server.set_lead(params.command_lead)
+    if any(name.startswith("preview.") for name in names):
+        server.preview = preview(params)
+    if "speed_scaling" in names:
+        k = server.command("set_speed_scaling", params.speed_scaling, accepted_ns=accepted_ns)
+        done.append(f"speed scaling {params.speed_scaling:g} from the sample stamped {server.stamp_of(k):.6f} s")
+    targets = params.targets()
+    if any(name in TARGET_PARAMETERS for name in names) and targets != server.stream.targets:
+        k = server.command("retarget", targets, accepted_ns=accepted_ns)  # they passed check_targets on set
+        done.append(f"re-targeting to {targets} from the sample stamped {server.stamp_of(k):.6f} s over "
+                    f"{params.blend_time:g} s")
+    return done
