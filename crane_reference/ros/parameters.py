@@ -28,11 +28,13 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import ParameterNotDeclaredException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ..interface.messages import ACTUATED_JOINTS, MAX_PUBLISH_RATE
 from ..model.chain import VARIANTS
+from ..model.config import load_config
 from ..model.parameters import CraneParameters, Task, TorqueDrive
 from ..motion.steps import ONLINE_STEP
 
@@ -242,6 +244,18 @@ TARGET_PARAMETERS = {"ellipse.a": "ellipse_a", "ellipse.b": "ellipse_b", "z.incr
 COMMANDING_PARAMETERS = {*TARGET_PARAMETERS, "speed_scaling", "blend_time"}
 
 
+def reach_descriptor(spec: ParameterSpec, low: float, high: float) -> ParameterDescriptor:
+    """``spec``'s descriptor with the range [low, high] m: E's reach from the column's axis at the start and
+    target heights (what rqt_reconfigure's sliders and rclpy's range check use; every change is still checked
+    around the whole ellipse)."""
+    descriptor = spec.descriptor()
+    descriptor.floating_point_range = [FloatingPointRange(from_value=low, to_value=high, step=0.0)]
+    descriptor.additional_constraints = (
+        f"must be a number in [{low:g}, {high:g}] m: E's reach from the column's axis at the start and target "
+        "heights (computed at configure); the whole ellipse is checked when it is set")
+    return descriptor
+
+
 def coerce_parameters(parameters: list[Parameter]) -> list[Parameter]:
     """Pre-set callback: integer values of double parameters become doubles (all else unchanged)."""
     return [Parameter(p.name, DOUBLE, float(p.value))
@@ -257,6 +271,30 @@ def check(parameters: Iterable[Parameter]) -> str | None:
         if reason is not None:
             return reason
     return None
+
+
+def declare_all(node: Node) -> NodeParameters:
+    """Declare every parameter of the table on ``node`` (``config_file`` first: it gives the others'
+    defaults, see :attr:`ParameterSpec.from_config`) and return their values."""
+    config_file = declare(node, SPECS["config_file"])
+    config = load_config(config_file or None)
+    return NodeParameters.from_values({"config_file": config_file, **{
+        spec.name: declare(node, spec, config) for spec in PARAMETERS if spec.name != "config_file"}})
+
+
+def parameter_names(node: Node) -> str:
+    """The names of ``node``'s parameters, sorted, for messages."""
+    return ", ".join(sorted(node.get_parameters_by_prefix("")))
+
+
+def refuse_unknown(node: Node, parameters: Iterable[Parameter]) -> None:
+    """Raise rclpy's ParameterNotDeclaredException for parameters ``node`` does not have, naming them and the
+    node's parameters (rclpy's own message lists neither)."""
+    unknown = [p.name for p in parameters if not node.has_parameter(p.name)]
+    if unknown:
+        raise ParameterNotDeclaredException(f"{', '.join(unknown)}: not a parameter of "
+                                            f"{node.get_fully_qualified_name()}; its parameters are "
+                                            f"{parameter_names(node)}")
 
 
 def declare(node: Node, spec: ParameterSpec, config: CraneParameters | None = None) -> Value:

@@ -184,6 +184,17 @@ class DiagnosticsPublisher:
                                         daemon=True)
         self._thread.start()
 
+    def log_status(self) -> None:
+        """One-line status in the node's log (a timer): stream time, E, residual, achieved rate, state."""
+        server = self._server()
+        sample = server.last_sample()[0] if server is not None else None
+        if sample is None:
+            return
+        x, y, z = sample.ee_position
+        self.node.get_logger().info(
+            f"t={sample.t:.3f} s E=({x:.3f}, {y:.3f}, {z:.3f}) m residual={sample.residual_distance:.1e} m "
+            f"rate={self.achieved_rate:.1f} Hz state={server.stream.state}")
+
     def join(self) -> None:
         if self._thread is not threading.current_thread():
             self._thread.join()

@@ -5,12 +5,22 @@ callback) and the server calls that apply an accepted one (the post-set callback
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from rclpy.parameter import Parameter
 
-from ..stream.server import CommandRefusedError, Preview, ReferenceServer
+from ..model.parameters import CraneParameters
+from ..motion.simulation import SOLVER_FAILURES
+from ..stream.server import CommandRefusedError, Preview, ReferenceServer, Solver
+from ..stream.solver import LocalSolver, SolverProcess, StreamSpec
 from ..stream.targets import UnreachableTargetError
 from .parameters import COMMANDING_PARAMETERS, TARGET_PARAMETERS, NodeParameters, ParameterError, check
 from .publishing import PublishSettings
+
+
+class StartupError(RuntimeError):
+    """The node cannot start (unusable configuration or target)."""
+
 
 MESSAGE_PARAMETERS = ("frame_id", "preview.joints", "preview.effort")
 """The parameters that change the messages' :class:`~.publishing.PublishSettings`."""
@@ -26,6 +36,25 @@ def publish_settings(params: NodeParameters, joint_names: tuple[str, ...],
         raise ParameterError(f"preview.joints = {list(names)!r}: {', '.join(unknown)} not joints of the "
                              f"{params.model} model; its joints are {', '.join(joint_names)}")
     return PublishSettings(params.frame_id, tuple(joint_names.index(name) for name in names), params.preview_effort)
+
+
+def stream_spec(params: NodeParameters, config: CraneParameters) -> StreamSpec:
+    """The stream of ``params`` for the crane ``config``."""
+    return StreamSpec(config=config, model=params.model, step=params.integrator_step, blend_time=params.blend_time,
+                      targets=params.targets(), drive_torque=params.drive_torque, drive_duration=params.drive_duration,
+                      speed_scaling=params.speed_scaling, ramp_time=params.speed_scaling_ramp_time)
+
+
+def start_solver(params: NodeParameters, config: CraneParameters, stopped: Callable[[], bool]) -> Solver:
+    """The solver of the stream of ``params``, in its own process (``solver_process``; ``stopped()`` ends the
+    wait for it) or here; :class:`StartupError` if the targets have no consistent start."""
+    spec, targets = stream_spec(params, config), params.targets()
+    try:
+        return SolverProcess(spec, stopped) if params.solver_process else LocalSolver(spec)
+    except UnreachableTargetError as error:
+        raise StartupError(f"ellipse.* / z.* = {targets}: {error}") from error
+    except SOLVER_FAILURES as error:
+        raise StartupError(f"no consistent start for the targets {targets}: {error}") from error
 
 
 def preview(params: NodeParameters) -> Preview:
