@@ -214,16 +214,16 @@ def test_the_solver_process_clears_an_interrupt_at_each_request_and_obeys_one_th
     try:
         schedule = FrameSchedule(RATE, RATE, LEAD, 1.0, process.info.start)
         process.interrupt()
-        assert not process.call("frames", schedule.request(schedule.plan(), 10, 1.0, 4, 10, None), 4.0).busy
+        assert not process.frames(schedule.request(schedule.plan(), 10, 1.0, 4, 10, None), 4.0).busy
         replies = []
         long = schedule.request(schedule.plan(), 10, 60.0, 4, 10, None)
-        worker = threading.Thread(target=lambda: replies.append(process.call("frames", long, 4.0)))
+        worker = threading.Thread(target=lambda: replies.append(process.frames(long, 4.0)))
         worker.start()
         time.sleep(0.5)
         process.interrupt()
         worker.join(60.0)
         assert replies and replies[0].busy
-        assert process.call("status") is not None
+        assert process.refresh_status() is not None
     finally:
         process.close()
 

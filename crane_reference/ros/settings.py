@@ -11,8 +11,8 @@ from rclpy.parameter import Parameter
 
 from ..model.parameters import CraneParameters
 from ..motion.simulation import SOLVER_FAILURES
-from ..stream.server import CommandRefusedError, Preview, ReferenceServer, Solver
-from ..stream.solver import LocalSolver, SolverProcess, StreamSpec
+from ..stream.server import CommandRefusedError, Preview, ReferenceServer
+from ..stream.solver import LocalSolver, SolverClient, SolverProcess, StreamSpec
 from ..stream.targets import UnreachableTargetError
 from .parameters import COMMANDING_PARAMETERS, TARGET_PARAMETERS, NodeParameters, ParameterError, check
 from .publishing import PublishSettings
@@ -45,7 +45,7 @@ def stream_spec(params: NodeParameters, config: CraneParameters) -> StreamSpec:
                       speed_scaling=params.speed_scaling, ramp_time=params.speed_scaling_ramp_time)
 
 
-def start_solver(params: NodeParameters, config: CraneParameters, stopped: Callable[[], bool]) -> Solver:
+def start_solver(params: NodeParameters, config: CraneParameters, stopped: Callable[[], bool]) -> SolverClient:
     """The solver of the stream of ``params``, in its own process (``solver_process``; ``stopped()`` ends the
     wait for it) or here; :class:`StartupError` if the targets have no consistent start."""
     spec, targets = stream_spec(params, config), params.targets()

@@ -42,8 +42,9 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 from ..model.parameters import Task
 from ..model.units import NANOSECONDS
@@ -51,7 +52,7 @@ from ..motion.simulation import SOLVER_FAILURES
 from .reference_stream import ERROR, PAUSED, RUNNING
 from .sample import ReferenceSample
 from .schedule import Frame, FrameBatch, FrameRequest, FrameSchedule, Plan, stamp_at
-from .solver import SolverStoppedError, StreamInfo, StreamStatus
+from .solver import SolverClient, SolverStoppedError, StreamStatus
 
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
 COMPUTE_SLICE = 0.005  # [s] of wall time the solver computes per request while publishing
@@ -61,19 +62,6 @@ RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to make 
 MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, the stamps leap (re-anchored)
 REST_MARGIN = 1.0  # [s] :meth:`ReferenceServer.come_to_rest` waits beyond the ramp and the lead
 COMMANDS = ("pause", "resume", "set_speed_scaling", "retarget")
-
-
-class Solver(Protocol):
-    """The solver client a server uses (:class:`~.solver.LocalSolver`, :class:`~.solver.SolverProcess`)."""
-
-    info: StreamInfo
-    status: StreamStatus
-
-    def call(self, method: str, *args: Any) -> Any: ...
-
-    def interrupt(self) -> None: ...
-
-    def close(self) -> None: ...
 
 
 class CommandRefusedError(RuntimeError):
@@ -140,7 +128,7 @@ class ServerStatus:
 class ReferenceServer:
     """See the module documentation."""
 
-    def __init__(self, solver: Solver, rate: int, lead: float, preview: Preview):
+    def __init__(self, solver: SolverClient, rate: int, lead: float, preview: Preview):
         """Serve the stream of ``solver`` at ``rate`` Hz with commands ``lead`` seconds ahead and ``preview``;
         starts computing ahead."""
         self.solver = solver
@@ -211,7 +199,7 @@ class ReferenceServer:
                 with self._solver_lock:
                     if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
                         continue
-                    batch = self.solver.call("frames", request, RELEASE_KEEP + LOOKAHEAD)
+                    batch = self.solver.frames(request, RELEASE_KEEP + LOOKAHEAD)
                 with self._lock:
                     if self._accept(batch, plan) and not batch.frames and not batch.busy:
                         self._lock.wait(timeout=LOOKAHEAD)
@@ -329,7 +317,8 @@ class ReferenceServer:
         batch = None
         self.solver.interrupt()  # the worker's request in progress stops computing ahead at its next run
         try:
-            answer, batch = self._request("command", request[0], tau, request[1:], frames, RELEASE_KEEP + LOOKAHEAD)
+            answer, batch = self._request(self.solver.command, request[0], tau, request[1:], frames,
+                                          RELEASE_KEEP + LOOKAHEAD)
         finally:
             with self._lock:
                 if batch is not None:
@@ -353,13 +342,13 @@ class ReferenceServer:
         if not self.computing:
             raise CommandRefusedError(f"the solver stopped ({self.schedule.fault or 'closed'}): start a new one")
 
-    def _request(self, method: str, *args: Any) -> Any:
-        """The solver's answer to ``method(*args)``, one request at a time; :class:`CommandRefusedError` if
-        the solver has stopped."""
+    def _request(self, request: Callable[..., Any], *args: Any) -> Any:
+        """The answer to ``request(*args)`` (a method of the solver client), one request at a time;
+        :class:`CommandRefusedError` if the solver has stopped."""
         self.check_computing()
         with self._solver_lock:
             try:
-                return self.solver.call(method, *args)
+                return request(*args)
             except SolverStoppedError as error:
                 raise CommandRefusedError(f"the solver stopped ({error}): start a new one") from error
 
@@ -376,10 +365,10 @@ class ReferenceServer:
 
     def check_targets(self, targets: Task) -> None:
         """Raise :class:`~.targets.UnreachableTargetError` unless ``targets`` can be streamed from here."""
-        self._request("check_targets", targets)
+        self._request(self.solver.check_targets, targets)
 
     def set_blend_time(self, seconds: float) -> None:
-        self._request("set_blend_time", seconds)
+        self._request(self.solver.set_blend_time, seconds)
 
     def set_lead(self, seconds: float) -> None:
         with self._lock:
@@ -387,7 +376,7 @@ class ReferenceServer:
 
     def reach(self, radius: float, heights: tuple[float, ...]) -> tuple[float, float]:
         """The crane's reach [m] at heights above E's static one (:meth:`~.solver.StreamSolver.reach`)."""
-        return self._request("reach", radius, heights)
+        return self._request(self.solver.reach, radius, heights)
 
     def restart(self, accepted_ns: int = 0) -> Restart:
         """Back to the static-equilibrium start of the current targets, also out of ERROR; only while not

@@ -2,8 +2,9 @@
 
 :class:`StreamSolver` owns a :class:`~.reference_stream.ReferenceStream` and answers the requests of a
 reference server (:mod:`.server`): frames to make (:func:`~.schedule.make_frames`), commands applied at a
-stream time, target checks, the crane's reach.  Two clients carry the requests to it, with one interface
-(:meth:`call` returns the result and keeps the stream's :class:`StreamStatus` of the reply):
+stream time, target checks, the crane's reach.  Two clients carry the requests to it, with the methods of
+:class:`SolverClient` (each returns the result and keeps the stream's :class:`StreamStatus` of the reply;
+a request names the solver's method itself, which pickles by reference, never a string):
 
 * :class:`LocalSolver` calls it in the caller's thread (tests, tools);
 * :class:`SolverProcess` runs it in a child process (``python -m crane_reference.stream.solver``: a fresh
@@ -135,11 +136,11 @@ class StreamSolver:
         self.stream.release(request.plan.tau, keep)
         return batch
 
-    def command(self, method: str, tau: float, args: tuple, request: FrameRequest, keep: float
+    def command(self, method: Callable[..., Any], tau: float, args: tuple, request: FrameRequest, keep: float
                 ) -> tuple[Any, FrameBatch]:
-        """The stream command ``method(tau, *args)``, then the frames of ``request`` (:meth:`frames`): one
-        request, so a command's first frames are ready without a second trip."""
-        return getattr(self, method)(tau, *args), self.frames(request, keep)
+        """The stream command ``method(self, tau, *args)`` (one of :data:`STREAM_COMMANDS`), then the frames of
+        ``request`` (:meth:`frames`): one request, so a command's first frames are ready without a second trip."""
+        return method(self, tau, *args), self.frames(request, keep)
 
     def after_reply(self) -> None:
         """Tidy up after a reply is sent (:meth:`~.reference_stream.ReferenceStream.free_forgotten`)."""
@@ -180,7 +181,58 @@ class StreamSolver:
         return before, stream.start_configuration()
 
 
-class LocalSolver:
+STREAM_COMMANDS: dict[str, Callable[..., Any]] = {
+    "pause": StreamSolver.pause, "resume": StreamSolver.resume, "set_speed_scaling": StreamSolver.set_speed_scaling,
+    "retarget": StreamSolver.retarget, "restart": StreamSolver.restart}
+"""The commands a server sends at a stream time (:meth:`StreamSolver.command`), by the name it records them under."""
+
+
+class SolverClient:
+    """The requests a reference server makes of a :class:`StreamSolver`; a client carries each to it
+    (:meth:`_call`) and keeps :attr:`status`, the stream's after the last reply."""
+
+    info: StreamInfo
+    status: StreamStatus
+
+    def _call(self, method: Callable[..., Any], *args: Any) -> Any:
+        """``method(solver, *args)`` for the solver's own ``method``."""
+        raise NotImplementedError
+
+    def frames(self, request: FrameRequest, keep: float) -> FrameBatch:
+        """:meth:`StreamSolver.frames`."""
+        return self._call(StreamSolver.frames, request, keep)
+
+    def command(self, name: str, tau: float, args: tuple, request: FrameRequest, keep: float
+                ) -> tuple[Any, FrameBatch]:
+        """:meth:`StreamSolver.command` of the command ``name`` (a key of :data:`STREAM_COMMANDS`)."""
+        return self._call(StreamSolver.command, STREAM_COMMANDS[name], tau, args, request, keep)
+
+    def check_targets(self, targets: Task) -> None:
+        """:meth:`StreamSolver.check_targets`."""
+        self._call(StreamSolver.check_targets, targets)
+
+    def set_blend_time(self, seconds: float) -> None:
+        """:meth:`StreamSolver.set_blend_time`."""
+        self._call(StreamSolver.set_blend_time, seconds)
+
+    def reach(self, radius: float, heights: tuple[float, ...]) -> tuple[float, float]:
+        """:meth:`StreamSolver.reach`."""
+        return self._call(StreamSolver.reach, radius, heights)
+
+    def refresh_status(self) -> StreamStatus:
+        """The stream's status now (:attr:`status` updated)."""
+        return self._call(StreamSolver.status)
+
+    def interrupt(self) -> None:
+        """Cut the request in progress short (see the module)."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release the solver."""
+        raise NotImplementedError
+
+
+class LocalSolver(SolverClient):
     """A :class:`StreamSolver` called in the caller's thread."""
 
     def __init__(self, spec: StreamSpec):
@@ -193,11 +245,11 @@ class LocalSolver:
         """Cut the call in progress short (see the module)."""
         self._interrupt.set()
 
-    def call(self, method: str, *args: Any) -> Any:
-        """``method(*args)`` of the solver; :attr:`status` is the stream's after it (also if it raised)."""
+    def _call(self, method: Callable[..., Any], *args: Any) -> Any:
+        """``method(solver, *args)``; :attr:`status` is the stream's after it (also if it raised)."""
         self._interrupt.clear()
         try:
-            return getattr(self.solver, method)(*args)
+            return method(self.solver, *args)
         finally:
             self.status = self.solver.status()
             self.solver.after_reply()
@@ -231,7 +283,7 @@ def _serve(requests: Connection, replies: Connection, interrupts: Connection) ->
             interrupts.recv_bytes()
         method, args = request
         try:
-            reply = (True, getattr(solver, method)(*args))
+            reply = (True, method(solver, *args))
         except Exception as error:  # reported to the caller, which raises it
             reply = (False, _portable(error))
         replies.send((*reply, solver.status()))
@@ -248,7 +300,7 @@ def _portable(error: Exception) -> Exception:
         return RuntimeError(f"{type(error).__name__}: {error}\n{traceback.format_exc()}")
 
 
-class SolverProcess:
+class SolverProcess(SolverClient):
     """A :class:`StreamSolver` in a child process (see the module)."""
 
     def __init__(self, spec: StreamSpec, stopped: Callable[[], bool] = lambda: False):
@@ -303,8 +355,8 @@ class SolverProcess:
         with contextlib.suppress(OSError, ValueError):  # the process is gone: the next call says so
             self._interrupts.send_bytes(b"!")
 
-    def call(self, method: str, *args: Any) -> Any:
-        """``method(*args)`` of the solver in the process; :attr:`status` is the stream's after it."""
+    def _call(self, method: Callable[..., Any], *args: Any) -> Any:
+        """``method(solver, *args)`` in the process; :attr:`status` is the stream's after it."""
         with self._lock:
             try:
                 self._requests.send((method, args))
