@@ -56,6 +56,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from common import newton_iterations
 from scipy.integrate import quad
 from scipy.signal import butter, sosfiltfilt
 
@@ -243,19 +244,6 @@ def damped(params: CraneParameters, duration: float, cache: Path) -> None:
         print(f"[damped] beta {damping.support:.3e} s (supports) / {damping.boom:.3e} s (boom), h={step * 1e3:.2f} "
               f"ms: max |error| {_triple(raw)} rad, E {ee:.1e} m; controller band {_triple(slow)} rad, E "
               f"{ee_slow:.1e} m; 40-250 Hz RMS kept over 5-10 s {_triple(kept, '.0%')}")
-
-
-def newton_iterations(scenario: Scenario, step: float, duration: float = 1.0, tolerance: float = ONLINE_TOLERANCE,
-                      evaluations: int = EVALUATIONS) -> float:
-    """Mean Newton evaluations per step over the first ``duration`` seconds (one step at a time)."""
-    q0 = scenario.equilibrium.q
-    stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), step, tolerance=tolerance,
-                            evaluations=evaluations)
-    counts = []
-    while stepper.state.t < duration:
-        stepper.advance()
-        counts.append(stepper.integrator.last_iterations)
-    return float(np.mean(counts))
 
 
 def iteration_rules(params: CraneParameters, duration: float, cache: Path, rfe_counts: tuple[int, ...]) -> None:

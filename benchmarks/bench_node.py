@@ -56,7 +56,7 @@ from typing import Any
 
 import numpy as np
 import rclpy
-from bench_speed import run_times
+from common import print_table, process_cpu_seconds, run_times
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
@@ -64,7 +64,6 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.serialization import serialize_message
-from report import print_table
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 from visualization_msgs.msg import MarkerArray
@@ -81,7 +80,6 @@ from crane_reference.stream.reference_stream import ReferenceStream
 NS = 10**9
 NODE = "crane_reference"
 WARM_UP = 2.0  # [s] after the first message
-CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 
 
 @dataclass
@@ -120,11 +118,7 @@ def descendants(pid: int) -> list[int]:
 
 def cpu_seconds(pid: int) -> tuple[float, float]:
     """User + system CPU time [s] of a process (all its threads) and of its descendants (the solver's)."""
-    times = []
-    for process in descendants(pid):
-        with open(f"/proc/{process}/stat", encoding="ascii") as stat:
-            fields = stat.read().rsplit(")", 1)[1].split()
-        times.append((int(fields[11]) + int(fields[12])) / CLOCK_TICKS)
+    times = [process_cpu_seconds(process) for process in descendants(pid)]
     return times[0], sum(times[1:])
 
 

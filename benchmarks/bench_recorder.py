@@ -28,22 +28,14 @@ import time
 from pathlib import Path
 
 import numpy as np
-from report import print_table
+from common import print_table, process_cpu_seconds
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.typesys import Stores, get_typestore
 
 from crane_reference.interface.bag import DIAGNOSTICS, END_EFFECTOR_POSE, JOINT_STATES
 
 NS = 10**9
-CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 START_TIMEOUT = 60.0  # [s] for the node to come up and the recorder to see its topics
-
-
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU time of a process [s]."""
-    with open(f"/proc/{pid}/stat", encoding="ascii") as stat:
-        fields = stat.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
 
 
 def bag_contents(path: Path) -> tuple[np.ndarray, dict[str, int]]:
@@ -70,9 +62,9 @@ def run(storage: str, rate: int, duration: float, domain: int, workdir: Path) ->
         recorder = subprocess.Popen([sys.executable, "-m", "crane_reference.cli", "record", "-o", str(bag),
                                      "--storage", storage], env=env, stdout=subprocess.PIPE,
                                     stderr=subprocess.PIPE, text=True)
-        start, cpu0 = time.monotonic(), cpu_seconds(recorder.pid)
+        start, cpu0 = time.monotonic(), process_cpu_seconds(recorder.pid)
         time.sleep(duration)
-        cpu, wall = cpu_seconds(recorder.pid) - cpu0, time.monotonic() - start
+        cpu, wall = process_cpu_seconds(recorder.pid) - cpu0, time.monotonic() - start
         recorder.send_signal(signal.SIGINT)
         _, stderr = recorder.communicate(timeout=START_TIMEOUT)
     finally:

@@ -21,13 +21,11 @@ the same run.
 from __future__ import annotations
 
 import argparse
-import math
 import time
 from dataclasses import replace
 
 import numpy as np
-import pinocchio as pin
-from bench_accuracy import newton_iterations
+from common import aba_time, call_seconds, newton_iterations, run_times
 from numba import njit
 
 from crane_reference.dynamics import kernels
@@ -36,18 +34,9 @@ from crane_reference.dynamics.structures import Coefficients
 from crane_reference.dynamics.terms import chain_terms, end_effector_jacobian, position_terms
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import CraneParameters
-from crane_reference.model.urdf import model_to_urdf
-from crane_reference.motion.integration import REFRESH_INTERVAL, ExactFrequencyTrapezoidal, StepState
+from crane_reference.motion.integration import REFRESH_INTERVAL, ExactFrequencyTrapezoidal
 from crane_reference.motion.simulation import MotionStepper, Scenario, simulate
 from crane_reference.motion.steps import ONLINE_STEP
-
-
-def per_call(function, repeat: int = 2000) -> float:
-    function()
-    start = time.perf_counter()
-    for _ in range(repeat):
-        function()
-    return (time.perf_counter() - start) / repeat
 
 
 @njit
@@ -66,30 +55,14 @@ def evaluation_times(params: CraneParameters) -> None:
     q = scenario.equilibrium.q
     qd = np.full_like(q, 0.01)
     d, m = scenario.dynamics, scenario.model
-    t_m = per_call(lambda: chain_terms(q, qd, d.chain))
-    t_qdd = per_call(lambda: scenario.motion.solve(0.5, q, qd))
+    t_m = call_seconds(lambda: chain_terms(q, qd, d.chain), 2000)
+    t_qdd = call_seconds(lambda: scenario.motion.solve(0.5, q, qd), 2000)
     print(f"[eval] {m.dof} DOF: M(q) with h, gravity and E kinematics {t_m * 1e6:.1f} us; "
           f"full qdd from (8) incl. constraints and Python wrapper {t_qdd * 1e6:.1f} us")
-    t_named = min(per_call(lambda: _read_chain(d.chain)) for _ in range(5))
-    t_fields = min(per_call(lambda: _read_fields(*d.chain)) for _ in range(5))
+    t_named = min(call_seconds(lambda: _read_chain(d.chain), 2000) for _ in range(5))
+    t_fields = min(call_seconds(lambda: _read_fields(*d.chain), 2000) for _ in range(5))
     print(f"[eval] calling a compiled function from Python with the ChainData named tuple {t_named * 1e6:.2f} us, "
           f"with its 11 fields as arguments {t_fields * 1e6:.2f} us (best of 5)")
-
-
-def aba_time(scenario: Scenario, repeat: int = 20000) -> float:
-    """Best per-call time [s] of Pinocchio's forward dynamics (ABA, called from Python) on the URDF that
-    crane-reference exports for the scenario's chain, at a random state (continuous joints as cos/sin)."""
-    model = pin.buildModelFromXML(model_to_urdf(scenario.model))
-    data = model.createData()
-    rng = np.random.default_rng(0)
-    q, v, tau = pin.randomConfiguration(model), rng.normal(size=model.nv), rng.normal(size=model.nv)
-    best = math.inf
-    for _ in range(5):
-        start = time.perf_counter()
-        for _ in range(repeat):
-            pin.aba(model, data, q, v, tau)
-        best = min(best, (time.perf_counter() - start) / repeat)
-    return best
 
 
 def step_times(scenario: Scenario, step: float, duration: float, after: float = 1.0) -> np.ndarray:
@@ -116,27 +89,6 @@ def step_times(scenario: Scenario, step: float, duration: float, after: float = 
         q, qd, qdd, correction, t0 = last.q, last.qd, run.rows.qdd[0], last.correction, times[i]
         B = last.evaluation.terms.velocity_map
     return walls
-
-
-def run_times(scenario: Scenario, step: float, duration: float, every_row: bool, chunk: float = 0.25) -> float:
-    """Wall time [s] of ``duration`` seconds of motion from rest in compiled runs of ``chunk`` seconds: the
-    steps alone (only each run's last row evaluated, what a caller that reads the motion needs) or with
-    every row's full evaluation (reactions, residuals, energy accounts: what ``simulate`` records)."""
-    motion = scenario.motion
-    integrator = ExactFrequencyTrapezoidal(motion)
-    state = integrator.start(0.0, scenario.equilibrium.q, np.zeros_like(scenario.equilibrium.q))
-    per_run = round(chunk / step)
-    start = time.perf_counter()
-    for first in range(0, round(duration / step), per_run):
-        times = step * np.arange(first + 1, first + per_run + 1)
-        k, drives = motion.constraints.coefficients_at(times), motion.dynamics.drive.kernel_parameters(times)
-        run = kernels.integration_run(state.q, state.qd, state.solution.qdd, state.solution.velocity_map,
-                                      state.correction, state.t, times, k,
-                                      drives, motion.partition, motion.dynamics.chain, integrator.settings,
-                                      np.full(times.size, every_row))
-        state = StepState(times[-1], run.last.q, run.last.qd, motion.solution_from_evaluation(run.last.evaluation),
-                          run.last.correction)
-    return time.perf_counter() - start
 
 
 def speed(params: CraneParameters, duration: float, repeats: int) -> None:
@@ -268,14 +220,9 @@ def component_times(params: CraneParameters, repeat: int = 3000) -> None:
               (q, qd, k, drive, partition, chain)))
     for name, function, arguments in parts:
         function(*arguments, 10)
-        best = min(_timed(function, arguments, repeat) for _ in range(5))
+        timed = lambda f=function, a=arguments: f(*a, repeat)  # noqa: E731 (one compiled loop of repeat calls)
+        best = min(call_seconds(timed, 1, median=True) for _ in range(5))
         print(f"[profile] {name:<52} {best / repeat * 1e6:7.2f} us")
-
-
-def _timed(function, arguments, repeat: int) -> float:
-    start = time.perf_counter()
-    function(*arguments, repeat)
-    return time.perf_counter() - start
 
 
 SECTIONS = ("eval", "profile", "speed")

@@ -26,6 +26,7 @@ import pickle
 import time
 
 import numpy as np
+from common import call_seconds
 from scipy.spatial.transform import Rotation
 
 from crane_reference.model.config import load_config
@@ -41,24 +42,14 @@ STEP = ONLINE_STEP  # [s], the node's default
 BATCH = 20
 
 
-def median_time(function, repeats: int) -> float:
-    """Median wall time [s] of ``function()`` over ``repeats`` calls."""
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times))
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeats", type=int, default=20)
     args = parser.parse_args()
 
     rotations = Rotation.random(CHUNK_STEPS, random_state=1).as_matrix()
-    single = median_time(lambda: [Rotation.from_matrix(R).as_quat() for R in rotations], args.repeats)
-    batch = median_time(lambda: Rotation.from_matrix(rotations).as_quat(), args.repeats)
+    single = call_seconds(lambda: [Rotation.from_matrix(R).as_quat() for R in rotations], args.repeats, median=True)
+    batch = call_seconds(lambda: Rotation.from_matrix(rotations).as_quat(), args.repeats, median=True)
     print(f"[quaternion] scipy Rotation.from_matrix(...).as_quat(): {single / CHUNK_STEPS * 1e6:7.1f} us per matrix "
           f"one at a time, {batch / CHUNK_STEPS * 1e6:7.2f} us per matrix for {CHUNK_STEPS} at once")
 
@@ -72,8 +63,8 @@ def main() -> None:
 
     for name, offset in (("at the steps", 0.0), ("between steps", 0.37 * STEP)):
         taus = [1.0 + i * STEP + offset for i in range(BATCH)]
-        one = median_time(lambda taus=taus: [stream.sample(tau) for tau in taus], args.repeats) / BATCH
-        many = median_time(lambda taus=taus: stream.samples(taus), args.repeats) / BATCH
+        one = call_seconds(lambda taus=taus: [stream.sample(tau) for tau in taus], args.repeats, median=True) / BATCH
+        many = call_seconds(lambda taus=taus: stream.samples(taus), args.repeats, median=True) / BATCH
         print(f"[sample] {name:<14} {one * 1e6:7.1f} us per sample one at a time, {many * 1e6:7.1f} us in batches "
               f"of {BATCH}")
 

@@ -14,7 +14,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from report import print_table
+from common import print_table
 
 from crane_reference.analysis.study.runner import run_study
 from crane_reference.analysis.study.spec import parse_spec

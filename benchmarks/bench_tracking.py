@@ -25,7 +25,7 @@ import argparse
 import time
 
 import numpy as np
-from bench_speed import aba_time
+from common import aba_time
 
 from crane_reference.analysis.tracking.closed_loop import TrackingSpec, run_tracking
 from crane_reference.analysis.tracking.controller import JointGains

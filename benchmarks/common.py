@@ -1,0 +1,101 @@
+"""Helpers the benchmark scripts share: timing, CPU of processes, Pinocchio's ABA as the unit of cost, the
+integrator's compiled runs and Newton evaluations, and the tables they print."""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable
+
+import numpy as np
+import pinocchio as pin
+
+from crane_reference.dynamics import kernels
+from crane_reference.model.urdf import model_to_urdf
+from crane_reference.motion.integration import EVALUATIONS, ONLINE_TOLERANCE, ExactFrequencyTrapezoidal, StepState
+from crane_reference.motion.simulation import MotionStepper, Scenario
+
+CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+
+
+def call_seconds(function: Callable[[], object], repeats: int, median: bool = False) -> float:
+    """Wall time [s] of one call of ``function()``: the mean of ``repeats`` calls back to back after one
+    untimed call, or with ``median`` the median of ``repeats`` timed calls."""
+    if median:
+        times = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            function()
+            times.append(time.perf_counter() - start)
+        return float(np.median(times))
+    function()
+    start = time.perf_counter()
+    for _ in range(repeats):
+        function()
+    return (time.perf_counter() - start) / repeats
+
+
+def process_cpu_seconds(pid: int) -> float:
+    """User + system CPU time [s] of the process ``pid`` (all its threads)."""
+    with open(f"/proc/{pid}/stat", encoding="ascii") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
+
+
+def aba_time(scenario: Scenario, repeat: int = 20000) -> float:
+    """Best per-call time [s] of Pinocchio's forward dynamics (ABA, called from Python) on the URDF that
+    crane-reference exports for the scenario's chain, at a random state (continuous joints as cos/sin)."""
+    model = pin.buildModelFromXML(model_to_urdf(scenario.model))
+    data = model.createData()
+    rng = np.random.default_rng(0)
+    q, v, tau = pin.randomConfiguration(model), rng.normal(size=model.nv), rng.normal(size=model.nv)
+    best = math.inf
+    for _ in range(5):
+        start = time.perf_counter()
+        for _ in range(repeat):
+            pin.aba(model, data, q, v, tau)
+        best = min(best, (time.perf_counter() - start) / repeat)
+    return best
+
+
+def run_times(scenario: Scenario, step: float, duration: float, every_row: bool, chunk: float = 0.25) -> float:
+    """Wall time [s] of ``duration`` seconds of motion from rest in compiled runs of ``chunk`` seconds: the
+    steps alone (only each run's last row evaluated, what a caller that reads the motion needs) or with
+    every row's full evaluation (reactions, residuals, energy accounts: what ``simulate`` records)."""
+    motion = scenario.motion
+    integrator = ExactFrequencyTrapezoidal(motion)
+    state = integrator.start(0.0, scenario.equilibrium.q, np.zeros_like(scenario.equilibrium.q))
+    per_run = round(chunk / step)
+    start = time.perf_counter()
+    for first in range(0, round(duration / step), per_run):
+        times = step * np.arange(first + 1, first + per_run + 1)
+        k, drives = motion.constraints.coefficients_at(times), motion.dynamics.drive.kernel_parameters(times)
+        run = kernels.integration_run(state.q, state.qd, state.solution.qdd, state.solution.velocity_map,
+                                      state.correction, state.t, times, k,
+                                      drives, motion.partition, motion.dynamics.chain, integrator.settings,
+                                      np.full(times.size, every_row))
+        state = StepState(times[-1], run.last.q, run.last.qd, motion.solution_from_evaluation(run.last.evaluation),
+                          run.last.correction)
+    return time.perf_counter() - start
+
+
+def newton_iterations(scenario: Scenario, step: float, duration: float = 1.0, tolerance: float = ONLINE_TOLERANCE,
+                      evaluations: int = EVALUATIONS) -> float:
+    """Mean Newton evaluations per step over the first ``duration`` seconds (one step at a time)."""
+    q0 = scenario.equilibrium.q
+    stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), step, tolerance=tolerance,
+                            evaluations=evaluations)
+    counts = []
+    while stepper.state.t < duration:
+        stepper.advance()
+        counts.append(stepper.integrator.last_iterations)
+    return float(np.mean(counts))
+
+
+def print_table(title: str, rows: list[dict[str, object]]) -> None:
+    """``title``, then one line per key of ``rows`` with one column per row (floats to 3 decimals)."""
+    print(title)
+    for key in rows[0]:
+        cells = "".join(f"{row[key]:>12.3f}" if isinstance(row[key], float) else f"{row[key]!s:>12}" for row in rows)
+        print(f"{key:<22}{cells}")
