@@ -211,7 +211,7 @@ def record_command(args: argparse.Namespace) -> int:
 
 
 def modes_command(args: argparse.Namespace) -> int:
-    from .analysis.modal import modes_report
+    from .analysis.modal_report import modes_report
 
     if not (np.isfinite(args.t) and args.t >= 0.0) or args.count < 1:
         print(f"crane-reference: --t {args.t} must be >= 0 s and --count {args.count} >= 1", file=sys.stderr)
@@ -225,7 +225,7 @@ def modes_command(args: argparse.Namespace) -> int:
 
 
 def analyze_command(args: argparse.Namespace) -> int:
-    from .analysis.vibration import analyze
+    from .analysis.vibration_report import analyze
 
     if not (np.isfinite(args.duration) and args.duration > 0 and args.step > 0):
         print(f"crane-reference: --duration {args.duration} and --step {args.step} must be > 0 s", file=sys.stderr)

@@ -19,13 +19,13 @@ import dataclasses
 
 import numpy as np
 import pytest
+from cantilever import cantilever_model
 from circle_constraint import CircleXZ
 
 from crane_reference.analysis.modal import (
     CONSTRAINT,
     DRIVE,
     body_mass_matrices,
-    cantilever_model,
     constraint_hessian,
     gravity_stiffness,
     linearise,

@@ -4,15 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 from scipy.ndimage import maximum_filter1d
 
 from ..motion.trajectory import Trajectory
 from .bands import CONTROLLER_BAND, controller_band
+from .figures import pyplot as plt
 
 MEAN_WINDOW = 0.1  # [s], window of the residual maximum
 COORDINATES = (("column_slew", r"$\psi^{(2)}$ [rad]"), ("boom_luff", r"$\psi^{(3,0)}$ [rad]"),

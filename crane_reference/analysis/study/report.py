@@ -13,13 +13,10 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from ..figures import pyplot as plt
 from .case import METRICS
 from .spec import StudySpec
 

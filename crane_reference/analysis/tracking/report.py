@@ -5,12 +5,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
+from ..figures import pyplot as plt
 from .closed_loop import TrackingRun
 from .plant import ACTUATED_JOINTS
 
