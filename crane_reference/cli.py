@@ -127,7 +127,7 @@ def study_command(args: argparse.Namespace) -> int:
 
 def _by_joint(values: list[str], option: str, size: int) -> dict[str, tuple[float, ...]]:
     """``JOINT=V1,V2,...`` items (or bare ``V1,...`` for every actuated joint) as floats by joint name."""
-    from .analysis.tracking.plant import ACTUATED_JOINTS
+    from .model.chain import ACTUATED_JOINTS
 
     out: dict[str, tuple[float, ...]] = {}
     for item in values:

@@ -289,7 +289,9 @@ def test_live_node_matches_offline_export(context, tmp_path):
     offset = (stamps - stamps[0]) // period
     offline = tmp_path / "offline"
     with BagWriter(offline) as bag:
-        export_reference(bag, node_stream(load_config(None), model), rate, published_for + 2.0)
+        # longer than the node published: it starts before the probe hears it (discovery takes seconds on a
+        # loaded machine), so its sample indices run past published_for
+        export_reference(bag, node_stream(load_config(None), model), rate, published_for + 10.0)
     offline_connections, offline_topics = read_bag(offline)
     assert {t: (c.msgtype, c.digest) for t, c in offline_connections.items()} == {
         t: (c.msgtype, c.digest) for t, c in connections.items() if t in offline_connections}

@@ -162,7 +162,7 @@ def test_coming_to_rest_pauses_along_the_ramp(server: ReferenceServer) -> None:
     publish(server, NS, 0.3)
     server.end()  # not publishing: the pause is applied at the next frame to make, and nothing to wait for
     server.come_to_rest(NS + 30 * PERIOD)
-    assert server.stream.state == PAUSED and server.stream.rate == 0.0
+    assert server.stream.state == PAUSED and server.stream.target_speed == 0.0
 
 
 def test_the_solver_process_serves_the_same_frames_and_raises_its_errors() -> None:

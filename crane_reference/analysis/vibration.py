@@ -52,7 +52,7 @@ from scipy.ndimage import uniform_filter1d
 
 from ..dynamics.kinematics import forward_kinematics
 from ..dynamics.structures import ChainData
-from ..model.chain import ChainModel
+from ..model.chain import ACTUATED_JOINTS, ChainModel
 from ..model.parameters import CraneParameters
 from ..motion.integration import CUTOFF
 from ..motion.programmed_motion import ProgrammedMotion
@@ -62,7 +62,6 @@ from .modal import Modes, linearise, modal_analysis, scenario_motion
 
 MIN_FREQUENCY = 2.0  # [Hz] peaks below are the quasi-static response to the slewing
 RELATIVE_TOLERANCE = 0.01  # of the peak frequency, besides one spectral bin
-DIFFERENCE_COORDINATES = ("column_slew", "boom_luff", "knuckle")  # psi2, psi(3,0), psi4
 SIGNALS = {"tip_vertical": "tip deflection $w_y$ (luffing plane) [m]",
            "tip_horizontal": "tip deflection $w_z$ (horizontal) [m]",
            "tip_torsion": r"tip torsion $\sum \varphi$ [rad]"}
@@ -256,6 +255,6 @@ def differences(reference: Trajectory, other: Trajectory) -> dict[str, np.ndarra
     """``other`` minus ``reference`` psi2, psi(3,0), psi4 on ``other``'s times (common span)."""
     keep = other.t <= min(reference.t[-1], other.t[-1]) + 1e-12
     out = {"t": other.t[keep]}
-    for name in DIFFERENCE_COORDINATES:
+    for name in ACTUATED_JOINTS:
         out[name] = other.coordinate(name)[keep] - np.interp(other.t[keep], reference.t, reference.coordinate(name))
     return out

@@ -10,14 +10,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model.chain import VARIANTS
+from ..model.chain import ACTUATED_JOINTS, VARIANTS
 from ..model.parameters import CraneParameters
 from ..motion.integration import CUTOFF, METHOD
 from ..motion.programmed_motion import REALISATIONS
 from ..motion.steps import ANALYSIS_STEP
 from .figures import pyplot
 from .vibration import (
-    DIFFERENCE_COORDINATES,
     MEAN_WINDOW,
     MIN_FREQUENCY,
     SIGNALS,
@@ -38,7 +37,7 @@ def _difference_summary(d: dict[str, np.ndarray]) -> dict:
     return {"span_s": float(d["t"][-1]),
             **{name: {"max_abs_rad": float(np.max(np.abs(d[name]))),
                       "max_abs_mean_rad": float(np.max(np.abs(moving_mean(d["t"], d[name])))),
-                      "final_rad": float(d[name][-1])} for name in DIFFERENCE_COORDINATES}}
+                      "final_rad": float(d[name][-1])} for name in ACTUATED_JOINTS}}
 
 
 def _run_summary(r: Run) -> dict:
@@ -90,7 +89,7 @@ def analyze(params: CraneParameters, out: str | Path, duration: float = 10.0, st
     diffs = {}
     pairs = [(f"flexible - rigid, {r} constraints", (r, "rigid"), (r, "flexible")) for r in realisations]
     pairs += [(f"servo - ideal constraints, {v}", ("ideal", v), ("servo", v)) for v in VARIANTS[::-1]
-              if {"ideal", "servo"} <= set(realisations)]
+              if set(REALISATIONS) <= set(realisations)]
     for label, reference, other in pairs:
         if not (runs[reference].error or runs[other].error):
             diffs[label] = differences(runs[reference].trajectory, runs[other].trajectory)
@@ -146,7 +145,7 @@ def summary_markdown(summary: dict) -> str:
               "| difference | span [s] | psi2 | psi(3,0) | psi4 |", "|---|---|---|---|---|"]
     for label, d in summary["differences"].items():
         cells = " | ".join(f"{d[n]['max_abs_rad']:.3e} ({d[n]['max_abs_mean_rad']:.3e})"
-                           for n in DIFFERENCE_COORDINATES)
+                           for n in ACTUATED_JOINTS)
         lines.append(f"| {label} | {d['span_s']:.3f} | {cells} |")
     if "modes_at_start" in summary:
         lines += ["", f"## Constrained modes at t = 0 ({summary['modes_at_start']['realisation']} constraints, "
@@ -244,11 +243,11 @@ def _plot_differences(diffs: dict, path: Path) -> None:
     (flexible - rigid per realisation, servo - ideal per model)."""
     plt = pyplot
     rows = max(len(diffs), 1)
-    fig, axes = plt.subplots(rows, len(DIFFERENCE_COORDINATES), figsize=(15, 3.8 * rows), squeeze=False,
+    fig, axes = plt.subplots(rows, len(ACTUATED_JOINTS), figsize=(15, 3.8 * rows), squeeze=False,
                              constrained_layout=True)
     labels = (r"$\psi^{(2)}$", r"$\psi^{(3,0)}$", r"$\psi^{(4)}$")
     for r, (pair, d) in enumerate(diffs.items()):
-        for ax, name, label in zip(axes[r], DIFFERENCE_COORDINATES, labels, strict=True):
+        for ax, name, label in zip(axes[r], ACTUATED_JOINTS, labels, strict=True):
             ax.plot(d["t"], d[name], color="0.7", lw=0.5, label="raw")
             ax.plot(d["t"], moving_mean(d["t"], d[name]), color="k", lw=1.2, label=f"{MEAN_WINDOW:g} s mean")
             _label_time_axes(ax, f"{label}: {pair}", "[rad]", fontsize="medium")

@@ -289,7 +289,7 @@ def export_reference(bag: BagWriter, stream: ReferenceStream, rate: int, duratio
                               else (Level.OK, stream.state))
             counters = {"published": k + 1, "held_late": 0, "stamp_leaps": 0, "held_non_finite": 0}
             values = messages.diagnostic_values(stream.state, sample, factor, rate, float(rate), counters,
-                                                stream.targets, stream.rate, stream.last_error)
+                                                stream.targets, stream.target_speed, stream.last_error)
             reference.write_diagnostics(stamp, f"{node_name}: reference", f"/{node_name}", level, message, values)
         stream.release(tau, RELEASE_KEEP)
         if progress is not None:

@@ -41,7 +41,6 @@ MARKERS_TOPIC = "~/markers"
 ROBOT_DESCRIPTION_TOPIC = "~/robot_description"
 SPEED_SCALING_TOPIC = "~/speed_scaling"  # input, std_msgs/Float64
 DIAGNOSTICS_TOPIC = "/diagnostics"
-ACTUATED_JOINTS = ("column_slew", "boom_luff", "knuckle")  # default joints of ~/reference_preview
 PUBLISHER_DEPTH = 10  # keep-last depth of every publisher (reliable, volatile)
 DIAGNOSTICS_PERIOD = 1.0  # [s]
 MAX_PUBLISH_RATE = 1000  # [Hz], upper bound of the publish_rate parameter

@@ -33,6 +33,8 @@ PRISMATIC = 0
 REVOLUTE = 1
 AXES = {"x": 0, "y": 1, "z": 2}
 VARIANTS = ("flexible", "rigid")
+ACTUATED_JOINTS = ("column_slew", "boom_luff", "knuckle")
+"""The joints the crane's actuators drive, psi2, psi(3,0) and psi4 (also the coordinates the paper plots)."""
 
 
 @dataclass(frozen=True)

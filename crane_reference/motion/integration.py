@@ -168,7 +168,7 @@ class ExactFrequencyTrapezoidal:
         solution = self.motion.solve(t, q, qd)
         return StepState(t, q, qd, solution, self._fresh())
 
-    def restart(self, state: StepState, keep_modes: bool = False) -> StepState:
+    def resolve(self, state: StepState, keep_modes: bool = False) -> StepState:
         """Re-solve (8) at ``state`` with the drive's value from t on (after a jump) or under new
         constraints, as at a start; with ``keep_modes`` (the configuration did not move, only the forces
         jumped, e.g. a controller's new command) the modal correction in use is kept and the accelerations
@@ -182,7 +182,7 @@ class ExactFrequencyTrapezoidal:
 
     def step(self, state: StepState, t1: float, ends_on_jump: bool = False) -> StepState:
         """Advance ``state`` to time t1 > state.t [s] (one step of :meth:`run`).  A step ending on a drive
-        jump (``ends_on_jump``) uses the drive's left limit there; continue with :meth:`restart` at the jump."""
+        jump (``ends_on_jump``) uses the drive's left limit there; continue with :meth:`resolve` at the jump."""
         return self.run(state, np.array([t1], dtype=float), ends_on_jump)[0]
 
     def run(self, state: StepState, times: np.ndarray, ends_on_jump: bool = False) -> tuple[StepState, StepRows]:

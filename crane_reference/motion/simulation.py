@@ -144,7 +144,7 @@ class MotionStepper:
         steps = np.diff(np.concatenate(([start.t], times)))
         work = self._work + np.cumsum(0.5 * steps[:, None] * (powers[:-1] + powers[1:]), axis=0)
         self._work = work[-1].copy()
-        self.state = self.integrator.restart(new) if on_jump else new
+        self.state = self.integrator.resolve(new) if on_jump else new
         self.sample = make_sample(self.state.t, self.state.q, self.state.qd, self.state.solution, self._work)
         accounts = rows.accounts.copy()
         qdd, reactions, forces = rows.qdd.copy(), rows.reactions.copy(), rows.constraint_forces.copy()
@@ -162,7 +162,7 @@ class MotionStepper:
         """The forces jumped at the current time (a new command of an :class:`~crane_reference.model.drive.Actuated`
         drive): re-solve (8) there under the forces from now on, keeping the modal correction (the
         configuration did not move); the sample shows the motion from now on."""
-        self.state = self.integrator.restart(self.state, keep_modes=True)
+        self.state = self.integrator.resolve(self.state, keep_modes=True)
         self.sample = make_sample(self.state.t, self.state.q, self.state.qd, self.state.solution, self._work)
 
     def snapshot(self) -> StepperSnapshot:
@@ -177,14 +177,14 @@ class MotionStepper:
     def retarget(self, constraints: ConstraintSet, t: float, q: np.ndarray, qd: np.ndarray, work: np.ndarray) -> None:
         """Continue from a computed step (t, q, qd and the work accounts [J] there, e.g. a row of
         :meth:`advance_until`) under new constraints that hold there (e.g. a C2 blend that starts at t).  The
-        method restarts there (:meth:`~.integration.ExactFrequencyTrapezoidal.restart`: (8) solved again at
+        method restarts there (:meth:`~.integration.ExactFrequencyTrapezoidal.resolve`: (8) solved again at
         (t, q, qd), a fresh modal correction), which is all a continuation under new constraints keeps of the
         step, so no step is integrated again."""
         self.integrator.motion = ProgrammedMotion(self.motion.dynamics, constraints, tuple(self.motion.dependent),
                                                   self.motion.min_singular_value)
         self._k = int(np.floor((t - self._t0) / self.step_size + 1e-9))  # grid times at or before t
         self._work = work.copy()
-        self.state = self.integrator.restart(StepState(t, q, qd, self.state.solution, self.state.correction))
+        self.state = self.integrator.resolve(StepState(t, q, qd, self.state.solution, self.state.correction))
         self.sample = make_sample(t, q, qd, self.state.solution, self._work)
 
 

@@ -157,7 +157,7 @@ class CraneReferenceNode(LifecycleNode):
         """Bring a moving reference to rest along a speed ramp, publish it to the first sample at rest, then
         stop publishing (the reference is held there)."""
         stream = self._server.stream
-        self._resume_on_activate = stream.state == RUNNING and stream.rate > 0.0
+        self._resume_on_activate = stream.state == RUNNING and stream.target_speed > 0.0
         self._server.come_to_rest(self._now(), self._stop)
         self._stop_publishing()
         self._starting = "inactive: publishing stopped; activate to publish again"

@@ -32,8 +32,8 @@ from rclpy.exceptions import ParameterNotDeclaredException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ..interface.messages import ACTUATED_JOINTS, MAX_PUBLISH_RATE
-from ..model.chain import VARIANTS
+from ..interface.messages import MAX_PUBLISH_RATE
+from ..model.chain import ACTUATED_JOINTS, VARIANTS
 from ..model.config import load_config
 from ..model.parameters import CraneParameters, Task, TorqueDrive
 from ..motion.steps import ONLINE_STEP

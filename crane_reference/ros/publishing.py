@@ -187,7 +187,7 @@ class DiagnosticsPublisher:
     def log_status(self) -> None:
         """One-line status in the node's log (a timer): stream time, E, residual, achieved rate, state."""
         server = self._server()
-        sample = server.last_sample()[0] if server is not None else None
+        sample = server.last_sample().sample if server is not None else None
         if sample is None:
             return
         x, y, z = sample.ee_position
@@ -221,7 +221,7 @@ class DiagnosticsPublisher:
         self.achieved_rate = status.achieved_rate
         values = messages.diagnostic_values(
             stream.state, status.last, status.real_time_factor, server.rate, status.achieved_rate, counters,
-            stream.targets, stream.rate, stream.last_error or status.fault,
+            stream.targets, stream.target_speed, stream.last_error or status.fault,
             {"frames_ready": status.frames_ready, "blend_time_s": f"{stream.blend_time:g}", **status.commands})
         self._publisher.publish(messages.diagnostics(self.types, node.get_clock().now().nanoseconds, name,
                                                      hardware_id, health.level, health.message, values))

@@ -109,7 +109,7 @@ class ReferenceStream:
         return self._warp.at(tau)[0]
 
     @property
-    def rate(self) -> float:
+    def target_speed(self) -> float:
         """The speed scaling the stream is at or moving to (0 while paused)."""
         return self._warp.target
 

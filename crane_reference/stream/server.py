@@ -44,7 +44,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 from ..model.parameters import Task
 from ..model.units import NANOSECONDS
@@ -93,6 +93,21 @@ class Restart:
     k: int
     jump: float
     joint: str
+
+
+class Published(NamedTuple):
+    """The last sample published (None before the first) and its stamp [ns]."""
+
+    sample: ReferenceSample | None
+    stamp_ns: int
+
+
+class CommandPoint(NamedTuple):
+    """Where a command takes effect: sample k, at stream time tau [s], and the solver's answer to it."""
+
+    k: int
+    tau: float
+    answer: Any
 
 
 @dataclass(frozen=True)
@@ -286,10 +301,10 @@ class ReferenceServer:
         with self._lock:
             return None if self._start_ns is None else stamp_at(self._start_ns, self.schedule.next_k, self.rate)
 
-    def last_sample(self) -> tuple[ReferenceSample | None, int]:
+    def last_sample(self) -> Published:
         """The last sample published and its stamp [ns]."""
         with self._lock:
-            return self.schedule.last, self._last_stamp
+            return Published(self.schedule.last, self._last_stamp)
 
     def stamp_of(self, k: int) -> float:
         """Stamp [s] of sample k (relative to the start while not publishing)."""
@@ -297,13 +312,12 @@ class ReferenceServer:
 
     # -- commands -------------------------------------------------------------------------------------
 
-    def _at_command_point(self, name: str, accepted_ns: int, *request: Any) -> tuple[int, float, Any]:
+    def _at_command_point(self, name: str, accepted_ns: int, *request: Any) -> CommandPoint:
         """Send the solver ``request`` (method, args...) with the stream time tau of the command point
         inserted after the method (frame k: the last one stamped within ``lead`` of the acceptance
         ``accepted_ns``, at least the one after the next to publish; the next frame to make while not
         publishing); the frames from k on are dropped at once, and the first batch of them is made again in
-        the same request.  Records the command's acceptance and effect.  Returns k, tau and the
-        solver's answer."""
+        the same request.  Records the command's acceptance and effect."""
         self.check_computing()
         with self._lock:
             k, tau = self.schedule.command_point(accepted_ns if self.publishing else None, self._start_ns or 0)
@@ -329,7 +343,7 @@ class ReferenceServer:
             self._commands[f"{name}_stamp_s"] = f"{self.stamp_of(k):.6f}"
             self._commands[f"{name}_accepted_s"] = f"{accepted_ns / NANOSECONDS:.6f}"
             self._commands[f"{name}_stream_time_s"] = repr(tau)
-        return k, tau, answer
+        return CommandPoint(k, tau, answer)
 
     @property
     def computing(self) -> bool:
@@ -361,7 +375,7 @@ class ReferenceServer:
         if name not in COMMANDS:
             raise ValueError(f"command {name!r}: not one of {', '.join(COMMANDS)}")
         label = "speed_scaling" if name == "set_speed_scaling" else name
-        return self._at_command_point(label, accepted_ns, name, *args)[0]
+        return self._at_command_point(label, accepted_ns, name, *args).k
 
     def check_targets(self, targets: Task) -> None:
         """Raise :class:`~.targets.UnreachableTargetError` unless ``targets`` can be streamed from here."""
@@ -384,9 +398,9 @@ class ReferenceServer:
         stream unchanged."""
         if self.publishing:
             raise CommandRefusedError("a restart makes the reference jump to the start: stop publishing first")
-        k, _, (before, after) = self._at_command_point("restart", accepted_ns, "restart")
-        jump = abs(after - before)
-        restart = Restart(k, float(jump.max()), self.info.joint_names[int(jump.argmax())])
+        point = self._at_command_point("restart", accepted_ns, "restart")
+        jump = abs(point.answer.start - point.answer.before)
+        restart = Restart(point.k, float(jump.max()), self.info.joint_names[int(jump.argmax())])
         with self._lock:
             self.schedule.fault = ""
             self._commands.update(restart_jump_rad=f"{restart.jump:.6g}", restart_jump_joint=restart.joint)
@@ -421,11 +435,11 @@ class ReferenceServer:
         rest is published (at most the ramp, the lead and REST_MARGIN; sooner if ``stop`` is set).  Nothing to
         do once computing ahead has stopped (the solver ended or failed: the last sample is held already)."""
         stream = self.stream
-        if stream.state != RUNNING or stream.rate <= 0.0 or not self._worker.is_alive():
+        if stream.state != RUNNING or stream.target_speed <= 0.0 or not self._worker.is_alive():
             return
-        k, tau, _ = self._at_command_point("pause", accepted_ns, "pause")
+        point = self._at_command_point("pause", accepted_ns, "pause")
         stream = self.stream
-        rest_k = k + math.ceil((stream.settled_at - tau) * self.rate - 1e-9) + 1
+        rest_k = point.k + math.ceil((stream.settled_at - point.tau) * self.rate - 1e-9) + 1
         deadline = time.monotonic() + stream.ramp_time + self.schedule.lead + REST_MARGIN
         stop = stop or threading.Event()
         while self.publishing and self.schedule.next_k <= rest_k and time.monotonic() < deadline:
@@ -443,7 +457,10 @@ class ReferenceServer:
             self._rates_reference = (published, wall, motion, now_ns)
             note, self._clock_note = self._clock_note, ""
             return ServerStatus(
-                self.stream, self.publishing, schedule.last, schedule.counters.as_dict(), schedule.fault,
-                len(schedule.frames), dict(self._commands), self._clock_behind / NANOSECONDS, note,
-                (published - last_published) * NANOSECONDS / (now_ns - last_now) if now_ns > last_now else 0.0,
-                (motion - last_motion) / (wall - last_wall) if wall > last_wall else math.inf, self.computing)
+                stream=self.stream, publishing=self.publishing, last=schedule.last,
+                counters=schedule.counters.as_dict(), fault=schedule.fault, frames_ready=len(schedule.frames),
+                commands=dict(self._commands), clock_behind=self._clock_behind / NANOSECONDS, clock_note=note,
+                achieved_rate=((published - last_published) * NANOSECONDS / (now_ns - last_now) if now_ns > last_now
+                               else 0.0),
+                real_time_factor=(motion - last_motion) / (wall - last_wall) if wall > last_wall else math.inf,
+                computing=self.computing)

@@ -36,7 +36,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -97,11 +97,18 @@ class StreamStatus:
 
     state: str
     targets: Task
-    rate: float
+    target_speed: float
     last_error: str
     ramp_time: float
     settled_at: float
     blend_time: float
+
+
+class Return(NamedTuple):
+    """A return to the start: q [SI units] at the stream time it happens, before, and q at the start."""
+
+    before: np.ndarray
+    start: np.ndarray
 
 
 class StreamSolver:
@@ -126,7 +133,7 @@ class StreamSolver:
 
     def status(self) -> StreamStatus:
         stream = self.stream
-        return StreamStatus(stream.state, stream.targets, stream.rate, stream.last_error, stream.ramp_time,
+        return StreamStatus(stream.state, stream.targets, stream.target_speed, stream.last_error, stream.ramp_time,
                             stream.settled_at(), stream.blend_time)
 
     def frames(self, request: FrameRequest, keep: float) -> FrameBatch:
@@ -172,13 +179,13 @@ class StreamSolver:
         """Re-target at tau to targets already checked (:meth:`check_targets`)."""
         self.stream.retarget(tau, targets, checked=True)
 
-    def restart(self, tau: float) -> tuple[np.ndarray, np.ndarray]:
-        """Back to the static-equilibrium start at tau; returns q at tau before, and q at the start."""
+    def restart(self, tau: float) -> Return:
+        """Back to the static-equilibrium start at tau."""
         stream = self.stream
         stream.compute(tau)
         before = stream.sample(tau).q
         stream.restart(tau)
-        return before, stream.start_configuration()
+        return Return(before, stream.start_configuration())
 
 
 STREAM_COMMANDS: dict[str, Callable[..., Any]] = {

@@ -28,7 +28,7 @@ import time
 
 import numpy as np
 
-from ...model.chain import VARIANTS
+from ...model.chain import ACTUATED_JOINTS, VARIANTS
 from ...model.config import load_config
 from ...model.drive import column_drive
 from ...model.parameters import CraneParameters, Task
@@ -40,17 +40,15 @@ from ...motion.trajectory import Trajectory
 from ...stream.targets import UnreachableTargetError, check_task
 from ..bands import CONTROLLER_BAND, controller_band
 from ..tracking.closed_loop import SUMMARY, TrackingSpec, run_tracking
-from ..tracking.plant import ACTUATED_JOINTS
 from ..vibration import boom_tip_deflection
 from .spec import PATH_SPEED_RISE, Case, StudySpec
 
 BAND = CONTROLLER_BAND  # [Hz]
 SINGULARITY_MARGIN = 0.1  # smallest sigma_min(K_dc) accepted by the reachability check (the node's)
-COMPARED = ("column_slew", "boom_luff", "knuckle")
 TRACKED = tuple(f"track_{name}" for name in SUMMARY if name != "real_time_factor")
 """The closed loop's metrics as columns (a spec with tracking)."""
 METRICS = ("feasible", "reason", "kdc_min_singular_value", "tip_deflection_m", "vibration_rms_m", "constraint_force_n",
-           "drive_power_w", "ee_speed_m_s", *(f"diff_{joint}_rad" for joint in COMPARED), "residual_m",
+           "drive_power_w", "ee_speed_m_s", *(f"diff_{joint}_rad" for joint in ACTUATED_JOINTS), "residual_m",
            "energy_error_j", *TRACKED, "wall_s")
 
 
@@ -168,7 +166,7 @@ def run_case(spec: StudySpec, case: Case) -> dict[str, object]:
         row["feasible"] = True
         if len(runs) == 2:
             flexible, rigid = runs["flexible"], runs["rigid"]
-            for joint in COMPARED:
+            for joint in ACTUATED_JOINTS:
                 difference = flexible.coordinate(joint) - rigid.coordinate(joint)
                 row[f"diff_{joint}_rad"] = float(np.abs(controller_band(difference, spec.step)).max())
     row["wall_s"] = time.perf_counter() - started

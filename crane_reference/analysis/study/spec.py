@@ -43,9 +43,10 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ...model.chain import VARIANTS
+from ...model.chain import ACTUATED_JOINTS, VARIANTS
 from ...model.config import load_config
 from ...model.parameters import TorqueDrive
+from ...motion.programmed_motion import REALISATIONS
 from ...motion.steps import ANALYSIS_STEP
 
 PATH_SPEED_RISE = 1.0  # [s], quintic rise of the path speed from rest
@@ -69,13 +70,13 @@ PARAMETERS: dict[str, tuple[str, float, float, bool]] = {
     "torque_limit": ("N m", 1.0, 1e8, False),
     "feedforward": ("", 0, 1, True),
 }
-TRACKING_PARAMETERS = ("bandwidth", "bandwidth_column_slew", "bandwidth_boom_luff", "bandwidth_knuckle",
-                       "damping_ratio", "torque_limit", "feedforward")
+TRACKING_PARAMETERS = ("bandwidth", *(f"bandwidth_{joint}" for joint in ACTUATED_JOINTS), "damping_ratio",
+                       "torque_limit", "feedforward")
 TRACKING_DEFAULTS = {"controller": "pd", "feedforward": "rigid", "rate": 1000.0, "bandwidth": 2.0,
                      "damping_ratio": 0.7, "torque_limit": math.inf}
 LIMITS = ("tip_deflection_m", "vibration_rms_m", "constraint_force_n", "drive_power_w", "ee_speed_m_s",
           "track_ellipse_distance_max_m", "track_height_error_max_m", "track_tip_vibration_rms_m",
-          "track_column_slew_torque_peak_nm", "track_boom_luff_torque_peak_nm", "track_knuckle_torque_peak_nm")
+          *(f"track_{joint}_torque_peak_nm" for joint in ACTUATED_JOINTS))
 CHOICES = (*VARIANTS, "both")
 
 
@@ -158,8 +159,8 @@ def parse_spec(data: Any, source: str = "study spec") -> StudySpec:
     duration = _number(data.get("duration", 3.0), "duration", 1e-3, 600.0)
     step = _number(data.get("step", ANALYSIS_STEP), "step", 1e-5, 1e-2)
     realisation = data.get("realisation", "ideal")
-    if realisation not in ("ideal", "servo"):
-        raise StudyError(f"realisation = {realisation!r}: must be 'ideal' or 'servo'")
+    if realisation not in REALISATIONS:
+        raise StudyError(f"realisation = {realisation!r}: must be one of {', '.join(map(repr, REALISATIONS))}")
     vary = data.get("vary")
     if not isinstance(vary, dict) or not vary:
         raise StudyError(f"vary = {vary!r}: must map parameters ({', '.join(PARAMETERS)}) to "

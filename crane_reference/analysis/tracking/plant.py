@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...dynamics.chain_dynamics import CraneDynamics
-from ...model.chain import build_model
+from ...model.chain import ACTUATED_JOINTS, build_model
 from ...model.drive import Actuated, make_drive
 from ...model.parameters import CraneParameters
 from ...motion.constraints import ConstraintSet
@@ -26,7 +26,6 @@ from ...motion.programmed_motion import ProgrammedMotion
 from ...motion.simulation import MotionStepper, Scenario
 from ...motion.trajectory import Trajectory, stack_samples
 
-ACTUATED_JOINTS = ("column_slew", "boom_luff", "knuckle")
 """The joints with actuators, in the order of every torque vector here (psi2, psi(3,0), psi4)."""
 
 
