@@ -23,6 +23,11 @@ ROSDEP_KEYS = {
 PIP_ONLY = {"dask", "distributed", "pyarrow"}
 """Modules without a rosdep key (installed by pip with the package): only the studies may use them."""
 
+TEST_ROSDEP_KEYS = {**ROSDEP_KEYS, "pytest": "python3-pytest"}
+TEST_PIP_ONLY = {"mcap"}
+"""Test modules without a rosdep key (setup.py's test extra installs them)."""
+TEST_HELPERS = {path.stem for path in (ROOT / "test").glob("*.py")}
+
 
 def imported_modules(path: Path) -> set[str]:
     """Top-level names of the absolute imports in a Python file."""
@@ -35,9 +40,9 @@ def imported_modules(path: Path) -> set[str]:
     return names - set(sys.stdlib_module_names) - {"crane_reference"}
 
 
-def exec_depends() -> set[str]:
+def exec_depends(tags: tuple[str, ...] = ("exec_depend", "depend")) -> set[str]:
     root = ET.parse(ROOT / "package.xml").getroot()
-    return {e.text.strip() for tag in ("exec_depend", "depend") for e in root.iter(tag)}
+    return {e.text.strip() for tag in tags for e in root.iter(tag)}
 
 
 def test_every_import_is_a_declared_dependency():
@@ -63,3 +68,16 @@ def test_declared_ros_packages_are_used():
     used = set().union(*(imported_modules(p) for p in SOURCES)) | launched
     ros_packages = {d for d in exec_depends() if not d.startswith("python3-")}
     assert ros_packages <= used, ros_packages - used
+
+
+def test_every_test_import_is_a_declared_dependency():
+    """What the tests import is a dependency of the package or a <test_depend> (rosdep installs it before
+    colcon test), besides the tests' own helper modules."""
+    declared = exec_depends(("exec_depend", "depend", "test_depend"))
+    missing = {}
+    for path in sorted((ROOT / "test").glob("*.py")):
+        for module in imported_modules(path) - PIP_ONLY - TEST_PIP_ONLY - TEST_HELPERS:
+            key = TEST_ROSDEP_KEYS.get(module, module)
+            if key not in declared:
+                missing.setdefault(key, []).append(path.name)
+    assert not missing, f"package.xml lacks <test_depend> for: {missing}"
