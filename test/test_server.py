@@ -111,7 +111,7 @@ def test_restart_only_while_not_publishing_and_its_jump(server: ReferenceServer)
     restart = server.restart()
     assert restart.k == len(out)  # while not publishing: at the next sample, the frames made ahead dropped
     truth = ReferenceStream(load_config(), "rigid", STEP, blend_time=0.5, ramp_time=0.3)
-    start = truth.start_configuration()
+    start = truth.sample(0.0).q  # the static-equilibrium start
     truth.compute(restart.k / RATE)
     jump = np.abs(truth.sample(restart.k / RATE).q - start)
     assert restart.jump == pytest.approx(jump.max(), rel=1e-9)
@@ -154,7 +154,7 @@ def test_a_solver_failure_holds_the_last_sample_and_a_restart_recovers(server: R
     assert server.stream.state == RUNNING
     server.begin(NS + len(out) * PERIOD)
     resumed = publish(server, NS + len(out) * PERIOD, 0.1)
-    np.testing.assert_allclose(resumed[0].frame.sample.q, truth.start_configuration(), atol=1e-12)
+    np.testing.assert_allclose(resumed[0].frame.sample.q, truth.sample(0.0).q, atol=1e-12)
 
 
 def test_coming_to_rest_pauses_along_the_ramp(server: ReferenceServer) -> None:
@@ -249,3 +249,29 @@ def test_health_ranks_what_is_wrong_worst_first() -> None:
     stopped = dataclasses.replace(failed, computing=False, fault="the solver process ended")
     health = serving_health(stopped, 3)
     assert health.level == Level.ERROR and health.message.startswith("solver stopped: the solver process ended")
+
+
+def test_a_restart_takes_the_shortest_way_on_whole_turn_coordinates() -> None:
+    """The column slews more than half a turn, then ~/restart goes back to the start: the column goes the
+    shortest way (a jump of at most half a turn), to the same pose as the static-equilibrium start (whole turns
+    apart), and the motion from there is the start's motion shifted by those turns."""
+    solver = LocalSolver(spec(step=5e-4))
+    stream = solver.solver.stream
+    column = stream.joint_names.index("column_slew")
+    assert stream.whole_turn_coordinates()[column] and not stream.whole_turn_coordinates()[0]  # base_x
+    tau = 8.0
+    stream.compute(tau)
+    before = stream.sample(tau).q
+    assert abs(before[column]) > np.pi  # the column has slewed more than half a turn
+    answer = StreamSolver.restart(solver.solver, tau)
+    assert np.array_equal(answer.before, before)
+    assert abs(answer.start[column] - before[column]) <= np.pi
+    fresh = ReferenceStream(load_config(), "rigid", 5e-4, 0.5, load_config().task, ramp_time=0.3)
+    turns = (answer.start[column] - fresh.sample(0.0).q[column]) / (2.0 * np.pi)
+    assert round(turns) != 0 and abs(turns - round(turns)) < 1e-12
+    shift = np.zeros_like(before)
+    shift[column] = 2.0 * np.pi * round(turns)
+    np.testing.assert_allclose(answer.start, fresh.sample(0.0).q + shift, rtol=0, atol=1e-12)
+    stream.compute(tau + 1.0)
+    fresh.compute(1.0)
+    np.testing.assert_allclose(stream.sample(tau + 1.0).q, fresh.sample(1.0).q + shift, rtol=0, atol=1e-9)

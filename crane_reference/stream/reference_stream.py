@@ -33,6 +33,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..model.chain import REVOLUTE
+from ..model.drive import SpringDrive
 from ..model.parameters import CraneParameters, FlexibleDrive, Task, TorqueDrive
 from ..motion.constraints import ConstraintSet
 from ..motion.equilibrium import static_equilibrium
@@ -86,11 +88,26 @@ class ReferenceStream:
                                      tuple(self.dependent[i] for i in rows), MIN_SINGULAR_VALUE)
         return static_equilibrium(holonomic, self.model.initial_q).q
 
-    def restart(self, tau: float = 0.0) -> None:
+    def whole_turn_coordinates(self) -> np.ndarray:
+        """Which coordinates matter only modulo a whole turn (2 pi rad): the revolute ones on which no spring
+        acts, neither the chain's nor a spring drive's (which holds the column to its motor's angle)."""
+        model = self.model
+        free = np.array([joint.kind == REVOLUTE and not np.any(model.stiffness[i])
+                         for i, joint in enumerate(model.joints)])
+        if isinstance(self.scenario.dynamics.drive, SpringDrive):
+            free[model.drive_joint] = False
+        return free
+
+    def restart(self, tau: float = 0.0, near: np.ndarray | None = None) -> None:
         """Back to the static-equilibrium start of the current targets; motion time 0 at publish time tau,
-        moving at the speed scaling."""
+        moving at the speed scaling.  With ``near`` (q now), each of the :meth:`whole_turn_coordinates` starts
+        the whole turns from its start value that are nearest ``near``: the same pose, reached the shortest
+        way (the motion from it is the same, shifted by those turns)."""
         constraints = self.task_constraints(self.targets, self.scenario.z_static)
         start = self._static_start(constraints)
+        if near is not None:
+            turns = np.where(self.whole_turn_coordinates(), np.round((near - start) / (2.0 * np.pi)), 0.0)
+            start = start + 2.0 * np.pi * turns
         self._stepper = MotionStepper(self._motion(constraints), 0.0, start, np.zeros_like(start), self.step)
         self._history = History(self._stepper.snapshot(),
                                 reference_sample(self._stepper.sample, self.model.drive_joint))
@@ -99,10 +116,6 @@ class ReferenceStream:
         self._forgotten: list[list] = []
         self.state = RUNNING
         self.last_error = ""
-
-    def start_configuration(self) -> np.ndarray:
-        """q at the static-equilibrium start of the current targets (where :meth:`restart` goes)."""
-        return self._static_start(self.task_constraints(self.targets, self.scenario.z_static))
 
     def motion_time(self, tau: float) -> float:
         """Motion time at publish time tau."""

@@ -180,12 +180,13 @@ class StreamSolver:
         self.stream.retarget(tau, targets, checked=True)
 
     def restart(self, tau: float) -> Return:
-        """Back to the static-equilibrium start at tau."""
+        """Back to the static-equilibrium start at tau, the shortest way on whole-turn coordinates
+        (:meth:`~.reference_stream.ReferenceStream.restart`)."""
         stream = self.stream
         stream.compute(tau)
         before = stream.sample(tau).q
-        stream.restart(tau)
-        return Return(before, stream.start_configuration())
+        stream.restart(tau, near=before)
+        return Return(before, stream.sample(tau).q)
 
 
 STREAM_COMMANDS: dict[str, Callable[..., Any]] = {
