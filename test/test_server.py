@@ -116,10 +116,12 @@ def test_restart_only_while_not_publishing_and_its_jump(server: ReferenceServer)
     jump = np.abs(truth.sample(restart.k / RATE).q - start)
     assert restart.jump == pytest.approx(jump.max(), rel=1e-9)
     assert restart.joint == truth.joint_names[int(jump.argmax())]
+    assert "restart_stamp_s" not in server.commands  # not known before publishing begins again
     server.begin(NS + len(out) * PERIOD)
     resumed = publish(server, NS + len(out) * PERIOD, 0.2)
     np.testing.assert_allclose(resumed[0].frame.sample.q, start, atol=1e-12)
     assert resumed[0].stamp_ns > out[-1].stamp_ns
+    assert server.commands["restart_stamp_s"] == f"{resumed[0].stamp_ns / NS:.6f}"  # absolute, as every stamp
 
 
 def test_a_solver_failure_holds_the_last_sample_and_a_restart_recovers(server: ReferenceServer,

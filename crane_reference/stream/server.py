@@ -165,6 +165,7 @@ class ReferenceServer:
         self._clock_note = ""
         self._commands: dict[str, str] = {}
         self._awaiting: dict[str, int] = {}  # command -> its first frame, until made
+        self._unstamped: dict[str, int] = {}  # command made while not publishing -> its frame, stamped at begin
         self._rates_reference = (0, 0.0, 0.0, 0)
         self._worker = threading.Thread(target=self._work, name="crane_reference_frames", daemon=True)
         self._worker.start()
@@ -263,6 +264,9 @@ class ReferenceServer:
         with self._lock:
             start = max(now_ns, self._last_stamp + NANOSECONDS // self.rate)
             self._start_ns = start - self.schedule.next_k * NANOSECONDS // self.rate
+            for name, k in self._unstamped.items():  # their stamps are known from now on
+                self._commands[f"{name}_stamp_s"] = f"{self.stamp_of(k):.6f}"
+            self._unstamped.clear()
             self._rates_reference = (self.schedule.counters.published, self.schedule.compute_wall,
                                      self.schedule.compute_motion, now_ns)
 
@@ -340,7 +344,11 @@ class ReferenceServer:
                 self._commands_pending -= 1
                 self._lock.notify_all()  # the worker goes on after these frames, not at the next publish
         with self._lock:
-            self._commands[f"{name}_stamp_s"] = f"{self.stamp_of(k):.6f}"
+            if self.publishing:
+                self._commands[f"{name}_stamp_s"] = f"{self.stamp_of(k):.6f}"
+            else:  # stamped when publishing begins (:meth:`begin`)
+                self._commands.pop(f"{name}_stamp_s", None)
+                self._unstamped[name] = k
             self._commands[f"{name}_accepted_s"] = f"{accepted_ns / NANOSECONDS:.6f}"
             self._commands[f"{name}_stream_time_s"] = repr(tau)
         return CommandPoint(k, tau, answer)
