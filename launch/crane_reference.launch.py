@@ -3,14 +3,17 @@ same model fed by the node's reference joint states, and RViz showing the crane,
 E's trail and pose.
 
     ros2 launch crane_reference crane_reference.launch.py [model:=flexible|rigid] [config_file:=crane.yaml]
-        [params_file:=node.yaml] [rviz:=true|false] [namespace:=crane1] [use_sim_time:=false|true]
+        [params_file:=node.yaml] [rviz:=true|false] [namespace:=crane1] [frame_prefix:=crane1/]
+        [use_sim_time:=false|true]
 
-All three nodes run in ``namespace`` ('' = the root) with ``use_sim_time``.  robot_state_publisher takes the
-URDF as its own parameter (generated here, at launch, from the same crane description and model variant as
-the node's) and publishes robot_description and the TF frames; its joint_states input is remapped to the
-node's ~/joint_states by a name relative to the namespace, so the reference never lands on the
-joint_states topic of measured state.  The RViz config names its topics relative to the namespace too.
-RViz's fixed frame is the URDF root link, ``world``; TF stays global (/tf, /tf_static).
+All three nodes run in ``namespace`` ('' = the root) with ``use_sim_time``.  ``model``, ``config_file`` and
+``frame_prefix`` given here override the params file; left empty, the params file's values hold (else the
+node's defaults), and robot_state_publisher gets the same ones: the URDF of that model and crane description
+(generated here, at launch) and that frame prefix, so that ``namespace:=crane1 frame_prefix:=crane1/`` and
+``crane2`` run side by side on one /tf.  Its joint_states input is remapped to the node's ~/joint_states by a
+name relative to the namespace, so the reference never lands on the joint_states topic of measured state.
+The RViz config names its topics relative to the namespace too; its fixed frame is the URDF's root link,
+``world``, with the prefix.
 """
 
 import os
@@ -27,38 +30,64 @@ PACKAGE = "crane_reference"
 NODE_NAME = "crane_reference"
 
 
+def _node_parameters(params_file: str, namespace: str) -> dict:
+    """The node's values in a params file: its ``/**`` section, then the one of the node's fully qualified name
+    (``/<namespace>/crane_reference``, or the bare name in the root namespace)."""
+    import yaml
+
+    if not params_file:
+        return {}
+    with open(params_file, encoding="utf-8") as file:
+        sections = yaml.safe_load(file) or {}
+    qualified = "/".join(part for part in ("", *namespace.strip("/").split("/"), NODE_NAME) if part)
+    names = {"/**", "/" + qualified} | ({NODE_NAME} if qualified == NODE_NAME else set())
+    values = {}
+    for key in sorted(sections, key=lambda key: key != "/**"):
+        if key in names:
+            values.update(sections[key].get("ros__parameters", {}))
+    return values
+
+
 def _nodes(context):
     from crane_reference.model.chain import build_model
     from crane_reference.model.config import load_config
     from crane_reference.model.urdf import model_to_urdf
 
-    model = LaunchConfiguration("model").perform(context)
-    config_file = LaunchConfiguration("config_file").perform(context)
+    given = {name: LaunchConfiguration(name).perform(context) for name in ("model", "config_file", "frame_prefix")}
     params_file = LaunchConfiguration("params_file").perform(context)
     namespace = LaunchConfiguration("namespace").perform(context)
     use_sim_time = LaunchConfiguration("use_sim_time").perform(context).lower() in ("true", "1")
-    urdf = model_to_urdf(build_model(load_config(config_file or None), model))
+    overrides = {name: value for name, value in given.items() if value}  # empty: the params file's value holds
+    effective = {"model": "flexible", "config_file": "", "frame_prefix": "", **_node_parameters(params_file, namespace),
+                 **overrides}
+    urdf = model_to_urdf(build_model(load_config(effective["config_file"] or None), effective["model"]))
     share = get_package_share_directory(PACKAGE)
     clock = {"use_sim_time": use_sim_time}
+    rviz_arguments = ["-d", os.path.join(share, "rviz", "crane_reference.rviz")]
+    if effective["frame_prefix"]:
+        rviz_arguments += ["-f", effective["frame_prefix"] + "world"]
     return [
         Node(package=PACKAGE, executable="node", name=NODE_NAME, namespace=namespace, output="screen",
-             parameters=[params_file, {"model": model, "config_file": config_file}, clock]),
+             parameters=[params_file, overrides, clock]),
         Node(package="robot_state_publisher", executable="robot_state_publisher", name="robot_state_publisher",
-             namespace=namespace, parameters=[{"robot_description": urdf}, clock],
+             namespace=namespace,
+             parameters=[{"robot_description": urdf, "frame_prefix": effective["frame_prefix"]}, clock],
              remappings=[("joint_states", f"{NODE_NAME}/joint_states")]),
-        Node(package="rviz2", executable="rviz2", name="rviz2", namespace=namespace,
-             arguments=["-d", os.path.join(share, "rviz", "crane_reference.rviz")], parameters=[clock],
-             condition=IfCondition(LaunchConfiguration("rviz"))),
+        Node(package="rviz2", executable="rviz2", name="rviz2", namespace=namespace, arguments=rviz_arguments,
+             parameters=[clock], condition=IfCondition(LaunchConfiguration("rviz"))),
     ]
 
 
 def generate_launch_description():
     share = get_package_share_directory(PACKAGE)
     return LaunchDescription([
-        DeclareLaunchArgument("model", default_value="flexible", choices=["flexible", "rigid"],
-                              description="crane model variant"),
+        DeclareLaunchArgument("model", default_value="", choices=["", "flexible", "rigid"],
+                              description="crane model variant ('' = the params file's, else flexible)"),
         DeclareLaunchArgument("config_file", default_value="",
-                              description="crane description YAML ('' = the packaged config/crane.yaml)"),
+                              description="crane description YAML ('' = the params file's, else the packaged one)"),
+        DeclareLaunchArgument("frame_prefix", default_value="",
+                              description="prefix of the frames of the node and robot_state_publisher ('' = the "
+                                          "params file's, else none), e.g. crane1/"),
         DeclareLaunchArgument("params_file", default_value=os.path.join(share, "config", "node.yaml"),
                               description="parameters of the crane_reference node"),
         DeclareLaunchArgument("rviz", default_value="true", description="start RViz"),

@@ -96,8 +96,9 @@ def resolve(name: str, namespace: str, node: str) -> str:
 def test_launch_file_parses_and_declares_its_arguments(launched):
     ast.parse(LAUNCH.read_text())
     arguments, _, share = launched
-    assert arguments == {"model": "flexible", "config_file": "", "params_file": str(share / "config" / "node.yaml"),
-                         "rviz": "true", "namespace": "", "use_sim_time": "false"}
+    assert arguments == {"model": "", "config_file": "", "frame_prefix": "",
+                         "params_file": str(share / "config" / "node.yaml"), "rviz": "true", "namespace": "",
+                         "use_sim_time": "false"}
 
 
 def test_launch_starts_the_node_robot_state_publisher_and_rviz_consistently(launched):
@@ -109,18 +110,20 @@ def test_launch_starts_the_node_robot_state_publisher_and_rviz_consistently(laun
     assert node["executable"] == "node" and '(f"lib/{PACKAGE}", ["scripts/node"])' in setup
     assert node["name"] == messages.NODE_NAME
     params_file, overrides, _ = node["parameters"]
-    assert Path(params_file).is_file() and overrides == {"model": "flexible", "config_file": ""}
+    assert Path(params_file).is_file() and overrides == {}  # the params file's values hold
     assert all(n.kwargs["namespace"] == "" and {"use_sim_time": False} in n.kwargs["parameters"]
                for n in nodes.values())
     rsp = nodes["robot_state_publisher"].kwargs
     assert rsp["executable"] == "robot_state_publisher"
     # the URDF of the same model as the node's, fed by the node's own joint states
-    assert rsp["parameters"][0] == {"robot_description": model_to_urdf(build_model(load_config(), "flexible"))}
+    assert rsp["parameters"][0] == {"robot_description": model_to_urdf(build_model(load_config(), "flexible")),
+                                    "frame_prefix": ""}
     ((remapped, target),) = rsp["remappings"]
     assert remapped == "joint_states"
     assert resolve(target, "", "robot_state_publisher") == resolve(messages.JOINT_STATES_TOPIC, "", messages.NODE_NAME)
     rviz = nodes["rviz2"].kwargs
     assert rviz["executable"] == "rviz2" and rviz["arguments"][0] == "-d" and Path(rviz["arguments"][1]).is_file()
+    assert len(rviz["arguments"]) == 2  # the config's fixed frame
     assert rviz["condition"].args[0].args == ("rviz",)
     # setup.py installs the launch file and the RViz config where the launch file looks for them
     assert '(f"share/{PACKAGE}/launch", glob("launch/*.launch.py"))' in setup
@@ -160,3 +163,28 @@ def test_launch_in_a_namespace_with_sim_time(monkeypatch, tmp_path, namespace):
     read = resolve(target, namespace, "robot_state_publisher")
     assert read == resolve(messages.JOINT_STATES_TOPIC, namespace, messages.NODE_NAME)
     assert read != resolve("joint_states", namespace, "robot_state_publisher")
+
+
+def test_a_params_file_is_not_overridden_and_frame_prefix_reaches_every_node(monkeypatch, tmp_path):
+    """A user's params file keeps its model, crane description and frame prefix (robot_state_publisher and RViz
+    follow them); the launch arguments, when given, override them for all three nodes."""
+    crane = tmp_path / "crane.yaml"
+    crane.write_text((ROOT / "config" / "crane.yaml").read_text())
+    params = tmp_path / "mine.yaml"
+    params.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"model": "rigid", "publish_rate": 50}},
+                                      "/crane1/crane_reference": {"ros__parameters": {"frame_prefix": "crane1/",
+                                                                                      "config_file": str(crane)}}}))
+    _, nodes, _ = launch(monkeypatch, tmp_path, params_file=str(params), namespace="crane1")
+    node, rsp, rviz = (nodes[name].kwargs for name in ("crane_reference", "robot_state_publisher", "rviz2"))
+    assert node["parameters"][:2] == [str(params), {}]
+    assert rsp["parameters"][0] == {"robot_description": model_to_urdf(build_model(load_config(crane), "rigid")),
+                                    "frame_prefix": "crane1/"}
+    assert rviz["arguments"][2:] == ["-f", "crane1/world"]
+    _, nodes, _ = launch(monkeypatch, tmp_path, params_file=str(params), namespace="crane1", model="flexible",
+                         frame_prefix="c2/")
+    node, rsp, rviz = (nodes[name].kwargs for name in ("crane_reference", "robot_state_publisher", "rviz2"))
+    assert node["parameters"][1] == {"model": "flexible", "frame_prefix": "c2/"}
+    assert rsp["parameters"][0]["frame_prefix"] == "c2/" and rviz["arguments"][2:] == ["-f", "c2/world"]
+    assert rsp["parameters"][0]["robot_description"] == model_to_urdf(build_model(load_config(crane), "flexible"))
+    _, nodes, _ = launch(monkeypatch, tmp_path, params_file=str(params), namespace="crane2")  # not crane1's section
+    assert nodes["robot_state_publisher"].kwargs["parameters"][0]["frame_prefix"] == ""

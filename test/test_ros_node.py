@@ -881,3 +881,46 @@ def test_command_lead_sets_when_a_command_takes_effect(ros: Harness) -> None:
         assert abs(changed - effective * NS) < 1e3  # [ns], float seconds
     (result,) = ros.set_parameters(Parameter("command_lead", value=0.0))
     assert not result.successful and "command_lead" in result.reason
+
+
+def test_two_namespaced_cranes_publish_disjoint_topics_and_frames() -> None:
+    """Two nodes in namespaces crane1 and crane2 with frame prefixes crane1/ and crane2/ (as the bring-up runs
+    them beside their robot_state_publishers): their topics are disjoint but /diagnostics (shared, told apart by
+    the status's hardware id), and every frame they name carries their own prefix."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    nodes, poses = [], {"crane1": [], "crane2": []}
+    try:
+        for crane in poses:
+            overrides = [Parameter("model", value="rigid"), Parameter("publish_rate", value=50),
+                         Parameter("frame_prefix", value=f"{crane}/"), Parameter("solver_process", value=False),
+                         Parameter("preview.rate", value=50.0)]
+            nodes.append(CraneReferenceNode(context=context, namespace=crane, parameter_overrides=overrides))
+            executor.add_node(nodes[-1])
+        probe = Node("two_cranes_probe", context=context)
+        executor.add_node(probe)
+        previews = {crane: [] for crane in poses}
+        for crane in poses:
+            probe.create_subscription(PoseStamped, f"/{crane}/{NODE}/end_effector_pose", poses[crane].append, 100)
+            probe.create_subscription(JointTrajectory, f"/{crane}/{NODE}/reference_preview", previews[crane].append,
+                                      100)
+        deadline = time.monotonic() + 30.0
+        while not all(len(p) >= 5 for p in (*poses.values(), *previews.values())):
+            assert time.monotonic() < deadline, "no poses and previews from both cranes"
+            executor.spin_once(timeout_sec=0.05)
+        for crane in poses:
+            assert {m.header.frame_id for m in poses[crane]} == {f"{crane}/world"}
+            assert {m.header.frame_id for m in previews[crane]} == {f"{crane}/world"}
+        published = [{name for name, _ in probe.get_publisher_names_and_types_by_node(NODE, f"/{crane}")}
+                     for crane in poses]
+        shared = published[0] & published[1]
+        assert shared <= {"/diagnostics", "/parameter_events", "/rosout"}, shared
+        assert all(any(name.startswith(f"/{crane}/{NODE}/") for name in names)
+                   for crane, names in zip(poses, published, strict=True))
+        assert {node.get_fully_qualified_name() for node in nodes} == {f"/crane1/{NODE}", f"/crane2/{NODE}"}
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        executor.shutdown()
+        context.try_shutdown()

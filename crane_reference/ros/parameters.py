@@ -137,6 +137,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "stamped start + k / publish_rate", "Hz", (1, MAX_PUBLISH_RATE), read_only=True),
     ParameterSpec("frame_id", STRING, "world", "Frame of ~/end_effector_pose, ~/reference_preview and ~/markers "
                   "(the world frame {0} of the crane)"),
+    ParameterSpec("frame_prefix", STRING, "", "Prefix of the frames the node names (frame_prefix + frame_id), as "
+                  "robot_state_publisher's frame_prefix prefixes the URDF's links: the same prefix on both lets "
+                  "several cranes share /tf (e.g. 'crane1/')", empty_allowed=True),
     ParameterSpec("ellipse.a", DOUBLE, 3.0, "Semi-axis of E's ellipse along world x (constraint (5.1)); "
                   "default: task.ellipse_a of the config file", "m", (0.1, 20.0),
                   from_config=lambda c: c.task.ellipse_a),
@@ -202,6 +205,7 @@ class NodeParameters:
     integrator_step: float
     publish_rate: int
     frame_id: str
+    frame_prefix: str
     ellipse_a: float
     ellipse_b: float
     z_increment: float

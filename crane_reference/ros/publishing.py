@@ -53,8 +53,8 @@ def run_until_shutdown(node: LifecycleNode, loop: Callable[[], None]) -> Callabl
 
 @dataclass(frozen=True)
 class PublishSettings:
-    """What the parameters choose of the messages: the frame of poses, previews and markers, the preview's
-    joints (coordinate indices) and whether previews carry efforts."""
+    """What the parameters choose of the messages: the frame of poses, previews and markers (prefixed), the
+    preview's joints (coordinate indices) and whether previews carry efforts."""
 
     frame_id: str
     preview_indices: tuple[int, ...]

@@ -22,7 +22,7 @@ class StartupError(RuntimeError):
     """The node cannot start (unusable configuration or target)."""
 
 
-MESSAGE_PARAMETERS = ("frame_id", "preview.joints", "preview.effort")
+MESSAGE_PARAMETERS = ("frame_id", "frame_prefix", "preview.joints", "preview.effort")
 """The parameters that change the messages' :class:`~.publishing.PublishSettings`."""
 
 
@@ -35,7 +35,8 @@ def publish_settings(params: NodeParameters, joint_names: tuple[str, ...],
     if unknown:
         raise ParameterError(f"preview.joints = {list(names)!r}: {', '.join(unknown)} not joints of the "
                              f"{params.model} model; its joints are {', '.join(joint_names)}")
-    return PublishSettings(params.frame_id, tuple(joint_names.index(name) for name in names), params.preview_effort)
+    return PublishSettings(params.frame_prefix + params.frame_id, tuple(joint_names.index(name) for name in names),
+                           params.preview_effort)
 
 
 def stream_spec(params: NodeParameters, config: CraneParameters) -> StreamSpec:
