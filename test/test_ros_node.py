@@ -391,11 +391,11 @@ def test_use_sim_time_waits_for_clock_and_follows_it(ros: Harness) -> None:
     assert set(np.diff(stamps).tolist()) == {NS // 100}
 
 
-def test_clock_jumps_neither_send_stamps_back_nor_skip_motion(ros: Harness) -> None:
-    """With use_sim_time, /clock jumps back 120 s, then 180 s forward: no stamp goes back (publishing waits,
-    diagnostics WARN that ROS time went back), and after the forward jump the stamps leap once with the clock
-    while the motion goes on sample by sample (no skipped samples, no position jump; counted as a stamp leap
-    and reported)."""
+def test_clock_jumps_restamp_without_skipping_motion(ros: Harness) -> None:
+    """With use_sim_time, /clock goes back 0.5 s (within the catch-up limit: publishing waits, no stamp goes
+    back), then 120 s back (a looped bag: the stamps restart from the new time once, counted as a
+    clock reset and announced), then 180 s forward (the stamps leap once with the clock); through all of it the
+    motion goes on sample by sample (no skipped sample, no position jump)."""
     rate = 100
     node = CraneReferenceNode(context=ros.context, parameter_overrides=[
         Parameter("use_sim_time", value=True), Parameter("publish_rate", value=rate),
@@ -408,20 +408,49 @@ def test_clock_jumps_neither_send_stamps_back_nor_skip_motion(ros: Harness) -> N
     ros.probe.create_timer(0.005, lambda: clock.publish(Clock(clock=messages.time_msg(
         rclpy_types(), offset[0] + time.monotonic_ns() - wall_start))))
     ros.wait_for(lambda: len(ros.received["joint_states"]) >= 50, "joint_states on simulated time")
+    offset[0] -= NS // 2
+    count = len(ros.received["joint_states"])
+    ros.wait_for(lambda: len(ros.received["joint_states"]) >= count + 30, "joint_states after the small jump")
     offset[0] -= 120 * NS
-    ros.wait_for(lambda: any("ROS time went back" in m for m in diagnostic_messages(ros)), "a WARN: time went back")
+    ros.wait_for(lambda: any("the stamps restart" in m for m in diagnostic_messages(ros)), "a WARN: stamps restart")
     offset[0] += 180 * NS
     ros.wait_for(lambda: any("jumped" in m for m in diagnostic_messages(ros)), "a WARN: the stamps leapt")
     count = len(ros.received["joint_states"])
     ros.wait_for(lambda: len(ros.received["joint_states"]) >= count + 50, "joint_states after the jumps")
     data = ros.samples()
     steps = np.diff(data["stamp"])
-    assert np.all(steps > 0)  # never back
-    leaps = steps != NS // rate
+    back, leaps = steps < 0, steps > NS // rate
+    assert back.sum() == 1 and -121 * NS < steps[back][0] < -119 * NS  # once back, with the 120 s jump
     assert leaps.sum() == 1 and steps[leaps][0] > 50 * NS  # one leap, with the forward jump
+    assert np.all(steps[~back & ~leaps] == NS // rate)
     assert_continuous(data["q"], data["qd"], 1.0 / rate)  # the motion went on sample by sample
     last = [d for _, d in list(ros.received["diagnostics"]) if d.status[0].values][-1]
-    assert {kv.key: kv.value for kv in last.status[0].values}["stamp_leaps"] == "1"
+    values = {kv.key: kv.value for kv in last.status[0].values}
+    assert values["stamp_leaps"] == "1" and values["clock_resets"] == "1"
+
+
+def test_a_clock_looping_every_5_s_gets_samples_in_every_loop(ros: Harness) -> None:
+    """A bag replayed in a loop: /clock runs 5 s and starts again, four times; every loop gets the samples of
+    its 5 s, and the motion goes on from loop to loop."""
+    rate = 50
+    node = CraneReferenceNode(context=ros.context, parameter_overrides=[
+        Parameter("use_sim_time", value=True), Parameter("publish_rate", value=rate),
+        Parameter("model", value="rigid")])
+    ros.node = node
+    ros.spin(node)
+    clock = ros.probe.create_publisher(Clock, "/clock", 10)
+    loop, start = 5 * NS, 2000 * NS
+    wall_start = time.monotonic_ns()
+    ros.probe.create_timer(0.005, lambda: clock.publish(Clock(clock=messages.time_msg(
+        rclpy_types(), start + (time.monotonic_ns() - wall_start) % loop))))
+    ros.wait_for(lambda: (time.monotonic_ns() - wall_start) > 4 * loop, "four loops of the clock", timeout=40.0)
+    data = ros.samples()
+    assert np.all((data["stamp"] >= start) & (data["stamp"] < start + loop))
+    steps = np.diff(data["stamp"])
+    assert (steps < 0).sum() >= 3  # each new loop starts the stamps again
+    loops = np.split(data["stamp"], np.flatnonzero(steps < 0) + 1)
+    assert all(len(stamps) >= 2 * rate for stamps in loops[1:-1])  # whole loops: most of their 5 s published
+    assert_continuous(data["q"], data["qd"], 1.0 / rate)
 
 
 # --- parameters -----------------------------------------------------------------------------------

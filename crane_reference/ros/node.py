@@ -20,6 +20,8 @@ from contextlib import suppress
 
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import JumpThreshold, TimeJump
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
@@ -81,6 +83,9 @@ class CraneReferenceNode(LifecycleNode):
         self.create_subscription(Float64, messages.SPEED_SCALING_TOPIC, self._on_speed_scaling,
                                  messages.PUBLISHER_DEPTH)
         self._status_timer = self.create_timer(self._params.status_period, self._diagnostics.log_status)
+        self._jump_handle = self.get_clock().create_jump_callback(  # a looped bag, a simulator reset
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=True),
+            post_callback=self._clock_jumped)
         if self._params.autostart:
             if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
                 self._stop.set()
@@ -99,6 +104,11 @@ class CraneReferenceNode(LifecycleNode):
         if self._publisher is not None and self._publisher.waiting_for_clock:
             return "activating: waiting for /clock (use_sim_time is true and ROS time is 0)"
         return self._starting
+
+    def _clock_jumped(self, jump: TimeJump) -> None:
+        """rclpy's jump callback: a jump back goes to the server, which re-anchors beyond its catch-up limit."""
+        if self._server is not None and jump.delta.nanoseconds < 0:
+            self._server.clock_went_back(self._now())
 
     def _stopping(self) -> bool:
         """Whether the node is being destroyed or its context shut down (SIGINT, SIGTERM)."""

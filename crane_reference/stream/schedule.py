@@ -181,16 +181,17 @@ def checked(frame: Frame, last_valid: ReferenceSample) -> tuple[Frame, str]:
 class Counters:
     """Samples published, held because no frame was ready (solver late) and held because a frame was not
     finite; times the stamps leapt forward (:meth:`FrameSchedule.anchored`: the clock jumped, or publishing
-    fell more than the catch-up limit behind)."""
+    fell more than the catch-up limit behind) and went back with the clock (:meth:`FrameSchedule.restamped`)."""
 
     published: int = 0
     held_late: int = 0
     stamp_leaps: int = 0
     held_non_finite: int = 0
+    clock_resets: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return {"published": self.published, "held_late": self.held_late, "stamp_leaps": self.stamp_leaps,
-                "held_non_finite": self.held_non_finite}
+                "held_non_finite": self.held_non_finite, "clock_resets": self.clock_resets}
 
 
 @dataclass
@@ -290,12 +291,20 @@ class FrameSchedule:
         """The start [ns] (sample k stamped start + k / rate) for the clock reading ``now_ns``: the same, unless
         the next sample is more than the catch-up limit late (the clock jumped forward, or publishing stalled),
         then the one that stamps the next sample ``now_ns``: the stamps leap forward with the clock and no
-        sample is skipped, so the motion goes on without a jump.  A clock that went back keeps the start:
-        stamps never go back, and nothing is due until the clock reaches the next stamp again."""
+        sample is skipped, so the motion goes on without a jump.  A clock that went back keeps the start
+        (nothing is due until the clock reaches the next stamp again) unless it went back beyond the catch-up
+        limit, which the clock's owner reports (:meth:`restamped`)."""
         if now_ns - stamp_at(start_ns, self.next_k, self.rate) > self.max_catch_up * NANOSECONDS:
             self.counters.stamp_leaps += 1
             return now_ns - self.next_k * NANOSECONDS // self.rate
         return start_ns
+
+    def restamped(self, now_ns: int) -> int:
+        """The start [ns] that stamps the next sample ``now_ns`` after the clock jumped back beyond the catch-up
+        limit (a replayed bag looped, a simulator reset): the stamps go back once, with the clock, and the motion
+        goes on sample by sample (counted as a clock reset)."""
+        self.counters.clock_resets += 1
+        return now_ns - self.next_k * NANOSECONDS // self.rate
 
     def due(self, now_ns: int, start_ns: int) -> list[tuple[int, Frame | None]]:
         """Every sample due by ``now_ns`` with its frame (None: not ready), the oldest first (at most the

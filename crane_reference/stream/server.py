@@ -300,6 +300,22 @@ class ReferenceServer:
                     out.append(Outgoing(k, self._last_stamp, frame))
             return out
 
+    def clock_went_back(self, now_ns: int) -> None:
+        """The clock jumped back (reported by its owner: rclpy's jump callback) to ``now_ns``: beyond the
+        catch-up limit behind the next stamp, publishing goes on on the new timeline, the next sample stamped
+        ``now_ns`` (:meth:`~.schedule.FrameSchedule.restamped`: stamps go back once, counted, announced); within
+        it, publishing waits until the clock reaches the next stamp again."""
+        with self._lock:
+            if self._start_ns is None:
+                return
+            behind = stamp_at(self._start_ns, self.schedule.next_k, self.rate) - now_ns
+            if behind <= self.schedule.max_catch_up * NANOSECONDS:
+                return
+            self._start_ns = self.schedule.restamped(now_ns)
+            self._last_stamp = now_ns - NANOSECONDS // self.rate
+            self._clock_note = (f"ROS time went back {behind / NANOSECONDS:.3f} s: the stamps restart from it "
+                                "(once), no sample skipped")
+
     def next_stamp(self) -> int | None:
         """Stamp [ns] of the next sample to publish (None while not publishing)."""
         with self._lock:
