@@ -149,6 +149,19 @@ class Harness:
                 "q": np.array([m.position for _, m in states]), "qd": np.array([m.velocity for _, m in states]),
                 "effort": np.array([m.effort for _, m in states])}
 
+    def start_on_sim_time(self, rate: int, clock_at: Callable[[int], int]) -> CraneReferenceNode:
+        """Start the rigid crane's node with use_sim_time at ``rate`` Hz, and publish /clock every 5 ms at
+        ``clock_at(ns of wall time since now)``."""
+        self.node = CraneReferenceNode(context=self.context, parameter_overrides=[
+            Parameter("use_sim_time", value=True), Parameter("publish_rate", value=rate),
+            Parameter("model", value="rigid")])
+        self.spin(self.node)
+        clock = self.probe.create_publisher(Clock, "/clock", 10)
+        wall_start = time.monotonic_ns()
+        self.probe.create_timer(0.005, lambda: clock.publish(Clock(clock=messages.time_msg(
+            rclpy_types(), clock_at(time.monotonic_ns() - wall_start)))))
+        return self.node
+
     def wait_until_stamp(self, stamp: int, timeout: float = 15.0) -> None:
         self.wait_for(lambda: self.received["joint_states"] and stamp_ns(self.received["joint_states"][-1][1]) >= stamp,
                       f"the sample stamped {stamp}", timeout)
@@ -397,16 +410,8 @@ def test_clock_jumps_restamp_without_skipping_motion(ros: Harness) -> None:
     clock reset and announced), then 180 s forward (the stamps leap once with the clock); through all of it the
     motion goes on sample by sample (no skipped sample, no position jump)."""
     rate = 100
-    node = CraneReferenceNode(context=ros.context, parameter_overrides=[
-        Parameter("use_sim_time", value=True), Parameter("publish_rate", value=rate),
-        Parameter("model", value="rigid")])
-    ros.node = node
-    ros.spin(node)
-    clock = ros.probe.create_publisher(Clock, "/clock", 10)
     offset = [1000 * NS]
-    wall_start = time.monotonic_ns()
-    ros.probe.create_timer(0.005, lambda: clock.publish(Clock(clock=messages.time_msg(
-        rclpy_types(), offset[0] + time.monotonic_ns() - wall_start))))
+    ros.start_on_sim_time(rate, lambda wall: offset[0] + wall)
     ros.wait_for(lambda: len(ros.received["joint_states"]) >= 50, "joint_states on simulated time")
     offset[0] -= NS // 2
     count = len(ros.received["joint_states"])
@@ -433,16 +438,9 @@ def test_a_clock_looping_every_5_s_gets_samples_in_every_loop(ros: Harness) -> N
     """A bag replayed in a loop: /clock runs 5 s and starts again, four times; every loop gets the samples of
     its 5 s, and the motion goes on from loop to loop."""
     rate = 50
-    node = CraneReferenceNode(context=ros.context, parameter_overrides=[
-        Parameter("use_sim_time", value=True), Parameter("publish_rate", value=rate),
-        Parameter("model", value="rigid")])
-    ros.node = node
-    ros.spin(node)
-    clock = ros.probe.create_publisher(Clock, "/clock", 10)
     loop, start = 5 * NS, 2000 * NS
     wall_start = time.monotonic_ns()
-    ros.probe.create_timer(0.005, lambda: clock.publish(Clock(clock=messages.time_msg(
-        rclpy_types(), start + (time.monotonic_ns() - wall_start) % loop))))
+    ros.start_on_sim_time(rate, lambda wall: start + wall % loop)
     ros.wait_for(lambda: (time.monotonic_ns() - wall_start) > 4 * loop, "four loops of the clock", timeout=40.0)
     data = ros.samples()
     assert np.all((data["stamp"] >= start) & (data["stamp"] < start + loop))
