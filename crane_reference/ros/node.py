@@ -45,6 +45,7 @@ from .parameters import (
     parameter_names,
     reach_descriptor,
     refuse_unknown,
+    unknown_overrides,
 )
 from .publishing import DiagnosticsPublisher, SamplePublisher
 from .settings import StartupError
@@ -59,7 +60,7 @@ class CraneReferenceNode(LifecycleNode):
         """Declare and read the parameters, publish diagnostics, and with ``autostart`` configure and activate;
         ``kwargs`` go to :class:`rclpy.node.Node`.  Raises :class:`~.settings.StartupError`, ConfigError or
         ParameterError if a parameter is unusable, or with ``autostart`` if it cannot be configured."""
-        super().__init__(node_name, **kwargs)
+        super().__init__(node_name, **{"automatically_declare_parameters_from_overrides": True, **kwargs})
         self._types = rclpy_types()
         self._server: ReferenceServer | None = None
         self._publisher: SamplePublisher | None = None
@@ -213,8 +214,7 @@ class CraneReferenceNode(LifecycleNode):
 
     def _check_overrides(self) -> None:
         """Refuse to start with a parameter override (``-p``, a params file) for a name the node lacks."""
-        unknown = sorted(name for name in self._parameter_overrides
-                         if not self.has_parameter(name) and not name.startswith("qos_overrides."))
+        unknown = unknown_overrides(self)
         if unknown:
             raise StartupError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
                                f"{parameter_names(self)}")

@@ -10,8 +10,9 @@ Integer values for double parameters (``-p ellipse.a:=3``, ``ellipse.a: 3`` in a
 ``ros2 param set /crane_reference ellipse.a 3``) are accepted: rclpy 7 checks a statically typed
 parameter's type before any user callback and rejects them, so
 
-* at start-up, :func:`declare` first declares the parameter with ``dynamic_typing=True`` to read the
-  override of any type, undeclares it and declares it again, statically typed, with the value
+* at start-up, :func:`declare` reads the override of any type (the node declares its overrides as they
+  come, ``automatically_declare_parameters_from_overrides``; else it declares the parameter with
+  ``dynamic_typing=True`` first), undeclares it and declares it again, statically typed, with the value
   converted to float (``ignore_override=True``);
 * at run time, :func:`coerce_parameters` is a *pre*-set callback (``Node.add_pre_set_parameters_callback``,
   run before rclpy's type and range checks) that turns such integers into doubles.
@@ -286,6 +287,21 @@ def declare_all(node: Node) -> NodeParameters:
         spec.name: declare(node, spec, config) for spec in PARAMETERS if spec.name != "config_file"}})
 
 
+def unknown_overrides(node: Node) -> list[str]:
+    """The names ``node`` was given overrides for (``-p``, a params file, ``parameter_overrides``) that are not
+    its parameters.  The node declares every override (``automatically_declare_parameters_from_overrides``), so
+    they are the declared names that neither the table nor rclpy itself declares (the parameters of a bare node
+    of the same context, without the command line's arguments)."""
+    bare = Node(f"{node.get_name()}_bare", context=node.context, use_global_arguments=False,
+                start_parameter_services=False, enable_rosout=False)
+    try:
+        builtin = set(bare.get_parameters_by_prefix(""))
+    finally:
+        bare.destroy_node()
+    return sorted(name for name in node.get_parameters_by_prefix("")
+                  if name not in SPECS and name not in builtin and not name.startswith("qos_overrides."))
+
+
 def parameter_names(node: Node) -> str:
     """The names of ``node``'s parameters, sorted, for messages."""
     return ", ".join(sorted(node.get_parameters_by_prefix("")))
@@ -305,10 +321,14 @@ def declare(node: Node, spec: ParameterSpec, config: CraneParameters | None = No
     """Declare ``spec`` on ``node`` (override, else its default for ``config``) and return the value.
 
     The override may be an integer for a double parameter (see the module doc for the two-step
-    declaration); a value :meth:`ParameterSpec.check` rejects raises :class:`ParameterError`.
+    declaration; a node that declares its overrides has it declared already); a value
+    :meth:`ParameterSpec.check` rejects raises :class:`ParameterError`.
     """
-    probe = ParameterDescriptor(dynamic_typing=True)
-    value = spec.coerce(node.declare_parameter(spec.name, spec.default_for(config), probe).value)
+    if node.has_parameter(spec.name):  # declared from its override (automatically_declare_parameters_from_overrides)
+        value = spec.coerce(node.get_parameter(spec.name).value)
+    else:
+        probe = ParameterDescriptor(dynamic_typing=True)
+        value = spec.coerce(node.declare_parameter(spec.name, spec.default_for(config), probe).value)
     node.undeclare_parameter(spec.name)
     reason = spec.check(value)
     if reason is not None:
