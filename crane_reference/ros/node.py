@@ -37,16 +37,7 @@ from ..stream.server import CommandRefusedError, ReferenceServer, Reply
 from ..stream.solver import SolverStoppedError
 from . import settings
 from .message_types import rclpy_types
-from .parameters import (
-    SPECS,
-    ParameterError,
-    coerce_parameters,
-    declare_all,
-    parameter_names,
-    reach_descriptor,
-    refuse_unknown,
-    unknown_overrides,
-)
+from .parameters import SPECS, ParameterError, declare_all, pre_set_callback, reach_descriptor
 from .publishing import DiagnosticsPublisher, SamplePublisher
 from .settings import StartupError
 
@@ -69,14 +60,13 @@ class CraneReferenceNode(LifecycleNode):
         self._diagnostics = DiagnosticsPublisher(self, self._types, self._doing, lambda: self._server, self._stop)
         try:
             self._params = declare_all(self)
-            self._check_overrides()
         except Exception as error:
             self._fail_start(error)
             raise
         except BaseException:  # KeyboardInterrupt while starting
             self._stop.set()
             raise
-        self.add_pre_set_parameters_callback(self._pre_set_parameters)
+        self.add_pre_set_parameters_callback(pre_set_callback(self))
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.create_service(Trigger, "~/restart", self._on_restart)
@@ -205,19 +195,6 @@ class CraneReferenceNode(LifecycleNode):
             publisher.destroy()
 
     # -- set-up ---------------------------------------------------------------------------------------
-
-    def _pre_set_parameters(self, parameters: list[Parameter]) -> list[Parameter]:
-        """The pre-set callback (the only one: rclpy concatenates the lists its pre-set callbacks return), run
-        before rclpy's own checks: :func:`~.parameters.refuse_unknown`, then :func:`~.parameters.coerce_parameters`."""
-        refuse_unknown(self, parameters)
-        return coerce_parameters(parameters)
-
-    def _check_overrides(self) -> None:
-        """Refuse to start with a parameter override (``-p``, a params file) for a name the node lacks."""
-        unknown = unknown_overrides(self)
-        if unknown:
-            raise StartupError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
-                               f"{parameter_names(self)}")
 
     def _lifecycle_state(self) -> str:
         """The primary lifecycle state, from what the transitions set up: a server after configure, a

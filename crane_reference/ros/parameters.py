@@ -280,11 +280,26 @@ def check(parameters: Iterable[Parameter]) -> str | None:
 
 def declare_all(node: Node) -> NodeParameters:
     """Declare every parameter of the table on ``node`` (``config_file`` first: it gives the others'
-    defaults, see :attr:`ParameterSpec.from_config`) and return their values."""
+    defaults, see :attr:`ParameterSpec.from_config`) and return their values; :class:`ParameterError` for an
+    override of a name the node lacks (:func:`unknown_overrides`)."""
     config_file = declare(node, SPECS["config_file"])
     config = load_config(config_file or None)
-    return NodeParameters.from_values({"config_file": config_file, **{
+    values = NodeParameters.from_values({"config_file": config_file, **{
         spec.name: declare(node, spec, config) for spec in PARAMETERS if spec.name != "config_file"}})
+    unknown = unknown_overrides(node)
+    if unknown:
+        raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
+                             f"{parameter_names(node)}")
+    return values
+
+
+def pre_set_callback(node: Node) -> Callable[[list[Parameter]], list[Parameter]]:
+    """``node``'s pre-set callback (the only one: rclpy concatenates the lists its pre-set callbacks return),
+    run before rclpy's own checks: :func:`refuse_unknown`, then :func:`coerce_parameters`."""
+    def pre_set(parameters: list[Parameter]) -> list[Parameter]:
+        refuse_unknown(node, parameters)
+        return coerce_parameters(parameters)
+    return pre_set
 
 
 def unknown_overrides(node: Node) -> list[str]:
