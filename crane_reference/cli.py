@@ -11,9 +11,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from .interface.messages import STORAGES
 from .model.chain import VARIANTS, build_model
 from .model.config import ConfigError, load_config
 from .model.urdf import model_to_urdf
+from .motion.programmed_motion import REALISATIONS
 from .motion.steps import ANALYSIS_STEP, ONLINE_STEP, PLANT_STEP
 
 
@@ -248,7 +250,7 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--bag", metavar="DIR", help="instead of CSV/NPZ/Figure 2, write the node's topics as a rosbag2 "
                    "bag (new directory DIR), stamped with simulated time; --model both records flexible")
     s.add_argument("--rate", type=int, default=100, metavar="HZ", help="--bag: publish rate (default 100)")
-    s.add_argument("--bag-storage", choices=["mcap", "sqlite3"], default="mcap", help="--bag: storage (default mcap)")
+    s.add_argument("--bag-storage", choices=STORAGES, default="mcap", help="--bag: storage (default mcap)")
     s.add_argument("--bag-version", type=int, choices=[9, 8], default=9,
                    help="--bag: metadata version, 9 (Jazzy, default) or 8 (Humble)")
     st = sub.add_parser("study", help="sweep the programmed constraints and crane settings of a study spec (YAML)")
@@ -260,7 +262,7 @@ def parser() -> argparse.ArgumentParser:
                         "reference under joint PD/PID with optional rigid inverse-dynamics feedforward")
     tr.add_argument("--config", help="crane YAML (default: the packaged config/crane.yaml)")
     tr.add_argument("--model", choices=VARIANTS, default="flexible", help="crane (plant and reference)")
-    tr.add_argument("--realisation", choices=["ideal", "servo"], default="ideal",
+    tr.add_argument("--realisation", choices=REALISATIONS, default="ideal",
                     help="the reference's constraint realisation (ideal: what the node publishes)")
     tr.add_argument("--controller", choices=["pd", "pid"], default="pd")
     tr.add_argument("--bandwidth", type=float, default=2.0, help="closed-loop bandwidth per joint [Hz] (default 2)")
@@ -289,7 +291,7 @@ def parser() -> argparse.ArgumentParser:
                    help="without TOPICs, record what this node publishes, as the ROS graph shows it "
                    "(default /crane_reference)")
     r.add_argument("-o", "--output", metavar="DIR", help="new bag directory (default rosbag2_YYYY_MM_DD-HH_MM_SS)")
-    r.add_argument("--storage", choices=["mcap", "sqlite3"], default="mcap", help="storage (default mcap)")
+    r.add_argument("--storage", choices=STORAGES, default="mcap", help="storage (default mcap)")
     r.add_argument("--version", type=int, choices=[9, 8], default=9,
                    help="metadata version, 9 (Jazzy, default) or 8 (Humble)")
     r.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: at SIGINT/SIGTERM)")
@@ -298,7 +300,7 @@ def parser() -> argparse.ArgumentParser:
     m.add_argument("--t", type=float, default=0.0, help="time of the motion [s] (default 0: the static equilibrium)")
     m.add_argument("--model", choices=VARIANTS, default="flexible")
     m.add_argument("--count", type=int, default=12, help="modes in the table and the drawing (default 12)")
-    m.add_argument("--realisation", choices=["ideal", "servo"], default="ideal", help="constraint realisation")
+    m.add_argument("--realisation", choices=REALISATIONS, default="ideal", help="constraint realisation")
     m.add_argument("--out", default="results", help="directory of the PNG (default ./results)")
     a = sub.add_parser("analyze", help="boom vibration, spectra vs modes, rigid vs flexible, both realisations")
     a.add_argument("--config")

@@ -47,8 +47,8 @@ from ..stream.reference_stream import ERROR, ReferenceStream
 from ..stream.sample import ReferenceSample
 from ..stream.schedule import stamp_at
 from . import messages
+from .messages import STORAGES
 
-STORAGES = ("mcap", "sqlite3")
 VERSIONS = (9, 8)
 NODE_NAME = messages.NODE_NAME
 JOINT_STATES = messages.JOINT_STATES_TOPIC.replace("~", f"/{NODE_NAME}", 1)

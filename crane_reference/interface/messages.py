@@ -44,6 +44,7 @@ DIAGNOSTICS_TOPIC = "/diagnostics"
 PUBLISHER_DEPTH = 10  # keep-last depth of every publisher (reliable, volatile)
 DIAGNOSTICS_PERIOD = 1.0  # [s]
 MAX_PUBLISH_RATE = 1000  # [Hz], upper bound of the publish_rate parameter
+STORAGES = ("mcap", "sqlite3")  # rosbag2 storage plugins the recorder and the offline export write
 ELLIPSE_SEGMENTS = 128
 ELLIPSE_NAMESPACE = "target_ellipse"
 TRAIL_NAMESPACE = "end_effector_trail"
