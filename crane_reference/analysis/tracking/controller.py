@@ -9,7 +9,8 @@ the integrator).  The rest runs at the controller's ticks t_k (rate f_c) on the 
 with e = q_ref - q; u_k holds over the period (the feedforward part may run linearly over it, see
 :mod:`.closed_loop`).  A torque-controlled joint with a 1 kHz zero-order-held D term on the flexible boom
 is unstable: the luff and knuckle joints carry only the first rigid element's inertia at high frequency
-(about 1 kg m^2 against the whole boom's 2300), so kd h / J far exceeds 2.  Torques beyond a limit
+(a small fraction of the whole boom's: ``bench_tracking.py --only inertia`` prints both), so kd h / J far
+exceeds 2.  Torques beyond a limit
 are cut to +-limit at the tick and counted (never silently): the saturated ticks are reported, and the
 integral does not grow while its joint is saturated (conditional integration, the usual anti-windup);
 between ticks the drive's D action may move the torque past the limit by kd |delta qd|.  Gains follow
