@@ -31,6 +31,7 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
   the node's serialized messages at the rate, paced, with a subscriber in another process, plus that of the
   compiled steps alone at the node's ``integrator.step`` for real-time motion, both measured in this run
   (``floor_percent``, ``cpu_over_floor``);
+* the time from SIGINT (sent while active) to the node's exit (``exit_after_sigint_s``);
 * first (``--message-costs``), in this process: what the node's publisher spends per sample to fill and
   publish ~/joint_states and ~/end_effector_pose (serialized and filled in place, as the node does, and as
   message objects, for comparison), alone and with a subscriber in another process, the CPU share of a
@@ -272,8 +273,10 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         held_in_commands = float(recorder.diagnostics.get("held_late", 0)) - before["held_late"] - late["held_late"]
         flooded = flood(executor, client, recorder, flood_requests, rate) if flood_requests else {}
     finally:
+        signalled = time.monotonic()
         node.send_signal(signal.SIGINT)
         _, stderr = node.communicate(timeout=30)
+        exit_after = time.monotonic() - signalled
         executor.shutdown()
         subscriber.destroy_node()
         context.try_shutdown()
@@ -295,7 +298,8 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         "effect_after_acceptance_max_ms": 1e3 * float(np.max(after_acceptance)),
         "margin_retarget_min_ms": 1e3 * float(np.min(margins)),
         "held_late_commands": int(held_in_commands),
-        **smoothness, **flooded, "exit_code": node.returncode, "traceback": "Traceback" in stderr,
+        **smoothness, **flooded, "exit_code": node.returncode, "exit_after_sigint_s": exit_after,
+        "traceback": "Traceback" in stderr,
     }
 
 

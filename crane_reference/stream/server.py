@@ -189,8 +189,9 @@ class ReferenceServer:
         return self._start_ns is not None
 
     def close(self) -> None:
-        """Stop computing ahead and end the solver."""
+        """Stop computing ahead (the request in progress cut short) and end the solver."""
         self._halt.set()
+        self.solver.interrupt()
         with self._lock:
             self._lock.notify_all()
         if self._worker is not threading.current_thread():
