@@ -31,7 +31,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
-from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
@@ -951,3 +951,21 @@ def test_two_namespaced_cranes_publish_disjoint_topics_and_frames() -> None:
             node.destroy_node()
         executor.shutdown()
         context.try_shutdown()
+
+
+def test_qos_overrides_of_the_reference_topics(ros: Harness) -> None:
+    """The reference publishers take rclpy's qos_overrides parameters: joint_states made best effort (and its
+    depth 3) by overrides, the pose left reliable."""
+    name = f"/{NODE}/joint_states"
+    ros.node = CraneReferenceNode(context=ros.context, parameter_overrides=[
+        Parameter("model", value="rigid"), Parameter("publish_rate", value=50),
+        Parameter(f"qos_overrides.{name}.publisher.reliability", value="best_effort"),
+        Parameter(f"qos_overrides.{name}.publisher.depth", value=3)])
+    ros.spin(ros.node)
+    ros.wait_for(lambda: ros.probe.get_publishers_info_by_topic(name)
+                 and ros.probe.get_publishers_info_by_topic(f"/{NODE}/end_effector_pose"), "the publishers")
+    (joints,) = ros.probe.get_publishers_info_by_topic(name)
+    (pose,) = ros.probe.get_publishers_info_by_topic(f"/{NODE}/end_effector_pose")
+    assert joints.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT  # (the graph does not carry depths)
+    assert pose.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+    assert ros.node.get_parameter(f"qos_overrides.{name}.publisher.depth").value == 3

@@ -7,6 +7,8 @@ the node clock and publishes every sample due (normally one), so no sample is sk
 wakes late.  A thread rather than an rclpy timer publishes because rclpy's executor adds its overhead to every
 timer callback and runs the (slow) parameter validation on the same thread.  ~/joint_states and
 ~/end_effector_pose are serialized once and then filled in place (:mod:`crane_reference.interface.serialized`).
+The reference topics take ``qos_overrides.<topic>.publisher.<policy>`` parameters (rclpy's QoS overriding),
+e.g. ``-p qos_overrides./crane_reference/joint_states.publisher.depth:=50``.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from rclpy.lifecycle import LifecycleNode
 from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -73,11 +76,12 @@ class SamplePublisher:
         self._ellipse: tuple[tuple[float, ...], list[Any]] = ((), [])  # (a, b, z) and its Point messages
         self._joint_writer: SerializedJointState | None = None
         self._pose_writer: SerializedPose | None = None
-        depth = messages.PUBLISHER_DEPTH
-        self._managed = [node.create_lifecycle_publisher(JointState, messages.JOINT_STATES_TOPIC, depth),
-                         node.create_lifecycle_publisher(PoseStamped, messages.END_EFFECTOR_POSE_TOPIC, depth),
-                         node.create_lifecycle_publisher(JointTrajectory, messages.REFERENCE_PREVIEW_TOPIC, depth),
-                         node.create_lifecycle_publisher(MarkerArray, messages.MARKERS_TOPIC, depth)]
+        depth, overridable = messages.PUBLISHER_DEPTH, QoSOverridingOptions.with_default_policies()
+        self._managed = [node.create_lifecycle_publisher(message_type, topic, depth, qos_overriding_options=overridable)
+                         for message_type, topic in ((JointState, messages.JOINT_STATES_TOPIC),
+                                                     (PoseStamped, messages.END_EFFECTOR_POSE_TOPIC),
+                                                     (JointTrajectory, messages.REFERENCE_PREVIEW_TOPIC),
+                                                     (MarkerArray, messages.MARKERS_TOPIC))]
         self._joints, self._poses, self._previews, self._markers = self._managed
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._description = node.create_publisher(String, messages.ROBOT_DESCRIPTION_TOPIC, latched)
