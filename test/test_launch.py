@@ -32,6 +32,20 @@ class Recorded:
         self.args, self.kwargs = args, kwargs
 
 
+class LifecycleNode(Recorded):
+    """Stand-in of launch_ros's LifecycleNode (name and namespace are required keywords, as in Jazzy)."""
+
+    def __init__(self, *, name, namespace, **kwargs):
+        super().__init__(name=name, namespace=namespace, **kwargs)
+
+
+class Transition:
+    """Stand-in of lifecycle_msgs/msg/Transition: the transition ids of its definition (Transition.msg)."""
+
+    TRANSITION_CONFIGURE = 1
+    TRANSITION_ACTIVATE = 3
+
+
 class LaunchConfiguration(Recorded):
     def perform(self, context):
         return context[self.args[0]]
@@ -41,11 +55,18 @@ def stand_ins(share: Path) -> dict[str, types.ModuleType]:
     modules = {}
     for name, attributes in {
         "launch": {"LaunchDescription": Recorded},
-        "launch.actions": {"DeclareLaunchArgument": Recorded, "OpaqueFunction": Recorded},
+        "launch.actions": {"DeclareLaunchArgument": Recorded, "OpaqueFunction": Recorded, "EmitEvent": Recorded,
+                           "RegisterEventHandler": Recorded},
         "launch.conditions": {"IfCondition": Recorded},
+        "launch.events": {"matches_action": lambda action: ("matches", action)},
         "launch.substitutions": {"LaunchConfiguration": LaunchConfiguration},
         "launch_ros": {},
-        "launch_ros.actions": {"Node": Recorded},
+        "launch_ros.actions": {"Node": Recorded, "LifecycleNode": LifecycleNode},
+        "launch_ros.event_handlers": {"OnStateTransition": Recorded},
+        "launch_ros.events": {},
+        "launch_ros.events.lifecycle": {"ChangeState": Recorded},
+        "lifecycle_msgs": {},
+        "lifecycle_msgs.msg": {"Transition": Transition},
         "ament_index_python": {},
         "ament_index_python.packages": {"get_package_share_directory": lambda package: str(share)},
     }.items():
@@ -72,7 +93,9 @@ def launch(monkeypatch, tmp_path, **overrides):
     arguments = {a.args[0]: a.kwargs["default_value"] for a in description.args[0] if not a.kwargs.get("function")
                  and a.args}
     (opaque,) = [a for a in description.args[0] if "function" in a.kwargs]
-    nodes = {node.kwargs["package"]: node for node in opaque.kwargs["function"]({**arguments, **overrides})}
+    actions = opaque.kwargs["function"]({**arguments, **overrides})
+    nodes = {node.kwargs["package"]: node for node in actions if "package" in node.kwargs}
+    nodes["lifecycle"] = [action for action in actions if "package" not in action.kwargs]
     return arguments, nodes, share
 
 
@@ -96,23 +119,24 @@ def resolve(name: str, namespace: str, node: str) -> str:
 def test_launch_file_parses_and_declares_its_arguments(launched):
     ast.parse(LAUNCH.read_text())
     arguments, _, share = launched
-    assert arguments == {"model": "", "config_file": "", "frame_prefix": "",
+    assert arguments == {"model": "", "config_file": "", "frame_prefix": "", "autostart": "",
                          "params_file": str(share / "config" / "node.yaml"), "rviz": "true", "namespace": "",
                          "use_sim_time": "false"}
 
 
 def test_launch_starts_the_node_robot_state_publisher_and_rviz_consistently(launched):
     _, nodes, share = launched
-    assert set(nodes) == {"crane_reference", "robot_state_publisher", "rviz2"}
+    assert set(nodes) == {"crane_reference", "robot_state_publisher", "rviz2", "lifecycle"}
+    assert isinstance(nodes["crane_reference"], LifecycleNode)
     node = nodes["crane_reference"].kwargs
     # the executable ros2 run / launch finds: installed by setup.py into lib/crane_reference
     setup = (ROOT / "setup.py").read_text()
     assert node["executable"] == "node" and '(f"lib/{PACKAGE}", ["scripts/node"])' in setup
     assert node["name"] == messages.NODE_NAME
     params_file, overrides, _ = node["parameters"]
-    assert Path(params_file).is_file() and overrides == {}  # the params file's values hold
+    assert Path(params_file).is_file() and overrides == {"autostart": False}  # the launch drives the lifecycle
     assert all(n.kwargs["namespace"] == "" and {"use_sim_time": False} in n.kwargs["parameters"]
-               for n in nodes.values())
+               for name, n in nodes.items() if name != "lifecycle")
     rsp = nodes["robot_state_publisher"].kwargs
     assert rsp["executable"] == "robot_state_publisher"
     # the URDF of the same model as the node's, fed by the node's own joint states
@@ -158,7 +182,7 @@ def test_launch_in_a_namespace_with_sim_time(monkeypatch, tmp_path, namespace):
     node's joint states (both names resolved in that namespace), never the namespace's measured ones."""
     _, nodes, _ = launch(monkeypatch, tmp_path, namespace=namespace, use_sim_time="true")
     assert all(n.kwargs["namespace"] == namespace and {"use_sim_time": True} in n.kwargs["parameters"]
-               for n in nodes.values())
+               for name, n in nodes.items() if name != "lifecycle")
     ((_, target),) = nodes["robot_state_publisher"].kwargs["remappings"]
     read = resolve(target, namespace, "robot_state_publisher")
     assert read == resolve(messages.JOINT_STATES_TOPIC, namespace, messages.NODE_NAME)
@@ -176,15 +200,37 @@ def test_a_params_file_is_not_overridden_and_frame_prefix_reaches_every_node(mon
                                                                                       "config_file": str(crane)}}}))
     _, nodes, _ = launch(monkeypatch, tmp_path, params_file=str(params), namespace="crane1")
     node, rsp, rviz = (nodes[name].kwargs for name in ("crane_reference", "robot_state_publisher", "rviz2"))
-    assert node["parameters"][:2] == [str(params), {}]
+    assert node["parameters"][:2] == [str(params), {"autostart": False}]
     assert rsp["parameters"][0] == {"robot_description": model_to_urdf(build_model(load_config(crane), "rigid")),
                                     "frame_prefix": "crane1/"}
     assert rviz["arguments"][2:] == ["-f", "crane1/world"]
     _, nodes, _ = launch(monkeypatch, tmp_path, params_file=str(params), namespace="crane1", model="flexible",
                          frame_prefix="c2/")
     node, rsp, rviz = (nodes[name].kwargs for name in ("crane_reference", "robot_state_publisher", "rviz2"))
-    assert node["parameters"][1] == {"model": "flexible", "frame_prefix": "c2/"}
+    assert node["parameters"][1] == {"model": "flexible", "frame_prefix": "c2/", "autostart": False}
     assert rsp["parameters"][0]["frame_prefix"] == "c2/" and rviz["arguments"][2:] == ["-f", "c2/world"]
     assert rsp["parameters"][0]["robot_description"] == model_to_urdf(build_model(load_config(crane), "flexible"))
     _, nodes, _ = launch(monkeypatch, tmp_path, params_file=str(params), namespace="crane2")  # not crane1's section
     assert nodes["robot_state_publisher"].kwargs["parameters"][0]["frame_prefix"] == ""
+
+
+@pytest.mark.parametrize("autostart", ["", "true", "false"])
+def test_the_launch_drives_the_lifecycle_unless_autostart_is_off(monkeypatch, tmp_path, autostart):
+    """With autostart (the argument, else the params file's: true in config/node.yaml) the launch emits configure
+    and, once configuring ends in inactive, activate, both for the node it starts; the node's own autostart is
+    off so that nothing transitions twice.  With autostart:=false it emits nothing: the node waits unconfigured."""
+    _, nodes, _ = launch(monkeypatch, tmp_path, autostart=autostart)
+    node = nodes["crane_reference"]
+    assert node.kwargs["parameters"][1]["autostart"] is False
+    if autostart == "false":
+        assert nodes["lifecycle"] == []
+        return
+    handler, configure = nodes["lifecycle"]
+    assert configure.kwargs["event"].kwargs == {"lifecycle_node_matcher": ("matches", node),
+                                                "transition_id": Transition.TRANSITION_CONFIGURE}
+    (on_inactive,) = handler.args
+    assert on_inactive.kwargs["target_lifecycle_node"] is node
+    assert (on_inactive.kwargs["start_state"], on_inactive.kwargs["goal_state"]) == ("configuring", "inactive")
+    (activate,) = on_inactive.kwargs["entities"]
+    assert activate.kwargs["event"].kwargs == {"lifecycle_node_matcher": ("matches", node),
+                                               "transition_id": Transition.TRANSITION_ACTIVATE}
