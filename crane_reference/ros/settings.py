@@ -107,7 +107,7 @@ def apply(server: ReferenceServer, params: NodeParameters, names: list[str], acc
     if any(name.startswith("preview.") for name in names):
         server.preview = preview(params)
     if "speed_scaling" in names:
-        k = server.command("set_speed_scaling", params.speed_scaling, accepted_ns=accepted_ns)
+        k = server.command("speed_scaling", params.speed_scaling, accepted_ns=accepted_ns)
         done.append(f"speed scaling {params.speed_scaling:g} from the sample stamped {server.stamp_of(k):.6f} s")
     targets = params.targets()
     if any(name in TARGET_PARAMETERS for name in names) and targets != server.stream.targets:

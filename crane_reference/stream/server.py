@@ -23,7 +23,7 @@ Computing ahead
 
 Commands
     :meth:`ReferenceServer.command` applies a stream command (``pause``, ``resume``,
-    ``set_speed_scaling``, ``retarget``) at the last frame stamped within ``lead`` seconds of its acceptance
+    ``speed_scaling``, ``retarget``) at the last frame stamped within ``lead`` seconds of its acceptance
     (at least the one after the next to publish: the effect comes at most ``lead`` after the acceptance when
     ``lead`` spans two periods), or at the next frame to make while nothing is published; the frames from
     there on are dropped at once and made again after it (the first batch in the command's own request to
@@ -61,7 +61,7 @@ URGENT_BATCH = 0.005  # [s] of stream (at least one frame) made per request clos
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to make (for commands)
 MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, the stamps leap (re-anchored)
 REST_MARGIN = 1.0  # [s] :meth:`ReferenceServer.come_to_rest` waits beyond the ramp and the lead
-COMMANDS = ("pause", "resume", "set_speed_scaling", "retarget")
+COMMANDS = ("pause", "resume", "speed_scaling", "retarget")
 
 
 class CommandRefusedError(RuntimeError):
@@ -392,15 +392,14 @@ class ReferenceServer:
                 raise CommandRefusedError(f"the solver stopped ({error}): start a new one") from error
 
     def command(self, name: str, *args: Any, accepted_ns: int) -> int:
-        """Apply the stream command ``name`` (``pause``, ``resume``, ``set_speed_scaling`` (rate),
+        """Apply the stream command ``name`` (``pause``, ``resume``, ``speed_scaling`` (rate),
         ``retarget`` (targets, checked with :meth:`check_targets`)) at the command point of its acceptance
         at the clock reading ``accepted_ns`` [ns] (:meth:`~.schedule.FrameSchedule.command_point`).  Returns
         the sample it takes effect at.  Raises what the stream raises (the stream unchanged), or
         :class:`CommandRefusedError` once the solver has stopped."""
         if name not in COMMANDS:
             raise ValueError(f"command {name!r}: not one of {', '.join(COMMANDS)}")
-        label = "speed_scaling" if name == "set_speed_scaling" else name
-        return self._at_command_point(label, accepted_ns, name, *args).k
+        return self._at_command_point(name, accepted_ns, name, *args).k
 
     def check_targets(self, targets: Task) -> None:
         """Raise :class:`~.targets.UnreachableTargetError` unless ``targets`` can be streamed from here."""

@@ -190,7 +190,7 @@ class StreamSolver:
 
 
 STREAM_COMMANDS: dict[str, Callable[..., Any]] = {
-    "pause": StreamSolver.pause, "resume": StreamSolver.resume, "set_speed_scaling": StreamSolver.set_speed_scaling,
+    "pause": StreamSolver.pause, "resume": StreamSolver.resume, "speed_scaling": StreamSolver.set_speed_scaling,
     "retarget": StreamSolver.retarget, "restart": StreamSolver.restart}
 """The commands a server sends at a stream time (:meth:`StreamSolver.command`), by the name it records them under."""
 
