@@ -14,6 +14,7 @@ e.g. ``-p qos_overrides./crane_reference/joint_states.publisher.depth:=50``.
 from __future__ import annotations
 
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -122,7 +123,9 @@ class SamplePublisher:
 
         It starts once the server's look-ahead of frames is ready and the clock runs (ROS time is 0 until the
         first /clock with use_sim_time).  It sleeps in wall time for the time left on the node clock and checks
-        that clock again (at least every MAX_WAIT), so it follows ROS time and stops at once when stopped.
+        that clock again (at least every MAX_WAIT), so it follows ROS time and stops at once when stopped.  The
+        node clock is read once a wake-up (an rclpy call that costs microseconds); the time the publishing
+        took is added from the monotonic clock.
         """
         clock, server, rate = self.node.get_clock(), self.server, self.server.rate
         while not self._quiet.is_set() and (not server.ready() or clock.now().nanoseconds == 0):
@@ -131,9 +134,10 @@ class SamplePublisher:
         self.waiting_for_clock = False
         server.begin(clock.now().nanoseconds)
         while not self._quiet.is_set():
-            for outgoing in server.due(clock.now().nanoseconds):
+            now, read_at = clock.now().nanoseconds, time.monotonic_ns()
+            for outgoing in server.due(now):
                 self.send(outgoing)
-            left = server.next_stamp() - clock.now().nanoseconds
+            left = server.next_stamp() - now - (time.monotonic_ns() - read_at)
             if left > 0:
                 self._quiet.wait(min(left / NANOSECONDS, MAX_WAIT))
 
