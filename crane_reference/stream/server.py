@@ -52,7 +52,7 @@ from ..motion.simulation import SOLVER_FAILURES
 from .reference_stream import ERROR, PAUSED, RUNNING
 from .sample import ReferenceSample
 from .schedule import Frame, FrameBatch, FrameRequest, FrameSchedule, Plan, stamp_at
-from .solver import SolverClient, SolverStoppedError, StreamStatus
+from .solver import STREAM_COMMANDS, SolverClient, SolverStoppedError, StreamStatus
 
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
 COMPUTE_SLICE = 0.005  # [s] of wall time the solver computes per request while publishing
@@ -61,7 +61,7 @@ URGENT_BATCH = 0.005  # [s] of stream (at least one frame) made per request clos
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to make (for commands)
 MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, the stamps leap (re-anchored)
 REST_MARGIN = 1.0  # [s] :meth:`ReferenceServer.come_to_rest` waits beyond the ramp and the lead
-COMMANDS = ("pause", "resume", "speed_scaling", "retarget")
+COMMANDS = tuple(name for name in STREAM_COMMANDS if name != "restart")  # :meth:`ReferenceServer.command`'s
 
 
 class CommandRefusedError(RuntimeError):
