@@ -9,7 +9,6 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-import pinocchio as pin
 
 from crane_reference.dynamics import kernels
 from crane_reference.model.urdf import model_to_urdf
@@ -46,6 +45,7 @@ def process_cpu_seconds(pid: int) -> float:
 def aba_time(scenario: Scenario, repeat: int = 20000) -> float:
     """Best per-call time [s] of Pinocchio's forward dynamics (ABA, called from Python) on the URDF that
     crane-reference exports for the scenario's chain, at a random state (continuous joints as cos/sin)."""
+    import pinocchio as pin  # here: the other benchmarks need no Pinocchio
     model = pin.buildModelFromXML(model_to_urdf(scenario.model))
     data = model.createData()
     rng = np.random.default_rng(0)

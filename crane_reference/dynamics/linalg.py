@@ -87,14 +87,6 @@ def solve_small_in_place(a, x):
 
 
 @njit(cache=True, nogil=True)
-def solve_small(A, B):
-    """X = A^-1 B for a small square A (:func:`solve_small_in_place` on copies), B of shape (m, k)."""
-    x = B.copy()
-    solve_small_in_place(A.copy(), x)
-    return x
-
-
-@njit(cache=True, nogil=True)
 def solve_small_vector(A, b):
     """x = A^-1 b for a small square A (see :func:`solve_small_in_place`)."""
     x = b.copy()

@@ -213,8 +213,8 @@ def constraint_values(p, v, k: Coefficients):
     rate, grads = velocity_residual(p, v, k)
     scratch = np.empty((1, 3))
     for i in range(m):
-        residual[i] = (_holonomic_value(Q, g, c, i, p, scratch, 0) if order[i] == 0
-                       else _rate_value(Q, g, c, i, p, v, scratch, 0))
+        # a first-order row's residual Psi is its velocity-level residual already
+        residual[i] = _holonomic_value(Q, g, c, i, p, scratch, 0) if order[i] == 0 else rate[i]
     distance = np.empty(m)
     for i in range(m):
         distance[i] = abs(residual[i]) / np.sqrt(grads[i, 0] ** 2 + grads[i, 1] ** 2 + grads[i, 2] ** 2)

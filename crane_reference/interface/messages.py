@@ -51,7 +51,6 @@ TRAIL_NAMESPACE = "end_effector_trail"
 LINE_WIDTH = 0.03  # [m], width of the marker lines
 ELLIPSE_COLOR = (0.1, 0.6, 1.0, 1.0)  # r, g, b, a
 TRAIL_COLOR = (1.0, 0.4, 0.1, 1.0)
-# diagnostic_msgs/DiagnosticStatus levels
 
 
 @dataclass(frozen=True)

@@ -285,7 +285,7 @@ def main(args: list[str] | None = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (StartupError, ConfigError, ParameterError) as error:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f"cannot start: {error}")
+        rclpy.logging.get_logger(NODE_NAME).fatal(f"{CANNOT} start: {error}")
         return 1
     except Exception:
         if rclpy.ok():

@@ -74,6 +74,7 @@ class SamplePublisher:
         self.node, self.types, self.server, self.settings = node, types, server, settings
         self.joint_names = list(server.info.joint_names)
         self.trail: deque[Any] = deque(maxlen=TRAIL_POINTS)  # E's positions as Point messages
+        self._trail_stride = max(1, round(server.rate / TRAIL_RATE))  # samples between two trail points
         self._ellipse: tuple[tuple[float, ...], list[Any]] = ((), [])  # (a, b, z) and its Point messages
         self._joint_writer: SerializedJointState | None = None
         self._pose_writer: SerializedPose | None = None
@@ -132,6 +133,8 @@ class SamplePublisher:
             self.waiting_for_clock = server.ready()
             self._quiet.wait(1.0 / rate)
         self.waiting_for_clock = False
+        if self._quiet.is_set():  # stopped before publishing began: nothing to begin
+            return
         server.begin(clock.now().nanoseconds)
         while not self._quiet.is_set():
             now, read_at = clock.now().nanoseconds, time.monotonic_ns()
@@ -160,7 +163,7 @@ class SamplePublisher:
                 self.types, stamp, settings.frame_id, [self.joint_names[i] for i in indices], indices,
                 messages.preview_offsets(frame.horizon, len(frame.preview)), [sample, *frame.preview],
                 settings.preview_effort))
-        if outgoing.k % max(1, round(self.server.rate / TRAIL_RATE)) == 0:
+        if outgoing.k % self._trail_stride == 0:
             self.trail.append(messages.point(self.types, sample.ee_position))
 
     def publish_markers(self) -> None:

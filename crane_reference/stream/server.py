@@ -333,9 +333,9 @@ class ReferenceServer:
 
     # -- commands -------------------------------------------------------------------------------------
 
-    def _at_command_point(self, name: str, accepted_ns: int, *request: Any) -> CommandPoint:
-        """Send the solver ``request`` (method, args...) with the stream time tau of the command point
-        inserted after the method (frame k: the last one stamped within ``lead`` of the acceptance
+    def _at_command_point(self, name: str, accepted_ns: int, *args: Any) -> CommandPoint:
+        """Send the solver the stream command ``name`` with ``args`` at the stream time tau of the command point
+        (frame k: the last one stamped within ``lead`` of the acceptance
         ``accepted_ns``, at least the one after the next to publish; the next frame to make while not
         publishing); the frames from k on are dropped at once, and the first batch of them is made again in
         the same request.  Records the command's acceptance and effect."""
@@ -352,8 +352,7 @@ class ReferenceServer:
         batch = None
         self.solver.interrupt()  # the worker's request in progress stops computing ahead at its next run
         try:
-            answer, batch = self._request(self.solver.command, request[0], tau, request[1:], frames,
-                                          RELEASE_KEEP + LOOKAHEAD)
+            answer, batch = self._request(self.solver.command, name, tau, args, frames, RELEASE_KEEP + LOOKAHEAD)
         finally:
             with self._lock:
                 if batch is not None:
@@ -399,7 +398,7 @@ class ReferenceServer:
         :class:`CommandRefusedError` once the solver has stopped."""
         if name not in COMMANDS:
             raise ValueError(f"command {name!r}: not one of {', '.join(COMMANDS)}")
-        return self._at_command_point(name, accepted_ns, name, *args).k
+        return self._at_command_point(name, accepted_ns, *args).k
 
     def check_targets(self, targets: Task) -> None:
         """Raise :class:`~.targets.UnreachableTargetError` unless ``targets`` can be streamed from here."""
@@ -422,7 +421,7 @@ class ReferenceServer:
         stream unchanged."""
         if self.publishing:
             raise CommandRefusedError("a restart makes the reference jump to the start: stop publishing first")
-        point = self._at_command_point("restart", accepted_ns, "restart")
+        point = self._at_command_point("restart", accepted_ns)
         jump = abs(point.answer.start - point.answer.before)
         restart = Restart(point.k, float(jump.max()), self.info.joint_names[int(jump.argmax())])
         with self._lock:
@@ -461,7 +460,7 @@ class ReferenceServer:
         stream = self.stream
         if stream.state != RUNNING or stream.target_speed <= 0.0 or not self._worker.is_alive():
             return
-        point = self._at_command_point("pause", accepted_ns, "pause")
+        point = self._at_command_point("pause", accepted_ns)
         stream = self.stream
         rest_k = point.k + math.ceil((stream.settled_at - point.tau) * self.rate - 1e-9) + 1
         deadline = time.monotonic() + stream.ramp_time + self.schedule.lead + REST_MARGIN

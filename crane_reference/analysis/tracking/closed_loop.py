@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...model.chain import VARIANTS
+from ...model.chain import ACTUATED_JOINTS, VARIANTS
 from ...model.parameters import CraneParameters
 from ...motion.constraints import ConstraintSet
 from ...motion.programmed_motion import REALISATIONS, ProgrammedMotion
@@ -37,7 +37,7 @@ from ..bands import vibration_band
 from ..vibration import boom_tip_deflection
 from .controller import CONTROLLERS, JointController, JointGains, bandwidth_gains
 from .feedforward import FEEDFORWARDS, RigidInverseDynamics
-from .plant import ACTUATED_JOINTS, Plant, held_start, servo_motion
+from .plant import Plant, held_start, servo_motion
 
 
 @dataclass(frozen=True)

@@ -16,10 +16,9 @@ from __future__ import annotations
 import numpy as np
 
 from ...dynamics.chain_dynamics import CraneDynamics
-from ...model.chain import build_model
+from ...model.chain import ACTUATED_JOINTS, build_model
 from ...model.drive import make_drive
 from ...model.parameters import CraneParameters
-from .plant import ACTUATED_JOINTS
 
 FEEDFORWARDS = ("none", "rigid")
 

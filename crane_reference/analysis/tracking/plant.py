@@ -26,8 +26,6 @@ from ...motion.programmed_motion import ProgrammedMotion
 from ...motion.simulation import MotionStepper, Scenario
 from ...motion.trajectory import Trajectory, stack_samples
 
-"""The joints with actuators, in the order of every torque vector here (psi2, psi(3,0), psi4)."""
-
 
 def servo_motion(scenario: Scenario) -> ProgrammedMotion:
     """The scenario's task realised by the luff and knuckle torques (servo-constraints) instead of a force

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ...model.chain import ACTUATED_JOINTS
 from ..figures import pyplot as plt
 from .closed_loop import TrackingRun
-from .plant import ACTUATED_JOINTS
 
 
 def label(run: TrackingRun) -> str:
