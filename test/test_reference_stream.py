@@ -121,20 +121,17 @@ def test_samples_between_steps_are_the_hermite_spline_and_the_kinematics_there()
     stream = ReferenceStream(load_config(), "flexible", step=STEP)
     stream.compute(0.1)
     grid = stream.samples(np.arange(0.0, 0.1 + STEP / 2, STEP))
-    times = np.array([s.t for s in grid])
-    q, qd, qdd = (np.array([getattr(s, name) for s in grid]) for name in ("q", "qd", "qdd"))
+    times, q, qd, qdd = grid.t, grid.q, grid.qd, grid.qdd
     at = np.sort(np.random.default_rng(3).uniform(0.0, 0.1, 37))
     samples = stream.samples(at)
-    np.testing.assert_allclose([s.q for s in samples], CubicHermiteSpline(times, q, qd, axis=0)(at), rtol=0,
-                               atol=1e-12)
-    np.testing.assert_allclose([s.qd for s in samples], CubicHermiteSpline(times, qd, qdd, axis=0)(at), rtol=0,
-                               atol=1e-10)
+    np.testing.assert_allclose(samples.q, CubicHermiteSpline(times, q, qd, axis=0)(at), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(samples.qd, CubicHermiteSpline(times, qd, qdd, axis=0)(at), rtol=0, atol=1e-10)
     dynamics = stream.scenario.dynamics
-    for s in samples:
+    for s in samples.rows():
         np.testing.assert_allclose(s.ee_position, dynamics.end_effector(s.q)[0], rtol=0, atol=1e-12)
         rotation = dynamics.terms(s.t, s.q, s.qd).ee_rotation
         np.testing.assert_allclose(Rotation.from_quat(s.ee_quaternion).as_matrix(), rotation, rtol=0, atol=1e-12)
-    assert [s.t for s in samples] == at.tolist()
+    assert samples.t.tolist() == at.tolist()
 
 
 def test_reach_is_the_arms_geometric_reach(params):

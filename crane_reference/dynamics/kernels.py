@@ -89,6 +89,9 @@ def projection_matrix(B, independent, servo):
     return P
 
 
+SINGULAR_VALUE, DRIVE_TORQUE = ACCOUNTS.index("kdc_min_singular_value"), ACCOUNTS.index("drive_torque")
+"""Columns of the accounts (:data:`~.structures.ACCOUNTS`) that kernels write or read by themselves."""
+
 ROUND_OFF_STEP = 1e-15
 """[rad or m]: a Newton correction of the position constraints this small is at the round-off of q."""
 
@@ -420,19 +423,24 @@ def newton_residual(q, qd, a1, T, S, Hw, p, C, k: Coefficients, drive, partition
 @njit(cache=True, nogil=True, inline='always')
 def _end_accelerations(end: Iterate, a1, k: Coefficients, partition: Partition, chain: ChainData):
     """qdd = B a1_ic + e at the step's end state (the acceleration constraints of (7) there: E's velocity
-    terms, A, c and B; no mass matrix), and B."""
+    terms, A, c and B; no mass matrix), B and sigma_min(K_dc)."""
     d = point_bias(velocity_terms(end.qd, end.S), chain.ee_joint, end.ee_position)
     A, c_acc = acceleration_terms(end.ee_position, matvec(end.ee_jacobian, end.qd), end.ee_jacobian, d, k)
-    B, e_dc = constraint_map(A, c_acc, partition.independent, partition.dependent)
-    return _accelerations_from(a1[:partition.independent.size], B, e_dc, partition.independent,
-                               partition.dependent), B
+    dependent = partition.dependent
+    K_dc = np.empty((dependent.size, dependent.size))
+    for row in range(dependent.size):
+        for j in range(dependent.size):
+            K_dc[row, j] = A[row, dependent[j]]
+    B, e_dc = constraint_map(A, c_acc, partition.independent, dependent)
+    return (_accelerations_from(a1[:partition.independent.size], B, e_dc, partition.independent, dependent), B,
+            smallest_singular_value(K_dc))
 
 
 @njit(cache=True, nogil=True)
 def _failed(q0, qd0, qdd0, B0, correction: ModalCorrection, iterations):
     """The :class:`Advance` of a step whose constraints could not be met: its start, unsolved."""
     nan = np.full(3, np.nan)
-    return Advance(q0, qd0, qdd0, B0, nan, np.full((3, 3), np.nan), nan, correction, CONSTRAINTS_UNSOLVABLE,
+    return Advance(q0, qd0, qdd0, B0, nan, np.full((3, 3), np.nan), nan, np.nan, correction, CONSTRAINTS_UNSOLVABLE,
                    iterations)
 
 
@@ -554,9 +562,9 @@ def integration_step(q0, qd0, qdd0, B0, correction: ModalCorrection, t0, h, k: C
     end = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, True, True)
     if not end.solved:
         return _failed(q0, qd0, qdd0, B0, correction, iteration + 1)
-    qdd, B = _end_accelerations(end, a1, k, partition, chain)
+    qdd, B, singular_value = _end_accelerations(end, a1, k, partition, chain)
     return Advance(end.q, end.qd, qdd, B, end.ee_position, end.T[chain.ee_joint, :3, :3].copy(),
-                   matvec(end.ee_jacobian, end.qd), correction, status, iteration + 1)
+                   matvec(end.ee_jacobian, end.qd), singular_value, correction, status, iteration + 1)
 
 
 @njit(cache=True, nogil=True)
@@ -580,7 +588,8 @@ def integration_run(q, qd, qdd, B, correction: ModalCorrection, t0, times, k: Co
     """:func:`integration_step` from t0 through ``times`` (N,) in one call, with the constraint
     coefficients ``k`` (stacked per step) and drive parameters ``drives`` (N, 4) of each step's end, B the
     velocity map at t0.  The rows of the steps where ``evaluated`` (N,) is True, and of the last one, carry
-    the full evaluation (:func:`step_evaluation`: reactions, residuals, accounts); the others NaN there.
+    the full evaluation (:func:`step_evaluation`: reactions, residuals, accounts); the others NaN there but
+    for sigma_min(K_dc) in the accounts (every step's; :func:`evaluated_rows` completes them later).
     Stops at the first step that fails; returns a :class:`Run`."""
     N, n, m = times.size, q.size, k.order.size
     rows = StepRows(np.empty((N, n)), np.empty((N, n)), np.empty((N, n)), np.full((N, m), np.nan),
@@ -594,6 +603,7 @@ def integration_run(q, qd, qdd, B, correction: ModalCorrection, t0, times, k: Co
         rows.q[completed], rows.qd[completed], rows.qdd[completed] = step.q, step.qd, step.qdd
         rows.ee_position[completed], rows.ee_rotation[completed] = step.ee_position, step.ee_rotation
         rows.ee_velocity[completed], rows.iterations[completed] = step.ee_velocity, step.iterations
+        rows.accounts[completed, SINGULAR_VALUE] = step.kdc_min_singular_value
         if evaluated[completed] and completed < N - 1:
             _evaluated_row(rows, completed, step_evaluation(step.q, step.qd, step.qdd, _at_step(k, completed),
                                                             drives[completed], partition, chain))
@@ -609,6 +619,20 @@ def integration_run(q, qd, qdd, B, correction: ModalCorrection, t0, times, k: Co
     else:  # the evaluation at the failed step's start
         last = evaluate(step.q, step.qd, _at_step(k, completed), drives[completed], partition, chain)
     return Run(completed, step.status, rows, Step(step.q, step.qd, last, step.correction, step.status, step.iterations))
+
+
+@njit(cache=True, nogil=True)
+def evaluated_rows(q, qd, qdd, k: Coefficients, drives, partition: Partition, chain: ChainData):
+    """The full evaluation (:func:`step_evaluation`) of computed steps that :func:`integration_run` left
+    unevaluated: rows of q, qd and the integrator's qdd (N, n) with the constraint coefficients ``k`` (stacked
+    per row) and the drive parameters ``drives`` of each; returns the generalized force of the constraints
+    (N, n), the drive torque (N,) [N m] and the constraint distances (N, m) [m]."""
+    N, n, m = q.shape[0], q.shape[1], k.order.size
+    forces, torques, distances = np.empty((N, n)), np.empty(N), np.empty((N, m))
+    for i in range(N):
+        e = step_evaluation(q[i], qd[i], qdd[i], _at_step(k, i), drives[i], partition, chain)
+        forces[i], torques[i], distances[i] = e.constraint_forces, e.accounts[DRIVE_TORQUE], e.distance
+    return forces, torques, distances
 
 
 @njit(cache=True, nogil=True)

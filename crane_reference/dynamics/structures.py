@@ -219,8 +219,9 @@ messages of the failures (formatted with t0, t1, h and iterations)."""
 
 class Advance(NamedTuple):
     """One integration step's end: q, qd and the integrator's qdd, the velocity map B, E's position, the
-    rotation of its frame and its velocity, the modal correction used, ``status`` (:data:`STATUS_MESSAGES`)
-    and the Newton iterations (the full :class:`Evaluation` there is computed only where it is read)."""
+    rotation of its frame and its velocity, sigma_min(K_dc), the modal correction used, ``status``
+    (:data:`STATUS_MESSAGES`) and the Newton iterations (the full :class:`Evaluation` there is computed only
+    where it is read)."""
 
     q: np.ndarray
     qd: np.ndarray
@@ -229,6 +230,7 @@ class Advance(NamedTuple):
     ee_position: np.ndarray
     ee_rotation: np.ndarray
     ee_velocity: np.ndarray
+    kdc_min_singular_value: float
     correction: ModalCorrection
     status: int
     iterations: int
@@ -237,7 +239,8 @@ class Advance(NamedTuple):
 class StepRows(NamedTuple):
     """Per-step results of a compiled run (first axis: step): q, qd, qdd, the reactions and their
     generalized force, E's position, rotation matrix and velocity, the constraint residuals and
-    distances, the accounts (:data:`ACCOUNTS`) and the Newton iterations."""
+    distances, the accounts (:data:`ACCOUNTS`) and the Newton iterations (reactions, residuals and accounts
+    NaN on the rows a run did not evaluate, but for sigma_min(K_dc))."""
 
     q: np.ndarray
     qd: np.ndarray

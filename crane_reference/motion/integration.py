@@ -185,10 +185,13 @@ class ExactFrequencyTrapezoidal:
         jump (``ends_on_jump``) uses the drive's left limit there; continue with :meth:`resolve` at the jump."""
         return self.run(state, np.array([t1], dtype=float), ends_on_jump)[0]
 
-    def run(self, state: StepState, times: np.ndarray, ends_on_jump: bool = False) -> tuple[StepState, StepRows]:
+    def run(self, state: StepState, times: np.ndarray, ends_on_jump: bool = False,
+            every_row: bool = True) -> tuple[StepState, StepRows]:
         """Advance ``state`` through the increasing ``times`` [s] in one compiled call (the steps of
         :meth:`step`); the last one ends on a drive jump with ``ends_on_jump``.  Returns the final state
-        and the per-step rows."""
+        and the per-step rows, each with its full evaluation (reactions, residuals, accounts), or with
+        ``every_row`` False only the last (the others read later with
+        :meth:`~.programmed_motion.ProgrammedMotion.evaluated_rows`)."""
         motion = self.motion
         drive = motion.dynamics.drive
         times = np.asarray(times, dtype=float)
@@ -198,7 +201,7 @@ class ExactFrequencyTrapezoidal:
         run = kernels.integration_run(
             state.q, state.qd, state.solution.qdd, state.solution.velocity_map, state.correction, state.t, times,
             motion.constraints.coefficients_at(times), drives, motion.partition, motion.dynamics.chain, self.settings,
-            np.ones(times.size, dtype=np.bool_))
+            np.full(times.size, every_row))
         if run.status != CONVERGED:
             t0 = times[run.completed - 1] if run.completed else state.t
             t1 = times[min(run.completed, len(times) - 1)]

@@ -86,18 +86,25 @@ class StepperSnapshot(NamedTuple):
 
 
 class MotionStepper:
-    """Online integration (:mod:`.integration`) of a :class:`ProgrammedMotion` with work bookkeeping."""
+    """Online integration (:mod:`.integration`) of a :class:`ProgrammedMotion` with work bookkeeping.
+
+    With ``every_row`` False only the last step of each compiled run is evaluated in full: the rows'
+    reactions, constraint forces, residuals and accounts but sigma_min(K_dc) are NaN elsewhere (a reader
+    completes the rows it reads with :meth:`~.programmed_motion.ProgrammedMotion.evaluated_rows`), and the
+    work accounts, integrals of every step's powers, are not kept (NaN)."""
 
     def __init__(self, motion: ProgrammedMotion, t0: float, q0: np.ndarray, qd0: np.ndarray,
-                 step: float = ONLINE_STEP, tolerance: float = ONLINE_TOLERANCE, evaluations: int = EVALUATIONS):
+                 step: float = ONLINE_STEP, tolerance: float = ONLINE_TOLERANCE, evaluations: int = EVALUATIONS,
+                 every_row: bool = True):
         if not step > 0.0:
             raise ValueError(f"step = {step}: must be > 0 s")
         self.step_size = step
+        self.every_row = every_row
         self.integrator = ExactFrequencyTrapezoidal(motion, tolerance=tolerance, evaluations=evaluations)
         self._t0 = t0
         self._k = 0
         self.state: StepState = self.integrator.start(t0, q0, qd0)
-        self._work = np.zeros(3)
+        self._work = np.zeros(3) if every_row else np.full(3, np.nan)
         self._breakpoints = sorted(motion.dynamics.drive.breakpoints)
         self.sample: Sample = make_sample(self.state.t, self.state.q, self.state.qd, self.state.solution, self._work)
 
@@ -138,7 +145,7 @@ class MotionStepper:
         work accounts; the samples' fields stacked per step."""
         start = self.state
         times, on_jump, covered = self._next_times(t_end)
-        new, rows = self.integrator.run(start, times, ends_on_jump=on_jump)
+        new, rows = self.integrator.run(start, times, ends_on_jump=on_jump, every_row=self.every_row)
         self._k += covered
         powers = np.vstack((start.solution.powers, rows.accounts[:, POWERS]))
         steps = np.diff(np.concatenate(([start.t], times)))
@@ -174,16 +181,18 @@ class MotionStepper:
         self.state, self._k, work, self.sample, self.integrator.motion = snapshot
         self._work = work.copy()
 
-    def retarget(self, constraints: ConstraintSet, t: float, q: np.ndarray, qd: np.ndarray, work: np.ndarray) -> None:
+    def retarget(self, constraints: ConstraintSet, t: float, q: np.ndarray, qd: np.ndarray,
+                 work: np.ndarray | None = None) -> None:
         """Continue from a computed step (t, q, qd and the work accounts [J] there, e.g. a row of
-        :meth:`advance_until`) under new constraints that hold there (e.g. a C2 blend that starts at t).  The
-        method restarts there (:meth:`~.integration.ExactFrequencyTrapezoidal.resolve`: (8) solved again at
-        (t, q, qd), a fresh modal correction), which is all a continuation under new constraints keeps of the
-        step, so no step is integrated again."""
+        :meth:`advance_until`; None where they are not kept, ``every_row`` False) under new constraints that
+        hold there (e.g. a C2 blend that starts at t).  The method restarts there
+        (:meth:`~.integration.ExactFrequencyTrapezoidal.resolve`: (8) solved again at (t, q, qd), a fresh modal
+        correction), which is all a continuation under new constraints keeps of the step, so no step is
+        integrated again."""
         self.integrator.motion = ProgrammedMotion(self.motion.dynamics, constraints, tuple(self.motion.dependent),
                                                   self.motion.min_singular_value)
         self._k = int(np.floor((t - self._t0) / self.step_size + 1e-9))  # grid times at or before t
-        self._work = work.copy()
+        self._work = np.full(3, np.nan) if work is None else work.copy()
         self.state = self.integrator.resolve(StepState(t, q, qd, self.state.solution, self.state.correction))
         self.sample = make_sample(t, q, qd, self.state.solution, self._work)
 

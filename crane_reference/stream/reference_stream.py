@@ -42,7 +42,7 @@ from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import SOLVER_FAILURES, MotionStepper, Scenario, TaskConstraints, paper_task_constraints
 from ..motion.steps import ONLINE_STEP
 from .history import History
-from .sample import ReferenceSample, between, reference_sample, reference_samples, warped
+from .sample import ReferenceSample, Samples, between, warped
 from .targets import blend_constraints, check_task
 from .time_warp import TimeWarp, check_rate
 
@@ -108,12 +108,12 @@ class ReferenceStream:
         if near is not None:
             turns = np.where(self.whole_turn_coordinates(), np.round((near - start) / (2.0 * np.pi)), 0.0)
             start = start + 2.0 * np.pi * turns
-        self._stepper = MotionStepper(self._motion(constraints), 0.0, start, np.zeros_like(start), self.step)
-        self._history = History(self._stepper.snapshot(),
-                                reference_sample(self._stepper.sample, self.model.drive_joint))
+        self._stepper = MotionStepper(self._motion(constraints), 0.0, start, np.zeros_like(start), self.step,
+                                      every_row=False)
+        self._history = History(self._stepper.snapshot(), self.model.drive_joint)
         self._warp = TimeWarp(self._warp.ramp_time, self.speed_scaling, tau)
         self._hold: ReferenceSample | None = None
-        self._forgotten: list[list] = []
+        self._forgotten: list[list] = []  # motion discarded by commands, freed off their critical path
         self.state = RUNNING
         self.last_error = ""
 
@@ -140,7 +140,7 @@ class ReferenceStream:
         of the computed motion)."""
         if self._hold is not None:
             return math.inf
-        return self._warp.publish_time(self._history.times[-1])
+        return self._warp.publish_time(self._history.end_time)
 
     def set_blend_time(self, seconds: float) -> None:
         if not (math.isfinite(seconds) and seconds > 0.0):
@@ -178,23 +178,22 @@ class ReferenceStream:
             return
         deadline = None if wall_budget is None else time.perf_counter() + wall_budget
         target = self.motion_time(until)
-        times = self._history.times
-        while times[-1] < target:
+        history = self._history
+        while history.end_time < target:
             if deadline is not None and time.perf_counter() > deadline:
                 return
             if interrupted is not None and interrupted():
                 return
             try:
-                chunk_end = min(target, times[-1] + CHUNK_STEPS * self.step)
-                rows = self._stepper.advance_until(max(chunk_end, times[-1] + 0.5 * self.step))
+                end = history.end_time
+                rows = self._stepper.advance_until(max(min(target, end + CHUNK_STEPS * self.step),
+                                                       end + 0.5 * self.step))
                 if not (np.all(np.isfinite(rows["q"])) and np.all(np.isfinite(rows["qd"]))):
                     raise FloatingPointError(f"non-finite state before t = {rows['t'][-1]:.6g} s")
             except SOLVER_FAILURES as failure:
                 self._fail(failure)
                 return
-            work = np.column_stack((rows["work_drive"], rows["work_constraints"], rows["work_damping"]))
-            self._history.extend(reference_samples(rows, self.model.drive_joint), work, self._stepper.motion,
-                                 self._stepper.snapshot())
+            history.extend(rows, self._stepper.snapshot())
 
     def free_forgotten(self) -> None:
         """Free the motion that commands discarded since the last call (a server that answers commands
@@ -202,42 +201,37 @@ class ReferenceStream:
         self._forgotten.clear()
 
     def _fail(self, failure: Exception) -> None:
-        last = self._history.last
-        self._stepper.rewind(last.snapshot)
-        self._hold = last.sample.hold()
+        history = self._history
+        self._stepper.rewind(history.last_snapshot)
+        self._hold = history.read(np.array([len(history) - 1])).rows()[0].hold()
         self.state = ERROR
         self.last_error = f"{type(failure).__name__}: {failure}"
 
     def sample(self, tau: float) -> ReferenceSample:
         """The reference at publish time tau (which must not exceed :attr:`computed_until`)."""
-        return self.samples([tau])[0]
+        return self.samples([tau]).rows()[0]
 
-    def samples(self, taus) -> list[ReferenceSample]:
+    def samples(self, taus) -> Samples:
         """The references at the publish times ``taus`` (none beyond :attr:`computed_until`): the computed
-        instants themselves, or interpolated between two of them (:func:`~.sample.between`, all at once)."""
+        steps themselves, or interpolated between two of them (:func:`~.sample.between`, all at once)."""
         if self._hold is not None:
-            return [self._hold] * len(taus)
-        warps = [self._warp.at(tau) for tau in taus]
-        entries, end = self._history.entries, self._history.times[-1]
-        made: list[ReferenceSample | None] = []
-        left, right, inside, times = [], [], [], []
-        for t, _, _ in warps:
-            if t > end + 1e-12:
-                raise ValueError(f"t = {t:.6g} s is beyond the computed motion ({end:.6g} s): call compute()")
-            k, exact = self._history.bracket(t)
-            made.append(entries[k].sample if exact else None)
-            if not exact:
-                left.append(entries[k].sample)
-                right.append(entries[k + 1].sample)
-                inside.append(len(made) - 1)
-                times.append(t)
-        if inside:
-            poses = self.scenario.dynamics.end_effector_poses
-            for i, sample in zip(inside, between(left, right, np.array(times), poses), strict=True):
-                made[i] = sample
-        return [warped(sample, rate, rate_change) for sample, (_, rate, rate_change) in zip(made, warps, strict=True)]
+            return Samples.repeated(self._hold, len(taus))
+        t, rate, rate_change = np.array([self._warp.at(tau) for tau in taus], dtype=float).reshape(-1, 3).T
+        history = self._history
+        end = history.end_time
+        if t.size and t.max() > end + 1e-12:
+            raise ValueError(f"t = {t.max():.6g} s is beyond the computed motion ({end:.6g} s): call compute()")
+        k, exact = history.locate(t)
+        made = history.read(k)
+        inside = np.flatnonzero(~exact)
+        if inside.size:
+            interpolated = between(made.take(inside), history.read(k[inside] + 1), t[inside],
+                                   self.scenario.dynamics.end_effector_poses)
+            for field, values in zip(made, interpolated, strict=True):
+                field[inside] = values
+        return warped(made, rate, rate_change)
 
-    def preview(self, tau: float, horizon: float, count: int) -> list[ReferenceSample]:
+    def preview(self, tau: float, horizon: float, count: int) -> Samples:
         """``count`` samples over (tau, tau + horizon], strictly increasing in time."""
         self.compute(tau + horizon)
         return self.samples([min(tau + horizon * (i + 1) / count, self.computed_until) for i in range(count)])
@@ -253,7 +247,7 @@ class ReferenceStream:
         """Raise :class:`~.targets.UnreachableTargetError` unless the whole new ellipse is reachable, away
         from singularities, at every height from E's present one to the new final height
         (:func:`~.targets.check_task`)."""
-        check_task(self.scenario, targets, float(self._history.last.sample.ee_position[2]),
+        check_task(self.scenario, targets, float(self._history.last_snapshot.sample.ee_position[2]),
                    self.singular_value_margin)
 
     def retarget(self, tau: float, targets: Task, checked: bool = False) -> None:
@@ -265,10 +259,10 @@ class ReferenceStream:
         t = self.motion_time(tau)
         self.compute(tau)
         k = self._history.first_at_or_after(t)
-        entry = self._history.entries[k]
+        at = self._history.instant(k)
         new = self.task_constraints(targets, self.scenario.z_static)
-        self._stepper.retarget(blend_constraints(entry.motion.constraints, new, entry.sample.t, self.blend_time),
-                               entry.sample.t, entry.sample.q, entry.sample.qd, entry.work)
+        self._stepper.retarget(blend_constraints(at.motion.constraints, new, at.t, self.blend_time), at.t, at.q,
+                               at.qd)
         self._forgotten.append(self._history.truncate(k))
         self._history.set_snapshot(k, self._stepper.snapshot())
         self.targets = targets

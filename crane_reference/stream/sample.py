@@ -5,11 +5,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from dataclasses import fields as dataclass_fields
+from typing import NamedTuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..motion.trajectory import Sample, generalized_effort, hermite_segment, stack_samples
+from ..motion.trajectory import hermite_segment
 
 
 @dataclass(frozen=True)
@@ -39,65 +40,84 @@ class ReferenceSample:
         return math.isfinite(np.concatenate(arrays).sum() + self.residual_distance)
 
 
-SampleColumns = tuple[np.ndarray, ...]
-"""The fields of :class:`ReferenceSample` stacked per sample, in field order (:func:`columns`)."""
+class Samples(NamedTuple):
+    """Reference samples stacked, one row per sample: the fields of :class:`ReferenceSample` (t (N,), q, qd,
+    qdd and effort (N, n), ee_position (N, 3), ee_quaternion (N, 4), residual_distance (N,), held (N,)).  The
+    stream makes and moves samples in this form; a few arrays pickle (to the node's process) at a fraction of
+    the cost of one object per sample."""
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    effort: np.ndarray
+    ee_position: np.ndarray
+    ee_quaternion: np.ndarray
+    residual_distance: np.ndarray
+    held: np.ndarray
+
+    @classmethod
+    def stack(cls, samples: list[ReferenceSample]) -> Samples:
+        """``samples`` stacked."""
+        return cls(*(np.array([getattr(s, f.name) for s in samples]) for f in dataclass_fields(ReferenceSample)))
+
+    @classmethod
+    def repeated(cls, sample: ReferenceSample, count: int) -> Samples:
+        """``sample`` ``count`` times."""
+        return cls(*(np.repeat(np.asarray(getattr(sample, f.name))[None], count, axis=0)
+                     for f in dataclass_fields(ReferenceSample)))
+
+    @property
+    def count(self) -> int:
+        return self.t.size
+
+    def take(self, index: np.ndarray) -> Samples:
+        """The rows ``index``."""
+        return Samples(*(field[index] for field in self))
+
+    def rows(self) -> list[ReferenceSample]:
+        """One :class:`ReferenceSample` per row (its arrays are rows of the stacked ones)."""
+        return [ReferenceSample(*row) for row in zip(self.t.tolist(), self.q, self.qd, self.qdd, self.effort,
+                                                     self.ee_position, self.ee_quaternion,
+                                                     self.residual_distance.tolist(), self.held.tolist(),
+                                                     strict=True)]
+
+    def finite(self) -> np.ndarray:
+        """(N,): whether every number of a row is finite."""
+        total = (self.q.sum(axis=1) + self.qd.sum(axis=1) + self.qdd.sum(axis=1) + self.effort.sum(axis=1)
+                 + self.ee_position.sum(axis=1) + self.ee_quaternion.sum(axis=1) + self.residual_distance + self.t)
+        return np.isfinite(total)
 
 
-def columns(samples: list[ReferenceSample]) -> SampleColumns:
-    """The samples' fields stacked, one array per field: a few arrays instead of one per sample and field,
-    which pickle (to the node's process) at a fraction of the cost."""
-    return tuple(np.array([getattr(s, f.name) for s in samples]) for f in dataclass_fields(ReferenceSample))
+def quaternions(rotations: np.ndarray) -> np.ndarray:
+    """The quaternions (x, y, z, w) of rotation matrices (N, 3, 3) from the kinematics, which are orthonormal to
+    round-off (scipy's check of that skipped)."""
+    if not len(rotations):
+        return np.empty((0, 4))
+    return Rotation.from_matrix(rotations, assume_valid=True).as_quat()
 
 
-def from_columns(stacked: SampleColumns) -> list[ReferenceSample]:
-    """The samples of :func:`columns` again (their arrays are rows of the stacked ones)."""
-    t, q, qd, qdd, effort, position, quaternion, residual, held = stacked
-    return [ReferenceSample(*row) for row in zip(t.tolist(), q, qd, qdd, effort, position, quaternion,
-                                                 residual.tolist(), held.tolist(), strict=True)]
-
-
-def reference_samples(rows: dict[str, np.ndarray], drive_joint: int) -> list[ReferenceSample]:
-    """The references at computed steps, from their :class:`~crane_reference.motion.trajectory.Sample`
-    fields stacked per step (one quaternion conversion for all of them)."""
-    effort = generalized_effort(rows["constraint_forces"], rows["drive_torque"], drive_joint)
-    quaternions = Rotation.from_matrix(rows["ee_rotation"]).as_quat()
-    residuals = np.max(rows["residual_distance"], axis=-1).tolist()
-    return [ReferenceSample(*fields, False) for fields in zip(
-        rows["t"].tolist(), rows["q"], rows["qd"], rows["qdd"], effort, rows["ee_position"], quaternions, residuals,
-        strict=True)]
-
-
-def reference_sample(s: Sample, drive_joint: int) -> ReferenceSample:
-    """The reference at one computed step."""
-    return reference_samples(stack_samples([s]), drive_joint)[0]
-
-
-def between(a: list[ReferenceSample], b: list[ReferenceSample], t: np.ndarray, poses) -> list[ReferenceSample]:
-    """The references at a[i].t < t[i] < b[i].t: q cubic Hermite in q and qd, qd cubic Hermite in qd and qdd
+def between(a: Samples, b: Samples, t: np.ndarray, poses) -> Samples:
+    """The references at a.t[i] < t[i] < b.t[i]: q cubic Hermite in q and qd, qd cubic Hermite in qd and qdd
     (both :func:`~crane_reference.motion.trajectory.hermite_segment`), qdd and effort linear; E's pose from
     ``poses(q)`` -> (positions (N, 3), rotation matrices (N, 3, 3)), the kinematics at the interpolated q."""
-    def stacked(side: list[ReferenceSample], name: str) -> np.ndarray:
-        return np.array([getattr(sample, name) for sample in side])
-
-    start = stacked(a, "t")
-    h = (stacked(b, "t") - start)[:, None]
-    s = (np.asarray(t, dtype=float)[:, None] - start[:, None]) / h
-    qd0, qd1, qdd0, qdd1 = stacked(a, "qd"), stacked(b, "qd"), stacked(a, "qdd"), stacked(b, "qdd")
-    q = hermite_segment(s, h, stacked(a, "q"), qd0, stacked(b, "q"), qd1)
-    qd = hermite_segment(s, h, qd0, qdd0, qd1, qdd1)
-    qdd = (1 - s) * qdd0 + s * qdd1
-    effort = (1 - s) * stacked(a, "effort") + s * stacked(b, "effort")
+    t = np.asarray(t, dtype=float)
+    h = (b.t - a.t)[:, None]
+    s = (t - a.t)[:, None] / h
+    q = hermite_segment(s, h, a.q, a.qd, b.q, b.qd)
+    qd = hermite_segment(s, h, a.qd, a.qdd, b.qd, b.qdd)
+    qdd = (1 - s) * a.qdd + s * b.qdd
+    effort = (1 - s) * a.effort + s * b.effort
     positions, rotations = poses(q)
-    quaternions = Rotation.from_matrix(rotations).as_quat()
-    residuals = np.maximum(stacked(a, "residual_distance"), stacked(b, "residual_distance")).tolist()
-    return [ReferenceSample(*fields, False) for fields in zip(
-        np.asarray(t, dtype=float).tolist(), q, qd, qdd, effort, positions, quaternions, residuals, strict=True)]
+    return Samples(t, q, qd, qdd, effort, positions, quaternions(rotations),
+                   np.maximum(a.residual_distance, b.residual_distance), np.zeros(t.size, dtype=bool))
 
 
-def warped(sample: ReferenceSample, rate: float, rate_change: float) -> ReferenceSample:
-    """``sample`` of the motion at its own time t, published at a rate dt/dtau = ``rate`` changing by
-    ``rate_change`` per second of publish time: velocity r q'(t), acceleration r^2 q''(t) + r' q'(t)
+def warped(samples: Samples, rate: np.ndarray, rate_change: np.ndarray) -> Samples:
+    """``samples`` of the motion at their own times t, published at rates dt/dtau = ``rate`` (N,) changing by
+    ``rate_change`` (N,) per second of publish time: velocity r q'(t), acceleration r^2 q''(t) + r' q'(t)
     (see :mod:`~.time_warp`).  Unchanged at r = 1, r' = 0."""
-    if rate == 1.0 and rate_change == 0.0:
-        return sample
-    return replace(sample, qd=rate * sample.qd, qdd=rate * rate * sample.qdd + rate_change * sample.qd)
+    if np.all(rate == 1.0) and not np.any(rate_change):
+        return samples
+    r, r_change = rate[:, None], rate_change[:, None]
+    return samples._replace(qd=r * samples.qd, qdd=r * r * samples.qdd + r_change * samples.qd)

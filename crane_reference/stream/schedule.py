@@ -30,7 +30,7 @@ import numpy as np
 
 from ..model.units import NANOSECONDS
 from .reference_stream import ERROR, ReferenceStream
-from .sample import ReferenceSample, columns, from_columns
+from .sample import ReferenceSample, Samples
 
 TIME_TOLERANCE = 1e-9  # [s], rounding slack when comparing stream times
 COMPUTE_MARGIN = 0.05  # [s] of motion computed beyond the preview horizon
@@ -101,12 +101,12 @@ class FrameBatch:
     fault: str = ""
 
     def __reduce__(self):
-        """Pickled with the frames' fields stacked (:func:`~.sample.columns`): the batch crosses from the
+        """Pickled with the frames' fields stacked (:class:`~.sample.Samples`): the batch crosses from the
         solver's process to the node's many times a second."""
         frames = self.frames
-        previews = [(i, columns(f.preview)) for i, f in enumerate(frames) if f.preview is not None]
+        previews = [(i, Samples.stack(f.preview)) for i, f in enumerate(frames) if f.preview is not None]
         packed = (np.array([f.k for f in frames], dtype=np.int64), np.array([f.tau for f in frames]),
-                  np.array([f.horizon for f in frames]), columns([f.sample for f in frames]), previews)
+                  np.array([f.horizon for f in frames]), Samples.stack([f.sample for f in frames]), previews)
         return _unpacked_batch, (packed, self.next_preview_k, self.busy, self.compute_wall, self.compute_motion,
                                  self.non_finite, self.fault)
 
@@ -114,9 +114,9 @@ class FrameBatch:
 def _unpacked_batch(packed, *rest) -> FrameBatch:
     """The :class:`FrameBatch` that :meth:`FrameBatch.__reduce__` packed."""
     ks, taus, horizons, samples, previews = packed
-    preview_of = {i: from_columns(stacked) for i, stacked in previews}
+    preview_of = {i: stacked.rows() for i, stacked in previews}
     frames = [Frame(k, tau, sample, preview_of.get(i), horizon) for i, (k, tau, horizon, sample) in
-              enumerate(zip(ks.tolist(), taus.tolist(), horizons.tolist(), from_columns(samples), strict=True))]
+              enumerate(zip(ks.tolist(), taus.tolist(), horizons.tolist(), samples.rows(), strict=True))]
     return FrameBatch(frames, *rest)
 
 
@@ -150,17 +150,22 @@ def make_frames(stream: ReferenceStream, request: FrameRequest,
     times = [t for t in times if t <= computed_until - TIME_TOLERANCE]
     frames: list[Frame] = []
     non_finite, fault = 0, ""
-    for i, (t, sample) in enumerate(zip(times, stream.samples(times), strict=True)):
-        k, preview = plan.k + i, None
+    samples = stream.samples(times)
+    finite = samples.finite()
+    for i, (t, sample) in enumerate(zip(times, samples.rows(), strict=True)):
+        k, preview, preview_finite = plan.k + i, None, True
         if k >= next_preview_k:
             if computed_until >= t + horizon:
-                preview = stream.preview(t, horizon, request.points)
+                stacked = stream.preview(t, horizon, request.points)
+                preview, preview_finite = stacked.rows(), bool(np.all(stacked.finite()))
                 next_preview_k = k + request.decimation
             elif k >= request.urgent_until:
                 break  # this frame's preview is not computed yet: make it on a later call
-        frame, why = checked(Frame(k, t, sample, preview, horizon), last)
-        if why:
-            non_finite, fault = non_finite + 1, why
+        frame = Frame(k, t, sample, preview, horizon)
+        if not (finite[i] and preview_finite):
+            frame, why = checked(frame, last)
+            if why:
+                non_finite, fault = non_finite + 1, why
         frames.append(frame)
         last = frame.sample
     return FrameBatch(frames, next_preview_k, computed_until < ahead, wall, motion, non_finite, fault)
