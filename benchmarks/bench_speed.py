@@ -75,18 +75,18 @@ def step_times(scenario: Scenario, step: float, duration: float, after: float = 
     state, motion, settings = stepper.state, scenario.motion, stepper.integrator.settings
     times = state.t + step * np.arange(1, round(duration / step) + 1)
     k, drives = motion.constraints.coefficients_at(times), motion.dynamics.drive.kernel_parameters(times)
-    q, qd, qdd, B, correction, t0 = state.q, state.qd, state.solution.qdd, state.solution.velocity_map, \
-        state.correction, state.t
+    q, qd, qdd, B, earlier, correction, t0 = state.q, state.qd, state.solution.qdd, state.solution.velocity_map, \
+        state.earlier, state.correction, state.t
     evaluated = np.zeros(1, dtype=np.bool_)
     walls = np.empty(times.size)
     for i in range(times.size):
         k_i = Coefficients(k.Q[i:i + 1], k.g[i:i + 1], k.c[i:i + 1], k.order)
         start = time.perf_counter()
-        run = kernels.integration_run(q, qd, qdd, B, correction, t0, times[i:i + 1], k_i, drives[i:i + 1],
+        run = kernels.integration_run(q, qd, qdd, B, earlier, correction, t0, times[i:i + 1], k_i, drives[i:i + 1],
                                       motion.partition, motion.dynamics.chain, settings, evaluated)
         walls[i] = time.perf_counter() - start
         last = run.last
-        q, qd, qdd, correction, t0 = last.q, last.qd, run.rows.qdd[0], last.correction, times[i]
+        q, qd, qdd, earlier, correction, t0 = last.q, last.qd, run.rows.qdd[0], last.earlier, last.correction, times[i]
         B = last.evaluation.terms.velocity_map
     return walls
 

@@ -72,11 +72,11 @@ def run_times(scenario: Scenario, step: float, duration: float, every_row: bool,
         times = step * np.arange(first + 1, first + per_run + 1)
         k, drives = motion.constraints.coefficients_at(times), motion.dynamics.drive.kernel_parameters(times)
         run = kernels.integration_run(state.q, state.qd, state.solution.qdd, state.solution.velocity_map,
-                                      state.correction, state.t, times, k,
+                                      state.earlier, state.correction, state.t, times, k,
                                       drives, motion.partition, motion.dynamics.chain, integrator.settings,
                                       np.full(times.size, every_row))
         state = StepState(times[-1], run.last.q, run.last.qd, motion.solution_from_evaluation(run.last.evaluation),
-                          run.last.correction)
+                          run.last.correction, run.last.earlier)
     return time.perf_counter() - start
 
 

@@ -9,7 +9,10 @@
   they approximate (converting the accelerations at each refresh kicked it and made them differ).
 * A run's evaluated rows: which rows get the full evaluation does not change the motion (bit for bit),
   and the reactions of an evaluated row are lambda = (A A^T)^-1 A (M qdd + h - Q) assembled from the
-  unconstrained terms in numpy at the row's q, qd and the integrator's qdd.
+  unconstrained terms in numpy at the row's q, qd and the integrator's qdd; rows evaluated after the run
+  equal those evaluated in it.
+* The Newton iteration's predictor: exact for accelerations quadratic in time; a run cut into several
+  compiled calls equals the run in one.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from scipy.linalg import eigh
 from scipy.signal import butter, sosfiltfilt
 
 from crane_reference.dynamics import kernels
+from crane_reference.dynamics.structures import ACCOUNTS
 from crane_reference.motion.integration import CUTOFF, ExactFrequencyTrapezoidal
 from crane_reference.motion.simulation import MotionStepper, Scenario
 
@@ -94,7 +98,7 @@ def test_evaluated_rows_do_not_change_the_motion_and_hold_the_kkt_reactions(scen
 
     def run(evaluated):
         return kernels.integration_run(state.q, state.qd, state.solution.qdd, state.solution.velocity_map,
-                                       state.correction, state.t, times,
+                                       state.earlier, state.correction, state.t, times,
                                        coefficients, drives, motion.partition, motion.dynamics.chain, settings,
                                        evaluated)
 
@@ -113,6 +117,48 @@ def test_evaluated_rows_do_not_change_the_motion_and_hold_the_kkt_reactions(scen
         imbalance = d.M @ every.qdd[i] + d.h - d.Q
         expected = np.linalg.solve(A @ A.T, A @ imbalance)
         np.testing.assert_allclose(every.reactions[i], expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+    # the rows left out, evaluated afterwards, are those evaluated in the run
+    later = ~shown
+    forces, torques, distances = motion.evaluated_rows(times[later], sparse.q[later], sparse.qd[later],
+                                                       sparse.qdd[later])
+    np.testing.assert_array_equal(forces, every.constraint_forces[later])
+    np.testing.assert_array_equal(torques, every.accounts[later, ACCOUNTS.index("drive_torque")])
+    np.testing.assert_array_equal(distances, every.residual_distance[later])
+    singular_value = ACCOUNTS.index("kdc_min_singular_value")
+    np.testing.assert_allclose(sparse.accounts[:, singular_value], every.accounts[:, singular_value], rtol=1e-12)
+
+
+def test_the_predictor_extrapolates_a_quadratic_exactly():
+    """a_1 = 3 a_0 - 3 a_-1 + a_-2 is the quadratic through the three accelerations one step on: exact for
+    accelerations quadratic in time; with one earlier value the line through two, with none a_0."""
+    h, c = 5e-4, np.array([[0.3, -1.2, 4.0], [2.0, 0.5, -7.0]])  # a(t) = c0 + c1 t + c2 t^2, per coordinate
+
+    def a(t):
+        return c[:, 0] + c[:, 1] * t + c[:, 2] * t * t
+
+    t0 = 0.37
+    earlier = np.array([a(t0 - h), a(t0 - 2 * h)])
+    np.testing.assert_allclose(kernels.predicted_accelerations(a(t0), earlier), a(t0 + h), rtol=1e-13)
+    earlier[1] = np.nan
+    line = a(t0) + (a(t0) - a(t0 - h))
+    np.testing.assert_allclose(kernels.predicted_accelerations(a(t0), earlier), line, rtol=1e-13)
+    earlier[0] = np.nan
+    np.testing.assert_array_equal(kernels.predicted_accelerations(a(t0), earlier), a(t0))
+
+
+def test_a_run_does_not_depend_on_how_it_is_cut_into_calls(scenario):
+    """The integrator's state carries what its steps use of earlier steps (the predictor's accelerations):
+    40 steps in one compiled call and in calls of 1, 7 and 32 steps give the same motion, bit for bit."""
+    motion, q0 = scenario.motion, scenario.equilibrium.q
+    integrator = ExactFrequencyTrapezoidal(motion)
+    start = integrator.run(integrator.start(0.0, q0, np.zeros_like(q0)), STEP * np.arange(1, 401))[0]
+    times = start.t + STEP * np.arange(1, 41)
+    whole = integrator.run(start, times)[1].q
+    state, parts = start, []
+    for chunk in (times[:1], times[1:8], times[8:]):
+        state, rows = integrator.run(state, chunk)
+        parts.append(rows.q)
+    np.testing.assert_array_equal(np.concatenate(parts), whole)
 
 
 def test_newton_matrix_is_the_jacobian_of_the_step_residual(scenario):
@@ -140,7 +186,8 @@ def test_newton_matrix_is_the_jacobian_of_the_step_residual(scenario):
         delta = np.zeros_like(a0)
         delta[j] = 1e-3 * max(1.0, abs(a0[j]))
         jacobian[:, j] = (residual(a0 + delta) - residual(a0 - delta)) / (2.0 * delta[j])
-    first = kernels.first_iterate(state.q, state.qd, a0, STEP, k, partition, chain, settings)
+    first = kernels.first_iterate(state.q, state.qd, a0, kernels.predicted_accelerations(a0, state.earlier), STEP, k,
+                                  partition, chain, settings)
     at_first = motion.solve(t1, first.q, first.qd)
     at_end = kernels.iteration_factor(at_first.dynamics.M, at_first.velocity_map, STEP, correction, drive, partition,
                                       chain)

@@ -437,11 +437,11 @@ def _end_accelerations(end: Iterate, a1, k: Coefficients, partition: Partition, 
 
 
 @njit(cache=True, nogil=True)
-def _failed(q0, qd0, qdd0, B0, correction: ModalCorrection, iterations):
+def _failed(q0, qd0, qdd0, B0, earlier, correction: ModalCorrection, iterations):
     """The :class:`Advance` of a step whose constraints could not be met: its start, unsolved."""
     nan = np.full(3, np.nan)
-    return Advance(q0, qd0, qdd0, B0, nan, np.full((3, 3), np.nan), nan, np.nan, correction, CONSTRAINTS_UNSOLVABLE,
-                   iterations)
+    return Advance(q0, qd0, qdd0, B0, earlier, nan, np.full((3, 3), np.nan), nan, np.nan, correction,
+                   CONSTRAINTS_UNSOLVABLE, iterations)
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -464,14 +464,30 @@ def _step_residual_at(it: Iterate, a1, correction: ModalCorrection, k: Coefficie
 
 
 @njit(cache=True, nogil=True, inline='always')
-def first_iterate(q0, qd0, a0, h, k: Coefficients, partition: Partition, chain: ChainData, settings: StepSettings):
-    """The step's first iterate: the trapezoidal state for a1 = a0 (x0 + h v0 + h^2/2 a0 for the integrated
-    coordinates, the predictor) with q_hd from the position constraints, starting from q_hd predicted as
-    q0 + h qd0 + h^2/2 qdd0 (qdd0[integrated] = a0 and its dependent part through the constraints)."""
+def predicted_accelerations(a0, earlier):
+    """The predictor of a step's accelerations a1 of the integrated coordinates from those at its start, a0,
+    and at the starts of the two steps before, ``earlier`` (2, n_x; row 0 the later, NaN where unknown): the
+    quadratic through the three extrapolated one step, a1 = 3 a0 - 3 a_-1 + a_-2 (exact for accelerations
+    quadratic in time: the slow motion's error after the Newton corrections shrinks with it); the linear one,
+    2 a0 - a_-1, with one known; a0 with none."""
+    if np.isnan(earlier[0, 0]):
+        return a0.copy()
+    if np.isnan(earlier[1, 0]):
+        return 2.0 * a0 - earlier[0]
+    return 3.0 * a0 - 3.0 * earlier[0] + earlier[1]
+
+
+@njit(cache=True, nogil=True, inline='always')
+def first_iterate(q0, qd0, a0, a1, h, k: Coefficients, partition: Partition, chain: ChainData,
+                  settings: StepSettings):
+    """The step's first iterate: the trapezoidal state for the predicted accelerations a1 of the integrated
+    coordinates (x0 + h v0 + h^2/4 (a0 + a1)) with q_hd from the position constraints, starting from q_hd
+    predicted as q0 + h qd0 + h^2/4 (qdd0 + qdd1) (qdd[integrated] = a and its dependent part through the
+    constraints)."""
     integrated = partition.integrated
     guess = q0 + h * qd0
-    guess[integrated] += (0.5 * h * h) * a0
-    return _state_at(a0, q0[integrated], qd0[integrated], a0, guess, q0.size, h, k, partition, chain, settings, True,
+    guess[integrated] += (0.25 * h * h) * (a0 + a1)
+    return _state_at(a1, q0[integrated], qd0[integrated], a0, guess, q0.size, h, k, partition, chain, settings, True,
                      False)
 
 
@@ -497,13 +513,15 @@ def step_residual(a1, q0, qd0, a0, correction: ModalCorrection, h, k: Coefficien
 
 
 @njit(cache=True, nogil=True)
-def integration_step(q0, qd0, qdd0, B0, correction: ModalCorrection, t0, h, k: Coefficients, drive,
+def integration_step(q0, qd0, qdd0, B0, earlier, correction: ModalCorrection, t0, h, k: Coefficients, drive,
                      partition: Partition, chain: ChainData, settings: StepSettings):
     """One step of the integrator (see :mod:`crane_reference.motion.integration`) from t0 to t0 + h of the
     integrated coordinates x = q[integrated] = (q_ic, q_vd): the trapezoidal rule on the residual of (8)
     with the modal terms P^T (M qdd + h - Q) - Delta M_r a_ic + D_u v_ic.  Newton on the independent
     accelerations with the residual from inverse dynamics, fixed point on the q_vd ones, from the
-    :func:`first_iterate`, whose M and B (the step end's to first order in h) give the iteration matrix
+    :func:`first_iterate` at the :func:`predicted_accelerations` (from ``earlier``, the accelerations of the
+    integrated coordinates at the two previous steps' starts, NaN where unknown; forgotten at a new step
+    size), whose M and B (the step end's to first order in h) give the iteration matrix
     (:func:`iteration_factor`); q_hd predicted to second order in the change of x at the later iterates,
     qd_dc from the velocity-level constraints at every iterate.  At least ``settings.evaluations``
     evaluations, then until the last correction is below the tolerance; the step ends at the state of the
@@ -531,10 +549,12 @@ def integration_step(q0, qd0, qdd0, B0, correction: ModalCorrection, t0, h, k: C
         if new_step and not servo:
             a0[:n_ic] = converted_accelerations(reduced_mass, a0[:n_ic], v0[:n_ic], correction, fresh)
         correction = fresh
-    a1 = a0.copy()
-    it = first_iterate(q0, qd0, a0, h, k, partition, chain, settings)
+    if new_step:  # the earlier accelerations are of another equation
+        earlier = np.full(earlier.shape, np.nan)
+    a1 = predicted_accelerations(a0, earlier)
+    it = first_iterate(q0, qd0, a0, a1, h, k, partition, chain, settings)
     if not it.solved:
-        return _failed(q0, qd0, qdd0, B0, correction, 1)
+        return _failed(q0, qd0, qdd0, B0, earlier, correction, 1)
     qdd, residual, B, Hw = _step_residual_at(it, a1, correction, k, drive, partition, chain)
     M = mass_at(it.S, Hw, chain)
     factor = iteration_factor(M, B, h, correction, drive, partition, chain)
@@ -561,9 +581,11 @@ def integration_step(q0, qd0, qdd0, B0, correction: ModalCorrection, t0, h, k: C
             break
     end = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, True, True)
     if not end.solved:
-        return _failed(q0, qd0, qdd0, B0, correction, iteration + 1)
+        return _failed(q0, qd0, qdd0, B0, earlier, correction, iteration + 1)
     qdd, B, singular_value = _end_accelerations(end, a1, k, partition, chain)
-    return Advance(end.q, end.qd, qdd, B, end.ee_position, end.T[chain.ee_joint, :3, :3].copy(),
+    later = np.empty_like(earlier)
+    later[0], later[1] = a0, earlier[0]
+    return Advance(end.q, end.qd, qdd, B, later, end.ee_position, end.T[chain.ee_joint, :3, :3].copy(),
                    matvec(end.ee_jacobian, end.qd), singular_value, correction, status, iteration + 1)
 
 
@@ -583,21 +605,22 @@ def _at_step(k: Coefficients, i):
 
 
 @njit(cache=True, nogil=True)
-def integration_run(q, qd, qdd, B, correction: ModalCorrection, t0, times, k: Coefficients, drives,
+def integration_run(q, qd, qdd, B, earlier, correction: ModalCorrection, t0, times, k: Coefficients, drives,
                     partition: Partition, chain: ChainData, settings: StepSettings, evaluated):
     """:func:`integration_step` from t0 through ``times`` (N,) in one call, with the constraint
     coefficients ``k`` (stacked per step) and drive parameters ``drives`` (N, 4) of each step's end, B the
-    velocity map at t0.  The rows of the steps where ``evaluated`` (N,) is True, and of the last one, carry
-    the full evaluation (:func:`step_evaluation`: reactions, residuals, accounts); the others NaN there but
-    for sigma_min(K_dc) in the accounts (every step's; :func:`evaluated_rows` completes them later).
+    velocity map at t0 and ``earlier`` the accelerations of the two steps before (:func:`integration_step`).
+    The rows of the steps where ``evaluated`` (N,) is True, and of the last one, carry the full evaluation
+    (:func:`step_evaluation`: reactions, residuals, accounts); the others NaN there but for sigma_min(K_dc)
+    in the accounts (every step's; :func:`evaluated_rows` completes them later).
     Stops at the first step that fails; returns a :class:`Run`."""
     N, n, m = times.size, q.size, k.order.size
     rows = StepRows(np.empty((N, n)), np.empty((N, n)), np.empty((N, n)), np.full((N, m), np.nan),
                     np.full((N, n), np.nan), np.empty((N, 3)), np.empty((N, 3, 3)), np.empty((N, 3)),
                     np.full((N, m), np.nan), np.full((N, m), np.nan), np.full((N, len(ACCOUNTS)), np.nan),
                     np.empty(N, dtype=np.int64))
-    step = integration_step(q, qd, qdd, B, correction, t0, times[0] - t0, _at_step(k, 0), drives[0], partition, chain,
-                            settings)
+    step = integration_step(q, qd, qdd, B, earlier, correction, t0, times[0] - t0, _at_step(k, 0), drives[0],
+                            partition, chain, settings)
     completed = 0
     while step.status == CONVERGED:
         rows.q[completed], rows.qd[completed], rows.qdd[completed] = step.q, step.qd, step.qdd
@@ -610,15 +633,16 @@ def integration_run(q, qd, qdd, B, correction: ModalCorrection, t0, times, k: Co
         completed += 1
         if completed == N:
             break
-        step = integration_step(step.q, step.qd, step.qdd, step.velocity_map, step.correction, times[completed - 1],
-                                times[completed] - times[completed - 1], _at_step(k, completed), drives[completed],
-                                partition, chain, settings)
+        step = integration_step(step.q, step.qd, step.qdd, step.velocity_map, step.earlier, step.correction,
+                                times[completed - 1], times[completed] - times[completed - 1], _at_step(k, completed),
+                                drives[completed], partition, chain, settings)
     if step.status == CONVERGED:
         last = step_evaluation(step.q, step.qd, step.qdd, _at_step(k, N - 1), drives[N - 1], partition, chain)
         _evaluated_row(rows, N - 1, last)
     else:  # the evaluation at the failed step's start
         last = evaluate(step.q, step.qd, _at_step(k, completed), drives[completed], partition, chain)
-    return Run(completed, step.status, rows, Step(step.q, step.qd, last, step.correction, step.status, step.iterations))
+    return Run(completed, step.status, rows, Step(step.q, step.qd, last, step.earlier, step.correction, step.status,
+                                                  step.iterations))
 
 
 @njit(cache=True, nogil=True)

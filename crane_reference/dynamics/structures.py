@@ -196,12 +196,14 @@ constraint forces and the dampers [W], and sigma_min(K_dc)."""
 
 
 class Step(NamedTuple):
-    """One integration step: q, qd at its end, the evaluation there, the modal correction it used,
-    ``status`` (:data:`STATUS_MESSAGES`) and the Newton iterations."""
+    """One integration step: q, qd at its end, the evaluation there, the integrated coordinates' accelerations
+    at its start and the one before (the next step's ``earlier``), the modal correction it used, ``status``
+    (:data:`STATUS_MESSAGES`) and the Newton iterations."""
 
     q: np.ndarray
     qd: np.ndarray
     evaluation: Evaluation
+    earlier: np.ndarray
     correction: ModalCorrection
     status: int
     iterations: int
@@ -218,8 +220,9 @@ messages of the failures (formatted with t0, t1, h and iterations)."""
 
 
 class Advance(NamedTuple):
-    """One integration step's end: q, qd and the integrator's qdd, the velocity map B, E's position, the
-    rotation of its frame and its velocity, sigma_min(K_dc), the modal correction used, ``status``
+    """One integration step's end: q, qd and the integrator's qdd, the velocity map B, the integrated
+    coordinates' accelerations at the step's start and the one before (the next step's ``earlier``), E's
+    position, the rotation of its frame and its velocity, sigma_min(K_dc), the modal correction used, ``status``
     (:data:`STATUS_MESSAGES`) and the Newton iterations (the full :class:`Evaluation` there is computed only
     where it is read)."""
 
@@ -227,6 +230,7 @@ class Advance(NamedTuple):
     qd: np.ndarray
     qdd: np.ndarray
     velocity_map: np.ndarray
+    earlier: np.ndarray
     ee_position: np.ndarray
     ee_rotation: np.ndarray
     ee_velocity: np.ndarray

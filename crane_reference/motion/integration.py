@@ -55,7 +55,10 @@ constraint: its position is integrated with the formulas above (x = (q_ic, q_vd)
 from the constraints.
 
 The step's nonlinear equation is solved by a modified Newton method on the residual (from O(n) inverse
-dynamics, without forming M) with the iteration matrix B^T (M + h^2/4 K + h/2 D) B - Delta M_r + h/2 D_u
+dynamics, without forming M), from the accelerations of the integrated coordinates at the two previous
+steps' starts and this one's extrapolated quadratically, a_1 = 3 a_0 - 3 a_-1 + a_-2
+(:func:`~crane_reference.dynamics.kernels.predicted_accelerations`; linearly, or a_0 itself, after a start,
+a restart or a new step size, until there are three), with the iteration matrix B^T (M + h^2/4 K + h/2 D) B - Delta M_r + h/2 D_u
 with M and B at the step's predicted end (its first iterate): exact for the stiff linear springs, to first
 order in h for the configuration's change over the step, approximate for gravity, velocity and
 constraint-curvature terms, so each correction shrinks the next by a factor of about 1e-3 (taken at the
@@ -89,8 +92,9 @@ from ..dynamics.structures import (
 )
 from .programmed_motion import MotionSolution, ProgrammedMotion, ProjectionError
 
-EVALUATIONS = 3
-"""Newton evaluations per step of the online default (benchmarks/bench_accuracy.py, [iterations])."""
+EVALUATIONS = 2
+"""Newton evaluations per step of the online default (benchmarks/bench_accuracy.py, [iterations]): from the
+extrapolated predictor, two leave the converged iteration's error on the controller band."""
 
 ONLINE_TOLERANCE = 1e-4
 """[rad/s or m/s]: after :data:`EVALUATIONS` evaluations, a step goes on only while its last velocity
@@ -120,13 +124,16 @@ class IntegrationError(RuntimeError):
 
 @dataclass(frozen=True)
 class StepState:
-    """Integrator state at t: full q, qd, the solution of (8) there and the modal correction in use."""
+    """Integrator state at t: full q, qd, the solution of (8) there, the modal correction in use and the
+    integrated coordinates' accelerations at the two previous steps' starts (2, n_x; NaN where unknown: the
+    predictor's, :func:`~crane_reference.dynamics.kernels.predicted_accelerations`)."""
 
     t: float
     q: np.ndarray
     qd: np.ndarray
     solution: MotionSolution
     correction: ModalCorrection
+    earlier: np.ndarray
 
     @property
     def qdd(self) -> np.ndarray:
@@ -161,12 +168,16 @@ class ExactFrequencyTrapezoidal:
         n_ic = len(self.motion.independent)
         return ModalCorrection(np.zeros((n_ic, n_ic)), np.zeros((n_ic, n_ic)), -math.inf, 0.0)
 
+    def no_earlier(self) -> np.ndarray:
+        """No earlier accelerations (a start, a restart: the predictor begins anew)."""
+        return np.full((2, len(self.motion.partition.integrated)), np.nan)
+
     def start(self, t: float, q: np.ndarray, qd: np.ndarray) -> StepState:
         """Consistent start: q_dc from the position constraints, qd_dc from (7), qdd from (8)."""
         q, kinematics = self.motion.project_positions(t, q)
         qd = self.motion.dependent_velocities(t, q, qd, kinematics)
         solution = self.motion.solve(t, q, qd)
-        return StepState(t, q, qd, solution, self._fresh())
+        return StepState(t, q, qd, solution, self._fresh(), self.no_earlier())
 
     def resolve(self, state: StepState, keep_modes: bool = False) -> StepState:
         """Re-solve (8) at ``state`` with the drive's value from t on (after a jump) or under new
@@ -175,10 +186,10 @@ class ExactFrequencyTrapezoidal:
         are those of the corrected equation under the new forces, which saves its eigenproblem."""
         solution = self.motion.solve(state.t, state.q, state.qd)
         if not keep_modes or not math.isfinite(state.correction.time):
-            return StepState(state.t, state.q, state.qd, solution, self._fresh())
+            return StepState(state.t, state.q, state.qd, solution, self._fresh(), self.no_earlier())
         qdd = kernels.corrected_accelerations(solution.dynamics.M, solution.velocity_map, solution.qdd, state.qd,
                                               state.correction, self.motion.partition)
-        return StepState(state.t, state.q, state.qd, replace(solution, qdd=qdd), state.correction)
+        return StepState(state.t, state.q, state.qd, replace(solution, qdd=qdd), state.correction, self.no_earlier())
 
     def step(self, state: StepState, t1: float, ends_on_jump: bool = False) -> StepState:
         """Advance ``state`` to time t1 > state.t [s] (one step of :meth:`run`).  A step ending on a drive
@@ -199,7 +210,8 @@ class ExactFrequencyTrapezoidal:
         if ends_on_jump:
             drives[-1] = drive.kernel_parameters(times[-1], left_limit=True)
         run = kernels.integration_run(
-            state.q, state.qd, state.solution.qdd, state.solution.velocity_map, state.correction, state.t, times,
+            state.q, state.qd, state.solution.qdd, state.solution.velocity_map, state.earlier, state.correction,
+            state.t, times,
             motion.constraints.coefficients_at(times), drives, motion.partition, motion.dynamics.chain, self.settings,
             np.full(times.size, every_row))
         if run.status != CONVERGED:
@@ -212,4 +224,4 @@ class ExactFrequencyTrapezoidal:
         self.last_iterations = int(rows.iterations[-1])
         last = run.last
         return StepState(float(times[-1]), rows.q[-1], rows.qd[-1], motion.solution_from_evaluation(last.evaluation),
-                         last.correction), rows
+                         last.correction, last.earlier), rows

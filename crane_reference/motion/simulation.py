@@ -193,7 +193,8 @@ class MotionStepper:
                                                   self.motion.min_singular_value)
         self._k = int(np.floor((t - self._t0) / self.step_size + 1e-9))  # grid times at or before t
         self._work = np.full(3, np.nan) if work is None else work.copy()
-        self.state = self.integrator.resolve(StepState(t, q, qd, self.state.solution, self.state.correction))
+        self.state = self.integrator.resolve(StepState(t, q, qd, self.state.solution, self.state.correction,
+                                                       self.state.earlier))
         self.sample = make_sample(t, q, qd, self.state.solution, self._work)
 
 
