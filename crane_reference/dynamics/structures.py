@@ -268,3 +268,35 @@ class Run(NamedTuple):
     status: int
     rows: StepRows
     last: Step
+
+
+class LoopRows(NamedTuple):
+    """Per-row results of a compiled closed loop (first axis: the start, then every step): q, qd and the
+    integrator's qdd, the constraint forces, the accounts (:data:`ACCOUNTS`), the work accounts (drive,
+    constraints, dampers) [J], E's position, rotation matrix and velocity, and the actuator torques [N m]."""
+
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    constraint_forces: np.ndarray
+    accounts: np.ndarray
+    work: np.ndarray
+    ee_position: np.ndarray
+    ee_rotation: np.ndarray
+    ee_velocity: np.ndarray
+    torques: np.ndarray
+
+
+class LoopRun(NamedTuple):
+    """A compiled closed loop: ticks and steps completed, the status of the last step, the rows (the start's
+    and the completed steps'), and the plant's state at the end (t [s], the evaluation there, the modal
+    correction and the earlier accelerations to continue from)."""
+
+    ticks: int
+    steps: int
+    status: int
+    rows: LoopRows
+    t: float
+    last: Evaluation
+    correction: ModalCorrection
+    earlier: np.ndarray

@@ -58,15 +58,15 @@ The step's nonlinear equation is solved by a modified Newton method on the resid
 dynamics, without forming M), from the accelerations of the integrated coordinates at the two previous
 steps' starts and this one's extrapolated quadratically, a_1 = 3 a_0 - 3 a_-1 + a_-2
 (:func:`~crane_reference.dynamics.kernels.predicted_accelerations`; linearly, or a_0 itself, after a start,
-a restart or a new step size, until there are three), with the iteration matrix B^T (M + h^2/4 K + h/2 D) B - Delta M_r + h/2 D_u
-with M and B at the step's predicted end (its first iterate): exact for the stiff linear springs, to first
-order in h for the configuration's change over the step, approximate for gravity, velocity and
-constraint-curvature terms, so each correction shrinks the next by a factor of about 1e-3 (taken at the
-step's start instead, an error of the slewing accelerations comes back as a boom-tip bending correction
-of the same size); the q_vd
-accelerations are iterated as a fixed point.  Each evaluation's correction is applied, and the step ends
-at the state of the corrected accelerations: after at least ``evaluations`` evaluations, once the last
-correction in velocities (h/2 |da|) is at most ``tolerance`` [rad/s or m/s].
+a restart or a new step size, until there are three), with the iteration matrix B^T (M + h^2/4 K + h/2 D) B -
+Delta M_r + h/2 D_u with M and B at the step's predicted end (its first iterate): exact for the stiff
+linear springs, to first order in h for the configuration's change over the step, approximate for gravity,
+velocity and constraint-curvature terms, so each correction shrinks the next by a factor of about 1e-3
+(taken at the step's start instead, an error of the slewing accelerations comes back as a boom-tip bending
+correction of the same size); the q_vd accelerations are iterated as a fixed point. Each evaluation's
+correction is applied, and the step ends at the state of the corrected accelerations: after at least
+``evaluations`` evaluations, once the last correction in velocities (h/2 |da|) is at most ``tolerance``
+[rad/s or m/s].
 
 Two uses (benchmarks/bench_accuracy.py): the online default, :data:`EVALUATIONS` evaluations with the
 loose :data:`ONLINE_TOLERANCE`, and a converged iteration (``tolerance`` 1e-9 or below, ``evaluations``

@@ -85,6 +85,16 @@ class StepperSnapshot(NamedTuple):
     motion: ProgrammedMotion
 
 
+class StepPlan(NamedTuple):
+    """Steps planned by :meth:`MotionStepper.step_plan`: their end times [s], whether each ends on a drive jump,
+    the index of the first step towards each end (and their count last), and the grid index after them."""
+
+    times: np.ndarray
+    on_jump: np.ndarray
+    first: np.ndarray
+    k: int
+
+
 class MotionStepper:
     """Online integration (:mod:`.integration`) of a :class:`ProgrammedMotion` with work bookkeeping.
 
@@ -112,20 +122,38 @@ class MotionStepper:
     def motion(self) -> ProgrammedMotion:
         return self.integrator.motion
 
-    def _next_times(self, t_end: float) -> tuple[np.ndarray, bool, int]:
-        """Step ends from the current state through the first grid time >= t_end, cut at the first drive
-        jump on the way (then the last end is the jump); also whether it is cut and how many grid times
-        it covers."""
-        h, t = self.step_size, self.state.t
+    def _next_times(self, t_end: float, t: float | None = None, k: int | None = None) -> tuple[np.ndarray, bool, int]:
+        """Step ends from the current state (or from time t at grid index k) through the first grid time >=
+        t_end, cut at the first drive jump on the way (then the last end is the jump); also whether it is cut
+        and how many grid times it covers."""
+        h, t, k = self.step_size, self.state.t if t is None else t, self._k if k is None else k
         slack = 1e-9 * h
-        last = max(self._k + 1, int(np.ceil((t_end - self._t0) / h - 1e-9)))
-        grid = self._t0 + np.arange(self._k + 1, last + 1) * h
+        last = max(k + 1, int(np.ceil((t_end - self._t0) / h - 1e-9)))
+        grid = self._t0 + np.arange(k + 1, last + 1) * h
         jump = next((b for b in self._breakpoints if t < b <= grid[-1] + slack), None)
         if jump is None:
             return grid, False, grid.size
         before = grid[grid < jump - slack]
         covered = before.size + int(before.size < grid.size and grid[before.size] <= jump + slack)
         return np.append(before, jump), True, covered
+
+    def step_plan(self, ends: np.ndarray) -> StepPlan:
+        """The steps :meth:`advance_until` would take from the current state through each of ``ends`` (increasing
+        [s]) in turn, without taking them."""
+        t, k, times, jumps, first = self.state.t, self._k, [], [], [0]
+        for t_end in ends:
+            while t < t_end - 1e-9 * self.step_size:
+                block, on_jump, covered = self._next_times(t_end, t, k)
+                times.append(block)
+                jumps.append(np.arange(block.size) == block.size - 1 if on_jump else np.zeros(block.size, bool))
+                t, k = float(block[-1]), k + covered
+            first.append(sum(block.size for block in times))
+        return StepPlan(np.concatenate(times), np.concatenate(jumps), np.array(first, dtype=np.int64), k)
+
+    def continue_from(self, state: StepState, k: int, work: np.ndarray, sample: Sample) -> None:
+        """Continue from ``state`` at grid index k with the work accounts and sample there (steps taken
+        elsewhere, e.g. a compiled closed loop, along a :meth:`step_plan`)."""
+        self.state, self._k, self._work, self.sample = state, k, work.copy(), sample
 
     def advance(self) -> Sample:
         """One step to the next grid time, or to a drive jump before it (then restart there)."""

@@ -1,0 +1,158 @@
+"""Compiled closed loop: a joint controller's ticks and the actuated plant's integration steps in one call.
+
+The controller is :mod:`crane_reference.analysis.tracking.controller`'s (its tick is :func:`controller_tick`,
+which the Python controller calls too); the plant is the crane without programmed constraints driven by an
+:class:`~crane_reference.model.drive.Actuated` drive (:mod:`crane_reference.analysis.tracking.plant`), stepped
+by :func:`~.kernels.integration_step` exactly as :class:`~crane_reference.motion.simulation.MotionStepper`
+steps it: at each tick the command's forces jump and (8) is solved again there keeping the modal correction
+(:func:`~.kernels.corrected_accelerations`); at a jump of the column drive's torque the step ends on it and
+the integrator restarts there; every step is evaluated in full and its powers integrated by the trapezoidal
+rule into the work accounts.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .kernels import DRIVE_TORQUE, corrected_accelerations, evaluate, integration_step, step_evaluation
+from .structures import (
+    ACCOUNTS,
+    CONVERGED,
+    ChainData,
+    Coefficients,
+    LoopRows,
+    LoopRun,
+    ModalCorrection,
+    Partition,
+    StepSettings,
+)
+
+POWER_COLUMNS = np.array([ACCOUNTS.index(name) for name in ("drive_power", "constraint_power", "damping_power")])
+"""Columns of the accounts whose time integrals are the work terms (drive, constraints, dampers)."""
+
+
+@njit(cache=True, nogil=True)
+def controller_tick(kp, kd, ki, limit, period, integral, saturated, error, reference_rate, rate, feedforward):
+    """One tick of the joint controller: with e = ``error``, u = clip(tau_ff + kp e + ki I + kd (qd_ref - qd),
+    +-limit) + kd qd (the drive's velocity loop subtracts kd qd again); a joint cut to its limit is counted in
+    ``saturated`` and its integral I held, the others' I grows by e ``period`` (both updated in place)."""
+    u = np.empty(kp.size)
+    for j in range(kp.size):
+        wanted = feedforward[j] + kp[j] * error[j] + ki[j] * integral[j] + kd[j] * (reference_rate[j] - rate[j])
+        torque = min(max(wanted, -limit[j]), limit[j])
+        if torque != wanted:
+            saturated[j] += 1
+        else:
+            integral[j] += error[j] * period
+        u[j] = torque + kd[j] * rate[j]
+    return u
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _drive_at(inner, t, start, end, first, last, actuated, n):
+    """The drive parameters at t: the column drive's ``inner`` followed by the actuators' forces, linear from
+    ``first`` at ``start`` to ``last`` at ``end`` on the ``actuated`` coordinates (as
+    :meth:`~crane_reference.model.drive.Actuated.forces`)."""
+    drive = np.zeros(inner.size + n)
+    drive[:inner.size] = inner
+    share = (t - start) / (end - start)
+    for j in range(actuated.size):
+        drive[inner.size + actuated[j]] = (1.0 - share) * first[j] + share * last[j]
+    return drive
+
+
+@njit(cache=True, nogil=True)
+def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, first_step, step_times, on_jump, inner,
+                    inner_after, k: Coefficients, partition: Partition, chain: ChainData, settings: StepSettings,
+                    actuated, period, reference_q, reference_qd, feedforward_start, feedforward_end, kp, kd, ki, limit,
+                    integral, saturated):
+    """Ticks of the controller from the plant state (t0, q, qd) with its modal ``correction`` and ``work``
+    accounts (3,) [J]; tick k runs from the plant's time then to ``tick_ends`` [k] (K,) [s] over the steps
+    first_step[k] .. first_step[k + 1] - 1 ending at ``step_times`` (S,), ``on_jump`` where a step ends on a
+    jump of the column drive (``inner`` (S, 4): the column drive's parameters at the step ends, left limits
+    there; ``inner_after`` (S + 1, 4): right limits at t0 and at the step ends, where the integrator
+    restarts).  Tick k commands u_k (:func:`controller_tick` every ``period`` [s] on ``reference_q`` [k] - q
+    and ``reference_qd`` [k] of the ``actuated`` coordinates, feedforward ``feedforward_start`` [k]) at its
+    start, linear to clip(u_k + feedforward_end[k + 1] - feedforward_start[k], +-limit) at its end;
+    ``integral`` and ``saturated`` are updated in place.  Stops at the first step that fails; returns a
+    :class:`LoopRun` (its rows: the start under the first command, then every step; at a drive jump qdd, the
+    constraint forces and the drive torque from after it, as ``MotionStepper``'s)."""
+    n, S, na = q.size, step_times.size, actuated.size
+    rows = LoopRows(np.empty((S + 1, n)), np.empty((S + 1, n)), np.empty((S + 1, n)), np.empty((S + 1, n)),
+                    np.empty((S + 1, len(ACCOUNTS))), np.empty((S + 1, 3)), np.empty((S + 1, 3)),
+                    np.empty((S + 1, 3, 3)), np.empty((S + 1, 3)), np.empty((S + 1, na)))
+    fresh = ModalCorrection(np.zeros_like(correction.inertia), np.zeros_like(correction.damping), -np.inf, 0.0)
+    work, t, status, done = work.copy(), t0, CONVERGED, 0
+    earlier = np.full((2, partition.integrated.size), np.nan)
+    e = evaluate(q, qd, k, _drive_at(inner_after[0], t0, t0, tick_ends[0], np.zeros(na), np.zeros(na), actuated, n),
+                 partition, chain)
+    for tick in range(tick_ends.size):
+        start, end = t, tick_ends[tick]
+        error, rate = np.empty(na), np.empty(na)
+        for j in range(na):
+            error[j], rate[j] = reference_q[tick, j] - q[actuated[j]], qd[actuated[j]]
+        first = controller_tick(kp, kd, ki, limit, period, integral, saturated, error, reference_qd[tick], rate,
+                                feedforward_start[tick])
+        last = np.empty(na)
+        for j in range(na):
+            last[j] = min(max(first[j] + feedforward_end[tick + 1, j] - feedforward_start[tick, j], -limit[j]),
+                          limit[j])
+        # the forces jump: (8) solved again at the tick's start, the modal correction kept
+        s0 = first_step[tick]
+        e = evaluate(q, qd, k, _drive_at(inner_after[s0], start, start, end, first, last, actuated, n), partition,
+                     chain)
+        qdd, B = e.terms.qdd, e.terms.velocity_map
+        if np.isfinite(correction.time):
+            qdd = corrected_accelerations(e.terms.M, B, qdd, qd, correction, partition)
+        else:
+            correction = fresh
+        earlier = np.full((2, partition.integrated.size), np.nan)
+        powers = e.accounts[POWER_COLUMNS]
+        if tick == 0:
+            _store(rows, 0, q, qd, qdd, e, work, e.terms.ee_position, e.terms.ee_rotation,
+                   e.terms.ee_jacobian @ qd)
+            for j in range(na):
+                rows.torques[0, j] = first[j] - kd[j] * qd[actuated[j]]
+        for s in range(s0, first_step[tick + 1]):
+            drive = _drive_at(inner[s], step_times[s], start, end, first, last, actuated, n)
+            h = step_times[s] - t
+            step = integration_step(q, qd, qdd, B, earlier, correction, t, h, k, drive, partition, chain, settings)
+            if step.status != CONVERGED:
+                return LoopRun(done, s, step.status, _first_rows(rows, s + 1), t, e, correction, earlier)
+            t, q, qd, qdd, B, earlier, correction = (step_times[s], step.q, step.qd, step.qdd, step.velocity_map,
+                                                     step.earlier, step.correction)
+            e = step_evaluation(q, qd, qdd, k, drive, partition, chain)
+            row_powers = e.accounts[POWER_COLUMNS]
+            for i in range(3):
+                work[i] += 0.5 * h * (powers[i] + row_powers[i])
+            powers = row_powers
+            _store(rows, s + 1, q, qd, qdd, e, work, step.ee_position, step.ee_rotation, step.ee_velocity)
+            for j in range(na):
+                rows.torques[s + 1, j] = drive[inner.shape[1] + actuated[j]] - kd[j] * qd[actuated[j]]
+            if on_jump[s]:  # restart at the drive's jump: the motion from it on, a fresh modal correction
+                e = evaluate(q, qd, k, _drive_at(inner_after[s + 1], t, start, end, first, last, actuated, n),
+                             partition, chain)
+                qdd, B, correction = e.terms.qdd, e.terms.velocity_map, fresh
+                earlier = np.full((2, partition.integrated.size), np.nan)
+                powers = e.accounts[POWER_COLUMNS]
+                rows.qdd[s + 1], rows.constraint_forces[s + 1] = qdd, e.constraint_forces
+                rows.accounts[s + 1, DRIVE_TORQUE] = e.accounts[DRIVE_TORQUE]
+        done += 1
+    return LoopRun(done, S, status, rows, t, e, correction, earlier)
+
+
+@njit(cache=True, nogil=True)
+def _first_rows(rows: LoopRows, count):
+    """The first ``count`` rows."""
+    return LoopRows(rows.q[:count], rows.qd[:count], rows.qdd[:count], rows.constraint_forces[:count],
+                    rows.accounts[:count], rows.work[:count], rows.ee_position[:count], rows.ee_rotation[:count],
+                    rows.ee_velocity[:count], rows.torques[:count])
+
+
+@njit(cache=True, nogil=True)
+def _store(rows: LoopRows, i, q, qd, qdd, e, work, ee_position, ee_rotation, ee_velocity):
+    """Row i from (q, qd), the integrator's qdd, the evaluation ``e`` there, the work and E's kinematics."""
+    rows.q[i], rows.qd[i], rows.qdd[i], rows.constraint_forces[i] = q, qd, qdd, e.constraint_forces
+    rows.accounts[i], rows.work[i] = e.accounts, work
+    rows.ee_position[i], rows.ee_rotation[i], rows.ee_velocity[i] = ee_position, ee_rotation, ee_velocity
