@@ -185,3 +185,48 @@ def test_cli_track_writes_series_summary_and_figure(tmp_path, capsys):
     assert "E off the ellipse" in capsys.readouterr().out
     assert cli.main(["track", "--gains", "wrist=1,2", "--out", str(tmp_path)]) == 2
     assert "joint 'wrist' must be one of column_slew, boom_luff, knuckle" in capsys.readouterr().err
+
+
+def test_the_compiled_closed_loop_is_the_per_tick_loop(params):
+    """Plant.follow (the controller's ticks and the plant's steps in one compiled call) against the loop of
+    one Plant.actuate per tick with the Python JointController, on the flexible crane through the drive's
+    torque jump at 1 s, with torque limits that saturate and a feedforward that changes within ticks: the
+    same motion, torques, work and saturated ticks to round-off."""
+    scenario = Scenario(params, "flexible")
+    start = held_start(scenario)
+    step, per, duration = 1e-3, 2, 1.1  # a 500 Hz controller
+    times = step * per * np.arange(round(duration / (step * per)) + 1)
+    gains = [JointGains(2e6, 1e4, 1e5, limit=limit) for limit in (8e3, 6e4, 3e4)]
+    rng = np.random.default_rng(7)
+    reference_q = start.q[np.newaxis, :] + 0.02 * np.sin(3.0 * times)[:, np.newaxis]
+    reference_qd = 0.06 * np.cos(3.0 * times)[:, np.newaxis] * np.ones(start.q.size)
+    feedforward = start.torques + rng.normal(0.0, 100.0, (times.size, 3))
+    feedforward_end = feedforward + 50.0  # a tick's command ends 50 N m above where the next one starts
+    limits = np.array([g.limit for g in gains])
+    runs = []
+    for compiled in (False, True):
+        controller = JointController(gains, step * per)
+        plant = Plant(params, "flexible", start, step, controller.damping)
+        actuated = plant.actuated
+        if compiled:
+            ticks = np.arange(times.size - 1)
+            for chunk in (ticks[:137], ticks[137:]):
+                plant.follow(times[chunk + 1], reference_q[np.ix_(chunk, actuated)],
+                             reference_qd[np.ix_(chunk, actuated)], feedforward[chunk[0]:chunk[-1] + 2],
+                             feedforward_end[chunk[0]:chunk[-1] + 2], controller)
+        else:
+            for k in range(times.size - 1):
+                torque = controller(reference_q[k, actuated] - plant.q[actuated], reference_qd[k, actuated],
+                                    plant.qd[actuated], feedforward[k])
+                plant.actuate(times[k + 1], torque, np.clip(torque + feedforward_end[k + 1] - feedforward[k],
+                                                            -limits, limits))
+        runs.append((*plant.trajectory(), controller))
+    (slow, slow_torques, slow_controller), (fast, fast_torques, fast_controller) = runs
+    assert slow.t.size == fast.t.size and np.any(slow_controller.saturated_ticks > 0)
+    np.testing.assert_array_equal(fast_controller.saturated_ticks, slow_controller.saturated_ticks)
+    np.testing.assert_allclose(fast.t, slow.t, rtol=0, atol=1e-12)
+    for name in ("q", "qd", "qdd", "constraint_forces", "ee_position", "kinetic_energy", "work_drive",
+                 "work_damping"):
+        a, b = getattr(fast, name), getattr(slow, name)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * max(1.0, np.abs(b).max()), err_msg=name)
+    np.testing.assert_allclose(fast_torques, slow_torques, rtol=0, atol=1e-9 * np.abs(slow_torques).max())

@@ -85,6 +85,7 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
     fresh = ModalCorrection(np.zeros_like(correction.inertia), np.zeros_like(correction.damping), -np.inf, 0.0)
     work, t, status, done = work.copy(), t0, CONVERGED, 0
     earlier = np.full((2, partition.integrated.size), np.nan)
+    command = np.zeros((2, na))
     e = evaluate(q, qd, k, _drive_at(inner_after[0], t0, t0, tick_ends[0], np.zeros(na), np.zeros(na), actuated, n),
                  partition, chain)
     for tick in range(tick_ends.size):
@@ -98,6 +99,7 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
         for j in range(na):
             last[j] = min(max(first[j] + feedforward_end[tick + 1, j] - feedforward_start[tick, j], -limit[j]),
                           limit[j])
+        command[0], command[1] = first, last
         # the forces jump: (8) solved again at the tick's start, the modal correction kept
         s0 = first_step[tick]
         e = evaluate(q, qd, k, _drive_at(inner_after[s0], start, start, end, first, last, actuated, n), partition,
@@ -119,7 +121,7 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
             h = step_times[s] - t
             step = integration_step(q, qd, qdd, B, earlier, correction, t, h, k, drive, partition, chain, settings)
             if step.status != CONVERGED:
-                return LoopRun(done, s, step.status, _first_rows(rows, s + 1), t, e, correction, earlier)
+                return LoopRun(done, s, step.status, _first_rows(rows, s + 1), t, e, correction, earlier, command)
             t, q, qd, qdd, B, earlier, correction = (step_times[s], step.q, step.qd, step.qdd, step.velocity_map,
                                                      step.earlier, step.correction)
             e = step_evaluation(q, qd, qdd, k, drive, partition, chain)
@@ -139,7 +141,7 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
                 rows.qdd[s + 1], rows.constraint_forces[s + 1] = qdd, e.constraint_forces
                 rows.accounts[s + 1, DRIVE_TORQUE] = e.accounts[DRIVE_TORQUE]
         done += 1
-    return LoopRun(done, S, status, rows, t, e, correction, earlier)
+    return LoopRun(done, S, status, rows, t, e, correction, earlier, command)
 
 
 @njit(cache=True, nogil=True)

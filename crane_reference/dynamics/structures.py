@@ -289,8 +289,9 @@ class LoopRows(NamedTuple):
 
 class LoopRun(NamedTuple):
     """A compiled closed loop: ticks and steps completed, the status of the last step, the rows (the start's
-    and the completed steps'), and the plant's state at the end (t [s], the evaluation there, the modal
-    correction and the earlier accelerations to continue from)."""
+    and the completed steps'), the plant's state at the end (t [s], the evaluation there, the modal
+    correction and the earlier accelerations to continue from) and the last tick's command (2, n_a) [N m]
+    at its start and end."""
 
     ticks: int
     steps: int
@@ -300,3 +301,4 @@ class LoopRun(NamedTuple):
     last: Evaluation
     correction: ModalCorrection
     earlier: np.ndarray
+    command: np.ndarray

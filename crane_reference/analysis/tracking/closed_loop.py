@@ -193,14 +193,13 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
         starts, ends = _feedforward(params, spec, *_reference(rigid, spec, task), per, ticks)
     else:
         starts, ends = _feedforward(params, spec, reference, reference_motion, per, ticks)
-    limits = np.array([g.limit for g in gains])
-    for k in range(ticks):
+    chunk = max(1, round(0.25 * spec.rate))  # ticks per compiled call: progress every 0.25 s
+    for first in range(0, ticks, chunk):
+        k = np.arange(first, min(first + chunk, ticks))
         i = k * per
-        torque = controller(reference.q[i, actuated] - plant.q[actuated], reference.qd[i, actuated],
-                            plant.qd[actuated], starts[k])
-        end = np.clip(torque + ends[k + 1] - starts[k], -limits, limits)
-        plant.actuate(reference.t[i + per], torque, end)
-        if progress is not None and (k + 1) % max(1, round(0.25 * spec.rate)) == 0:
+        plant.follow(reference.t[i + per], reference.q[np.ix_(i, actuated)], reference.qd[np.ix_(i, actuated)],
+                     starts[k[0]:k[-1] + 2], ends[k[0]:k[-1] + 2], controller)
+        if progress is not None:
             progress(plant.t)
     trajectory, torques = plant.trajectory()
     reference = _every(reference, 1, len(trajectory.t))

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...dynamics.closed_loop import controller_tick
+
 CONTROLLERS = ("pd", "pid")
 
 
@@ -75,14 +77,17 @@ class JointController:
         """Ticks at which each joint's torque was cut to its limit."""
         self.ticks = 0
 
+    @property
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """kp, kd, ki, the limits, the integral and the saturated ticks per joint, as the compiled loop takes
+        them (:func:`~crane_reference.dynamics.closed_loop.controller_tick`; the last two updated in place)."""
+        return self._kp, self.damping, self._ki, self._limit, self._integral, self.saturated_ticks
+
     def __call__(self, error: np.ndarray, reference_rate: np.ndarray, rate: np.ndarray,
                  feedforward: np.ndarray) -> np.ndarray:
         """u_k [N m] of this tick for the joint errors e, the reference's and the measured joint velocities
         and the feedforward (the torque u_k - kd qd within the limits); advances the integral."""
-        wanted = feedforward + self._kp * error + self._ki * self._integral + self.damping * (reference_rate - rate)
-        torque = np.clip(wanted, -self._limit, self._limit)
-        saturated = torque != wanted
-        self.saturated_ticks += saturated
         self.ticks += 1
-        self._integral += np.where(saturated, 0.0, error * self.period)
-        return torque + self.damping * rate
+        return controller_tick(self._kp, self.damping, self._ki, self._limit, self.period, self._integral,
+                               self.saturated_ticks, *(np.asarray(x, dtype=float) for x in (error, reference_rate,
+                                                                                               rate, feedforward)))

@@ -17,14 +17,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...dynamics.chain_dynamics import CraneDynamics
+from ...dynamics.closed_loop import closed_loop_run
+from ...dynamics.structures import ACCOUNTS, CONVERGED, STATUS_MESSAGES
 from ...model.chain import ACTUATED_JOINTS, build_model
 from ...model.drive import Actuated, make_drive
 from ...model.parameters import CraneParameters
 from ...motion.constraints import ConstraintSet
 from ...motion.equilibrium import static_equilibrium
+from ...motion.integration import IntegrationError, StepState
 from ...motion.programmed_motion import ProgrammedMotion
-from ...motion.simulation import MotionStepper, Scenario
-from ...motion.trajectory import Trajectory, stack_samples
+from ...motion.simulation import SAMPLED_ACCOUNTS, MotionStepper, Scenario
+from ...motion.trajectory import Trajectory, make_sample, stack_samples
+from .controller import JointController
 
 
 def servo_motion(scenario: Scenario) -> ProgrammedMotion:
@@ -87,6 +91,56 @@ class Plant:
         self._samples.append(rows)
         self._torque_rows.append(self.drive.forces(rows["t"])[:, self.actuated]
                                  - self.joint_damping * rows["qd"][:, self.actuated])
+
+    def follow(self, ends: np.ndarray, reference_q: np.ndarray, reference_qd: np.ndarray,
+               feedforward_start: np.ndarray, feedforward_end: np.ndarray, controller: JointController) -> None:
+        """Ticks of ``controller`` in one compiled call (:func:`~crane_reference.dynamics.closed_loop.closed_loop_run`):
+        tick k commands, from now (then from ``ends`` [k - 1]) to ``ends`` [k] (K,) [s, on the step grid], the
+        controller's u_k on the errors to ``reference_q`` [k] and ``reference_qd`` [k] (K, 3) with the
+        feedforward ``feedforward_start`` [k], linear to u_k + feedforward_end[k + 1] - feedforward_start[k]
+        (within the limits) at its end: the ticks of :meth:`actuate` with a :class:`JointController`, steps and
+        accounts the same."""
+        stepper, motion = self.stepper, self.stepper.motion
+        plan = stepper.step_plan(ends)
+        inner = self.drive.drive
+        left = inner.kernel_parameters(plan.times, left_limit=True)
+        after = inner.kernel_parameters(np.concatenate(([stepper.state.t], plan.times)))
+        kp, kd, ki, limit, integral, saturated = controller.arrays
+        state = stepper.state
+        run = closed_loop_run(state.q, state.qd, state.correction, stepper.snapshot().work, state.t,
+                              np.asarray(ends, dtype=float), plan.first, plan.times, plan.on_jump, left, after,
+                              motion.constraints.coefficients(state.t), motion.partition, self.dynamics.chain,
+                              stepper.integrator.settings, self.actuated, controller.period,
+                              np.ascontiguousarray(reference_q, dtype=float),
+                              np.ascontiguousarray(reference_qd, dtype=float),
+                              np.ascontiguousarray(feedforward_start, dtype=float),
+                              np.ascontiguousarray(feedforward_end, dtype=float), kp, kd, ki, limit, integral,
+                              saturated)
+        controller.ticks += run.ticks
+        if run.status != CONVERGED:
+            raise IntegrationError(STATUS_MESSAGES[run.status].format(
+                t0=run.t, t1=plan.times[run.steps], h=plan.times[run.steps] - run.t,
+                iterations=stepper.integrator.max_iterations))
+        rows = run.rows
+        times = np.concatenate(([state.t], plan.times))
+        accounts = {name: rows.accounts[:, i] for i, name in enumerate(ACCOUNTS) if name in SAMPLED_ACCOUNTS}
+        empty = np.zeros((times.size, 0))
+        arrays = dict(t=times, q=rows.q, qd=rows.qd, qdd=rows.qdd, reactions=empty,
+                      constraint_forces=rows.constraint_forces,
+                      ee_position=rows.ee_position, ee_rotation=rows.ee_rotation, ee_velocity=rows.ee_velocity,
+                      residual=empty, residual_distance=empty, **accounts, work_drive=rows.work[:, 0],
+                      work_constraints=rows.work[:, 1], work_damping=rows.work[:, 2])
+        if len(self._samples) == 1:  # the start's sample under the first command
+            self._samples[0] = {name: value[:1] for name, value in arrays.items()}
+            self._torque_rows[0] = rows.torques[:1]
+        self._samples.append({name: value[1:] for name, value in arrays.items()})
+        self._torque_rows.append(rows.torques[1:])
+        solution = motion.solution_from_evaluation(run.last)
+        last = StepState(run.t, rows.q[-1], rows.qd[-1], solution, run.correction, run.earlier)
+        stepper.continue_from(last, plan.k, rows.work[-1], make_sample(run.t, last.q, last.qd, solution, rows.work[-1]))
+        last_start = plan.first[-2]
+        self.drive.command(float(plan.times[last_start - 1]) if last_start else state.t, float(ends[-1]),
+                           *(self._forces(torques) for torques in run.command))
 
     def _forces(self, torques: np.ndarray) -> np.ndarray:
         forces = np.zeros(self.model.dof)
