@@ -302,3 +302,20 @@ def test_settled_profiles_drop_finished_blends_also_inside_running_ones():
     assert settled(outer, 0.2) == outer  # nothing finished yet
     for t in np.linspace(1.5, 4.0, 26):
         assert np.allclose(profile(t), outer(t), rtol=1e-14, atol=1e-14), t
+
+
+def test_surface_offsets_are_the_ellipse_and_height_written_out():
+    """ConstraintSet.surface_offsets (compiled, all rows at once) against the ellipse (5.1) and height (5.2)
+    written out: Phi / |Phi_p| with Phi = (x/a)^2 + (y/b)^2 - 1, Phi_p = (2x/a^2, 2y/b^2, 0) and
+    Phi = z - z_a(t), Phi_p = (0, 0, 1), with a growing semi-axis a(t)."""
+    a, b = QuinticRise(3.0, 0.4, 0.0, 2.0), Constant(2.0)
+    z = QuinticRise(1.5, 0.2, 0.0, 5.0)
+    constraints = ConstraintSet((EllipseXY(a, b), HeightZ(z)))
+    rng = np.random.default_rng(11)
+    times = np.sort(rng.uniform(0.0, 3.0, 40))
+    positions = rng.uniform(-4.0, 4.0, (40, 3))
+    x, y, height = positions.T
+    semi_a, semi_b, z_a = (np.array([profile(t)[0] for t in times]) for profile in (a, b, z))
+    ellipse = ((x / semi_a) ** 2 + (y / semi_b) ** 2 - 1) / np.hypot(2 * x / semi_a**2, 2 * y / semi_b**2)
+    np.testing.assert_allclose(constraints.surface_offsets(times, positions),
+                               np.column_stack([ellipse, height - z_a]), rtol=1e-12, atol=1e-14)

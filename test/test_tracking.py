@@ -18,6 +18,7 @@ from test_simulation import quintic_z
 
 from crane_reference.analysis.tracking.closed_loop import TrackingSpec, run_tracking
 from crane_reference.analysis.tracking.controller import JointController, JointGains, bandwidth_gains
+from crane_reference.analysis.tracking.feedforward import RigidInverseDynamics
 from crane_reference.analysis.tracking.plant import ACTUATED_JOINTS, Plant, held_start
 from crane_reference.model.drive import Actuated, TorqueSource, column_drive
 from crane_reference.motion.simulation import Scenario
@@ -230,3 +231,21 @@ def test_the_compiled_closed_loop_is_the_per_tick_loop(params):
         a, b = getattr(fast, name), getattr(slow, name)
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * max(1.0, np.abs(b).max()), err_msg=name)
     np.testing.assert_allclose(fast_torques, slow_torques, rtol=0, atol=1e-9 * np.abs(slow_torques).max())
+
+
+def test_rigid_feedforward_is_m_qdd_plus_h_minus_q(params):
+    """RigidInverseDynamics (O(n) inverse dynamics, rows at once) against M qdd + h - Q assembled from the
+    rigid crane's mass matrix and terms at random states, before and at the drive's jump."""
+    model = Scenario(params, "rigid").model
+    inverse = RigidInverseDynamics(params, model.joint_names)
+    rng = np.random.default_rng(5)
+    q = model.initial_q + rng.normal(0.0, 0.2, (6, model.dof))
+    qd, qdd = rng.normal(0.0, 0.5, (2, 6, model.dof))
+    times = np.array([0.0, 0.3, 0.999, 1.0, 1.0, 2.0])
+    for left_limit in (False, True):
+        rows = inverse(times, q, qd, qdd, left_limit)
+        for i in range(times.size):
+            terms = inverse.dynamics.terms(times[i], q[i], qd[i], left_limit)
+            expected = (terms.M @ qdd[i] + terms.h - terms.Q)[[model.index(name) for name in ACTUATED_JOINTS]]
+            np.testing.assert_allclose(rows[i], expected, rtol=1e-10, atol=1e-8 * np.abs(expected).max())
+            np.testing.assert_allclose(inverse(times[i], q[i], qd[i], qdd[i], left_limit), rows[i], rtol=1e-13)

@@ -660,6 +660,19 @@ def evaluated_rows(q, qd, qdd, k: Coefficients, drives, partition: Partition, ch
 
 
 @njit(cache=True, nogil=True)
+def imbalance_rows(q, qd, qdd, drives, chain: ChainData):
+    """M qdd + h - Q at the rows of q, qd and qdd (N, n), with the drive parameters ``drives`` of each row,
+    by O(n) inverse dynamics (no M)."""
+    out = np.empty_like(q)
+    for i in range(q.shape[0]):
+        T, S = forward_kinematics(q[i], chain.kinds, chain.axes, chain.origins)
+        Hw = world_pseudo_inertias(T, chain.body_joint, chain.body_H)
+        out[i] = inverse_dynamics(S, Hw, velocity_terms(qd[i], S), qdd[i], chain) - generalized_forces(
+            q[i], qd[i], np.zeros(q.shape[1]), chain, drives[i])
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _evaluated_row(rows: StepRows, i, e: Evaluation):
     """Row i of a run's rows from the full evaluation of its step."""
     rows.reactions[i], rows.constraint_forces[i] = e.reactions, e.constraint_forces

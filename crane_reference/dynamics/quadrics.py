@@ -219,3 +219,18 @@ def constraint_values(p, v, k: Coefficients):
     for i in range(m):
         distance[i] = abs(residual[i]) / np.sqrt(grads[i, 0] ** 2 + grads[i, 1] ** 2 + grads[i, 2] ** 2)
     return residual, grads, distance, rate
+
+
+@njit(cache=True, nogil=True)
+def surface_offsets(positions, k: Coefficients):
+    """Phi / |Phi_p| of the holonomic rows at E's positions (N, 3), with the coefficients ``k`` stacked per
+    position: E's signed distance to each row's surface, to first order in Phi (N, n_h) [m]."""
+    rows = 0
+    for i in range(k.order.size):
+        rows += k.order[i] == 0
+    out = np.empty((positions.shape[0], rows))
+    for i in range(positions.shape[0]):
+        residual, grads = holonomic_values(positions[i], Coefficients(k.Q[i], k.g[i], k.c[i], k.order))
+        for r in range(rows):
+            out[i, r] = residual[r] / np.sqrt(grads[r, 0] ** 2 + grads[r, 1] ** 2 + grads[r, 2] ** 2)
+    return out

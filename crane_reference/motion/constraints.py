@@ -233,6 +233,12 @@ class ConstraintSet:
         """Phi(p, t) stacked (m,) (holonomic constraints)."""
         return np.array([c.quadric(t).residual(p) for c in self._holonomic()])
 
+    def surface_offsets(self, times: np.ndarray, positions: np.ndarray) -> np.ndarray:
+        """Phi / |Phi_p| (N, m) [m] at E's positions (N, 3) at ``times`` (N,) [s]: E's signed distance to each
+        constraint's surface, to first order in Phi (holonomic constraints)."""
+        self._holonomic()
+        return quadrics.surface_offsets(np.ascontiguousarray(positions, dtype=float), self.coefficients_at(times))
+
     def position_jacobian(self, t: float, p: np.ndarray) -> np.ndarray:
         """Phi_p stacked (m, 3) (holonomic constraints)."""
         return np.array([c.quadric(t).gradient(p) for c in self._holonomic()])

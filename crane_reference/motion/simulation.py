@@ -142,12 +142,13 @@ class MotionStepper:
         [s]) in turn, without taking them."""
         t, k, times, jumps, first = self.state.t, self._k, [], [], [0]
         for t_end in ends:
+            count = first[-1]
             while t < t_end - 1e-9 * self.step_size:
                 block, on_jump, covered = self._next_times(t_end, t, k)
                 times.append(block)
                 jumps.append(np.arange(block.size) == block.size - 1 if on_jump else np.zeros(block.size, bool))
-                t, k = float(block[-1]), k + covered
-            first.append(sum(block.size for block in times))
+                t, k, count = float(block[-1]), k + covered, count + block.size
+            first.append(count)
         return StepPlan(np.concatenate(times), np.concatenate(jumps), np.array(first, dtype=np.int64), k)
 
     def continue_from(self, state: StepState, k: int, work: np.ndarray, sample: Sample) -> None:

@@ -204,8 +204,7 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
     trajectory, torques = plant.trajectory()
     reference = _every(reference, 1, len(trajectory.t))
     constraints = ConstraintSet(tuple(c for c in reference_motion.constraints.constraints if c.order == 0))
-    path_error = np.array([constraints.residual(t, p) / np.linalg.norm(constraints.position_jacobian(t, p), axis=1)
-                           for t, p in zip(trajectory.t, trajectory.ee_position, strict=True)])
+    path_error = constraints.surface_offsets(trajectory.t, trajectory.ee_position)
     deflections = [boom_tip_deflection(plant.model, plant.dynamics.chain, q) if spec.variant == "flexible"
                    else np.zeros((len(trajectory.t), 3)) for q in (trajectory.q, reference.q)]
     return TrackingRun(spec, gains, trajectory, torques, reference, path_error, *deflections,
@@ -236,10 +235,11 @@ def _feedforward(params: CraneParameters, spec: TrackingSpec, reference: Traject
         return starts, starts
     inverse = RigidInverseDynamics(params, reference.joint_names)
     jumps = motion.dynamics.drive.breakpoints
+    at = np.arange(0, ticks * per + 1, per)
+    starts = inverse(reference.t[at], reference.q[at], reference.qd[at], reference.qdd[at])
     ends = starts.copy()
-    for k, i in enumerate(range(0, ticks * per + 1, per)):
+    for k, i in enumerate(at):
         t, q, qd = reference.t[i], reference.q[i], reference.qd[i]
-        starts[k] = ends[k] = inverse(t, q, qd, reference.qdd[i])
         if any(abs(t - jump) <= 1e-9 * spec.step for jump in jumps):
             ends[k] = inverse(t, q, qd, motion.solve(t, q, qd, left_limit=True).qdd, left_limit=True)
     return starts, ends

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...dynamics.chain_dynamics import CraneDynamics
+from ...dynamics.kernels import imbalance_rows
 from ...model.chain import ACTUATED_JOINTS, build_model
 from ...model.drive import make_drive
 from ...model.parameters import CraneParameters
@@ -32,10 +33,13 @@ class RigidInverseDynamics:
         self._columns = np.array([joint_names.index(name) for name in model.joint_names], dtype=np.int64)
         self._actuated = np.array([model.index(name) for name in ACTUATED_JOINTS], dtype=np.int64)
 
-    def __call__(self, t: float, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+    def __call__(self, t: float | np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                  left_limit: bool = False) -> np.ndarray:
-        """tau_ff [N m] (order of :data:`~.plant.ACTUATED_JOINTS`) at the reference's (q, qd, qdd) at t [s]
-        (with ``left_limit`` the drive just before t: at a jump of its torque, with the qdd from before it)."""
-        columns = self._columns
-        terms = self.dynamics.terms(t, q[columns], qd[columns], left_limit)
-        return (terms.M @ qdd[columns] + terms.h - terms.Q)[self._actuated]
+        """tau_ff [N m] (order of :data:`~.plant.ACTUATED_JOINTS`; (N, 3) for N rows) at the reference's
+        (q, qd, qdd) at t [s] (or rows (N, n) at times (N,); with ``left_limit`` the drive just before t: at a
+        jump of its torque, with the qdd from before it), by O(n) inverse dynamics
+        (:func:`~crane_reference.dynamics.kernels.imbalance_rows`)."""
+        rows = [np.ascontiguousarray(np.atleast_2d(x)[:, self._columns], dtype=float) for x in (q, qd, qdd)]
+        drives = np.atleast_2d(self.dynamics.drive.kernel_parameters(np.atleast_1d(t), left_limit))
+        out = imbalance_rows(*rows, drives, self.dynamics.chain)[:, self._actuated]
+        return out if np.ndim(q) == 2 else out[0]
