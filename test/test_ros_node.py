@@ -833,7 +833,7 @@ def test_rclpy_and_rosbags_messages_agree() -> None:
         "joint_state": lambda t: messages.joint_state(t, stamp, names, sample),
         "pose": lambda t: messages.end_effector_pose(t, stamp, "world", sample),
         "preview": lambda t: messages.reference_preview(t, stamp, "world", names, indices, offsets,
-                                                        [sample, *preview], effort=True),
+                                                        [sample, *preview.rows()], effort=True),
         "diagnostics": lambda t: messages.diagnostics(t, stamp, "crane", "node", Level.WARN, "late",
                                                       {"rate": 99.5, "state": "RUNNING"}),
         "markers": lambda t: messages.markers(t, stamp, "world",
@@ -850,7 +850,7 @@ def test_rclpy_and_rosbags_messages_agree() -> None:
         assert plain(ours_read) == plain(theirs_read), name
     with pytest.raises(ValueError, match="increase strictly"):
         messages.reference_preview(messages.rosbags_types(typestore), stamp, "world", names, indices,
-                                   [0, 2, 2, 3, 4], [sample, *preview])
+                                   [0, 2, 2, 3, 4], [sample, *preview.rows()])
 
 
 def test_speed_scaling_topic_sets_the_parameter_and_slows_the_reference(ros: Harness) -> None:
