@@ -138,9 +138,10 @@ class SamplePublisher:
         server.begin(clock.now().nanoseconds)
         while not self._quiet.is_set():
             now, read_at = clock.now().nanoseconds, time.monotonic_ns()
-            for outgoing in server.due(now):
+            due = server.due(now)
+            for outgoing in due.outgoing:
                 self.send(outgoing)
-            left = server.next_stamp() - now - (time.monotonic_ns() - read_at)
+            left = due.next_stamp_ns - now - (time.monotonic_ns() - read_at)
             if left > 0:
                 self._quiet.wait(min(left / NANOSECONDS, MAX_WAIT))
 

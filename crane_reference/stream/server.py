@@ -8,8 +8,8 @@ it what is due; a ROS node adds the clock, the messages, parameters and services
 Publishing
     :meth:`ReferenceServer.begin` at a clock reading starts the stamps (sample k stamped
     ``start + k / rate``, :func:`~.schedule.stamp_at`, never before the last stamp sent), then
-    :meth:`ReferenceServer.due` gives every sample due by a clock reading, stamped, and
-    :meth:`ReferenceServer.next_stamp` when the next one is.  A frame not ready (the solver late) is the
+    :meth:`ReferenceServer.due` gives every sample due by a clock reading, stamped, and when the next one
+    is.  A frame not ready (the solver late) is the
     last sample held; a clock that jumps forward makes the stamps leap with it (no sample skipped, the
     motion goes on), one that goes back makes nothing due until it reaches the next stamp again
     (:meth:`~.schedule.FrameSchedule.anchored`); :meth:`ReferenceServer.status` reports both.
@@ -84,6 +84,14 @@ class Outgoing:
     k: int
     stamp_ns: int
     frame: Frame
+
+
+class Due(NamedTuple):
+    """What :meth:`ReferenceServer.due` hands the publisher: the samples to publish now, oldest first, and the
+    stamp [ns] of the next one (None while not publishing)."""
+
+    outgoing: list[Outgoing]
+    next_stamp_ns: int | None
 
 
 @dataclass(frozen=True)
@@ -276,12 +284,13 @@ class ReferenceServer:
         with self._lock:
             self._start_ns = None
 
-    def due(self, now_ns: int) -> list[Outgoing]:
-        """Every sample due by the clock reading ``now_ns`` [ns] (normally one), stamped, oldest first."""
+    def due(self, now_ns: int) -> Due:
+        """Every sample due by the clock reading ``now_ns`` [ns] (normally one), stamped, oldest first, and the
+        stamp of the next one."""
         schedule = self.schedule
         with self._lock:
             if self._start_ns is None:
-                return []
+                return Due([], None)
             start = schedule.anchored(now_ns, self._start_ns)
             if start != self._start_ns:
                 self._clock_note = (f"ROS time jumped {(start - self._start_ns) / NANOSECONDS:.3f} s ahead of the "
@@ -299,7 +308,7 @@ class ReferenceServer:
                 if frame is not None:
                     self._last_stamp = stamp_at(start, k, self.rate)
                     out.append(Outgoing(k, self._last_stamp, frame))
-            return out
+            return Due(out, stamp_at(start, schedule.next_k, self.rate))
 
     def clock_went_back(self, now_ns: int) -> None:
         """The clock jumped back (reported by its owner: rclpy's jump callback) to ``now_ns``: beyond the
@@ -316,11 +325,6 @@ class ReferenceServer:
             self._last_stamp = now_ns - NANOSECONDS // self.rate
             self._clock_note = (f"ROS time went back {behind / NANOSECONDS:.3f} s: the stamps restart from it "
                                 "(once), no sample skipped")
-
-    def next_stamp(self) -> int | None:
-        """Stamp [ns] of the next sample to publish (None while not publishing)."""
-        with self._lock:
-            return None if self._start_ns is None else stamp_at(self._start_ns, self.schedule.next_k, self.rate)
 
     def last_sample(self) -> Published:
         """The last sample published and its stamp [ns]."""
