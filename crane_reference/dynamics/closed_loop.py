@@ -15,10 +15,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .kernels import DRIVE_TORQUE, corrected_accelerations, evaluate, integration_step, step_evaluation
+from .kernels import corrected_accelerations, evaluate, integration_step, step_evaluation
 from .structures import (
     ACCOUNTS,
     CONVERGED,
+    DRIVE_TORQUE,
+    POWERS,
     ChainData,
     Coefficients,
     LoopRows,
@@ -27,9 +29,6 @@ from .structures import (
     Partition,
     StepSettings,
 )
-
-POWER_COLUMNS = np.array([ACCOUNTS.index(name) for name in ("drive_power", "constraint_power", "damping_power")])
-"""Columns of the accounts whose time integrals are the work terms (drive, constraints, dampers)."""
 
 
 @njit(cache=True, nogil=True)
@@ -65,8 +64,8 @@ def _drive_at(inner, t, start, end, first, last, actuated, n):
 @njit(cache=True, nogil=True)
 def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, first_step, step_times, on_jump, inner,
                     inner_after, k: Coefficients, partition: Partition, chain: ChainData, settings: StepSettings,
-                    actuated, period, reference_q, reference_qd, feedforward_start, feedforward_end, kp, kd, ki, limit,
-                    integral, saturated):
+                    actuated, joint_damping, period, reference_q, reference_qd, feedforward_start, feedforward_end, kp,
+                    kd, ki, limit, integral, saturated):
     """Ticks of the controller from the plant state (t0, q, qd) with its modal ``correction`` and ``work``
     accounts (3,) [J]; tick k runs from the plant's time then to ``tick_ends`` [k] (K,) [s] over the steps
     first_step[k] .. first_step[k + 1] - 1 ending at ``step_times`` (S,), ``on_jump`` where a step ends on a
@@ -75,18 +74,21 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
     restarts).  Tick k commands u_k (:func:`controller_tick` every ``period`` [s] on ``reference_q`` [k] - q
     and ``reference_qd`` [k] of the ``actuated`` coordinates, feedforward ``feedforward_start`` [k]) at its
     start, linear to clip(u_k + feedforward_end[k + 1] - feedforward_start[k], +-limit) at its end;
-    ``integral`` and ``saturated`` are updated in place.  Stops at the first step that fails; returns a
-    :class:`LoopRun` (its rows: the start under the first command, then every step; at a drive jump qdd, the
-    constraint forces and the drive torque from after it, as ``MotionStepper``'s)."""
+    ``integral`` and ``saturated`` are updated in place; the actuator torques are the commands minus
+    ``joint_damping`` qd (the joint drives' velocity loops, in the plant's damping).  Stops at the first
+    step that fails; returns a :class:`LoopRun` (its rows: the start under the first command, then every
+    step; at a drive jump qdd, the constraint forces and the drive torque from after it, as
+    ``MotionStepper``'s)."""
     n, S, na = q.size, step_times.size, actuated.size
     rows = LoopRows(np.empty((S + 1, n)), np.empty((S + 1, n)), np.empty((S + 1, n)), np.empty((S + 1, n)),
                     np.empty((S + 1, len(ACCOUNTS))), np.empty((S + 1, 3)), np.empty((S + 1, 3)),
                     np.empty((S + 1, 3, 3)), np.empty((S + 1, 3)), np.empty((S + 1, na)))
     fresh = ModalCorrection(np.zeros_like(correction.inertia), np.zeros_like(correction.damping), -np.inf, 0.0)
-    work, t, status, done = work.copy(), t0, CONVERGED, 0
+    work, t, done = work.copy(), t0, 0
     earlier = np.full((2, partition.integrated.size), np.nan)
     command = np.zeros((2, na))
-    e = evaluate(q, qd, k, _drive_at(inner_after[0], t0, t0, tick_ends[0], np.zeros(na), np.zeros(na), actuated, n),
+    # what is returned without ticks (each tick evaluates at its own start)
+    e = evaluate(q, qd, k, _drive_at(inner_after[0], t0, t0, tick_ends[0], command[0], command[1], actuated, n),
                  partition, chain)
     for tick in range(tick_ends.size):
         start, end = t, tick_ends[tick]
@@ -110,12 +112,12 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
         else:
             correction = fresh
         earlier = np.full((2, partition.integrated.size), np.nan)
-        powers = e.accounts[POWER_COLUMNS]
+        powers = e.accounts[POWERS]
         if tick == 0:
             _store(rows, 0, q, qd, qdd, e, work, e.terms.ee_position, e.terms.ee_rotation,
                    e.terms.ee_jacobian @ qd)
             for j in range(na):
-                rows.torques[0, j] = first[j] - kd[j] * qd[actuated[j]]
+                rows.torques[0, j] = first[j] - joint_damping[j] * qd[actuated[j]]
         for s in range(s0, first_step[tick + 1]):
             drive = _drive_at(inner[s], step_times[s], start, end, first, last, actuated, n)
             h = step_times[s] - t
@@ -125,23 +127,23 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
             t, q, qd, qdd, B, earlier, correction = (step_times[s], step.q, step.qd, step.qdd, step.velocity_map,
                                                      step.earlier, step.correction)
             e = step_evaluation(q, qd, qdd, k, drive, partition, chain)
-            row_powers = e.accounts[POWER_COLUMNS]
+            row_powers = e.accounts[POWERS]
             for i in range(3):
                 work[i] += 0.5 * h * (powers[i] + row_powers[i])
             powers = row_powers
             _store(rows, s + 1, q, qd, qdd, e, work, step.ee_position, step.ee_rotation, step.ee_velocity)
             for j in range(na):
-                rows.torques[s + 1, j] = drive[inner.shape[1] + actuated[j]] - kd[j] * qd[actuated[j]]
+                rows.torques[s + 1, j] = drive[inner.shape[1] + actuated[j]] - joint_damping[j] * qd[actuated[j]]
             if on_jump[s]:  # restart at the drive's jump: the motion from it on, a fresh modal correction
                 e = evaluate(q, qd, k, _drive_at(inner_after[s + 1], t, start, end, first, last, actuated, n),
                              partition, chain)
                 qdd, B, correction = e.terms.qdd, e.terms.velocity_map, fresh
                 earlier = np.full((2, partition.integrated.size), np.nan)
-                powers = e.accounts[POWER_COLUMNS]
+                powers = e.accounts[POWERS]
                 rows.qdd[s + 1], rows.constraint_forces[s + 1] = qdd, e.constraint_forces
                 rows.accounts[s + 1, DRIVE_TORQUE] = e.accounts[DRIVE_TORQUE]
         done += 1
-    return LoopRun(done, S, status, rows, t, e, correction, earlier, command)
+    return LoopRun(done, S, CONVERGED, rows, t, e, correction, earlier, command)
 
 
 @njit(cache=True, nogil=True)

@@ -34,7 +34,9 @@ from .structures import (
     ACCOUNTS,
     CONSTRAINTS_UNSOLVABLE,
     CONVERGED,
+    DRIVE_TORQUE,
     NOT_CONVERGED,
+    SINGULAR_VALUE,
     Accelerations,
     Advance,
     ChainData,
@@ -88,9 +90,6 @@ def projection_matrix(B, independent, servo):
         P[independent[col], col] = 1.0
     return P
 
-
-SINGULAR_VALUE, DRIVE_TORQUE = ACCOUNTS.index("kdc_min_singular_value"), ACCOUNTS.index("drive_torque")
-"""Columns of the accounts (:data:`~.structures.ACCOUNTS`) that kernels write or read by themselves."""
 
 ROUND_OFF_STEP = 1e-15
 """[rad or m]: a Newton correction of the position constraints this small is at the round-off of q."""
@@ -481,9 +480,8 @@ def predicted_accelerations(a0, earlier):
 def first_iterate(q0, qd0, a0, a1, h, k: Coefficients, partition: Partition, chain: ChainData,
                   settings: StepSettings):
     """The step's first iterate: the trapezoidal state for the predicted accelerations a1 of the integrated
-    coordinates (x0 + h v0 + h^2/4 (a0 + a1)) with q_hd from the position constraints, starting from q_hd
-    predicted as q0 + h qd0 + h^2/4 (qdd0 + qdd1) (qdd[integrated] = a and its dependent part through the
-    constraints)."""
+    coordinates (x0 + h v0 + h^2/4 (a0 + a1)) with q_hd from the position constraints, starting from
+    q0 + h qd0 for them."""
     integrated = partition.integrated
     guess = q0 + h * qd0
     guess[integrated] += (0.25 * h * h) * (a0 + a1)

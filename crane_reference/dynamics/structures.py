@@ -193,6 +193,11 @@ ACCOUNTS = ("kinetic_energy", "potential_energy", "drive_torque", "drive_power",
             "damping_power", "kdc_min_singular_value")
 """Columns of :attr:`Evaluation.accounts`: E_k, E_p [J], t_dr [N m], the powers fed in by the drive, the
 constraint forces and the dampers [W], and sigma_min(K_dc)."""
+SINGULAR_VALUE, DRIVE_TORQUE = ACCOUNTS.index("kdc_min_singular_value"), ACCOUNTS.index("drive_torque")
+"""Columns of :data:`ACCOUNTS`: sigma_min(K_dc) and the drive torque."""
+POWERS = np.array([ACCOUNTS.index(name) for name in ("drive_power", "constraint_power", "damping_power")])
+"""Columns of :data:`ACCOUNTS` whose time integrals are the work terms (drive, constraints, dampers)."""
+
 
 
 class Step(NamedTuple):

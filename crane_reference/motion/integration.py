@@ -82,9 +82,9 @@ import numpy as np
 
 from ..dynamics import kernels
 from ..dynamics.structures import (
-    ACCOUNTS,
     CONSTRAINTS_UNSOLVABLE,
     CONVERGED,
+    SINGULAR_VALUE,
     STATUS_MESSAGES,
     ModalCorrection,
     StepRows,
@@ -191,6 +191,11 @@ class ExactFrequencyTrapezoidal:
                                               state.correction, self.motion.partition)
         return StepState(state.t, state.q, state.qd, replace(solution, qdd=qdd), state.correction, self.no_earlier())
 
+    def failure(self, status: int, t0: float, t1: float) -> Exception:
+        """The error of a step from t0 to t1 [s] that ended with ``status`` (:data:`STATUS_MESSAGES`)."""
+        message = STATUS_MESSAGES[status].format(t0=t0, t1=t1, h=t1 - t0, iterations=self.max_iterations)
+        return ProjectionError(message) if status == CONSTRAINTS_UNSOLVABLE else IntegrationError(message)
+
     def step(self, state: StepState, t1: float, ends_on_jump: bool = False) -> StepState:
         """Advance ``state`` to time t1 > state.t [s] (one step of :meth:`run`).  A step ending on a drive
         jump (``ends_on_jump``) uses the drive's left limit there; continue with :meth:`resolve` at the jump."""
@@ -216,11 +221,9 @@ class ExactFrequencyTrapezoidal:
             np.full(times.size, every_row))
         if run.status != CONVERGED:
             t0 = times[run.completed - 1] if run.completed else state.t
-            t1 = times[min(run.completed, len(times) - 1)]
-            message = STATUS_MESSAGES[run.status].format(t0=t0, t1=t1, h=t1 - t0, iterations=self.max_iterations)
-            raise ProjectionError(message) if run.status == CONSTRAINTS_UNSOLVABLE else IntegrationError(message)
+            raise self.failure(run.status, t0, times[min(run.completed, len(times) - 1)])
         rows = run.rows
-        motion.check_singularity(float(np.min(rows.accounts[:, ACCOUNTS.index("kdc_min_singular_value")])))
+        motion.check_singularity(float(np.min(rows.accounts[:, SINGULAR_VALUE])))
         self.last_iterations = int(rows.iterations[-1])
         last = run.last
         return StepState(float(times[-1]), rows.q[-1], rows.qd[-1], motion.solution_from_evaluation(last.evaluation),

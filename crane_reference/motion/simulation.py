@@ -19,7 +19,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from ..dynamics.chain_dynamics import CraneDynamics
-from ..dynamics.structures import ACCOUNTS
+from ..dynamics.structures import ACCOUNTS, DRIVE_TORQUE, POWERS
 from ..model.chain import ChainModel, build_model
 from ..model.drive import make_drive
 from ..model.parameters import CraneParameters, Task
@@ -31,8 +31,6 @@ from .programmed_motion import ConstraintSingularityError, ProgrammedMotion, Pro
 from .steps import ANALYSIS_STEP, ONLINE_STEP
 from .trajectory import Sample, Trajectory, make_sample, stack_samples
 
-POWERS = [ACCOUNTS.index(name) for name in ("drive_power", "constraint_power", "damping_power")]
-"""Columns of the accounts whose time integrals are the work terms (drive, constraints, dampers)."""
 SAMPLED_ACCOUNTS = ("kinetic_energy", "potential_energy", "drive_torque", "kdc_min_singular_value")
 """Accounts a sample carries under their own names."""
 
@@ -187,7 +185,7 @@ class MotionStepper:
         if on_jump:  # the sample at a jump shows the motion from the jump on, as after a restart
             solution = self.state.solution
             qdd[-1], reactions[-1], forces[-1] = solution.qdd, solution.reactions, solution.constraint_forces
-            accounts[-1, ACCOUNTS.index("drive_torque")] = solution.drive_torque
+            accounts[-1, DRIVE_TORQUE] = solution.drive_torque
         columns = {name: accounts[:, i] for i, name in enumerate(ACCOUNTS) if name in SAMPLED_ACCOUNTS}
         return dict(t=times, q=rows.q, qd=rows.qd, qdd=qdd, reactions=reactions, constraint_forces=forces,
                     ee_position=rows.ee_position, ee_rotation=rows.ee_rotation, ee_velocity=rows.ee_velocity,
@@ -223,7 +221,7 @@ class MotionStepper:
         self._k = int(np.floor((t - self._t0) / self.step_size + 1e-9))  # grid times at or before t
         self._work = np.full(3, np.nan) if work is None else work.copy()
         self.state = self.integrator.resolve(StepState(t, q, qd, self.state.solution, self.state.correction,
-                                                       self.state.earlier))
+                                                       self.integrator.no_earlier()))
         self.sample = make_sample(t, q, qd, self.state.solution, self._work)
 
 

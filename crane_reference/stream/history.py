@@ -71,10 +71,11 @@ class History:
 
     def extend(self, rows: dict[str, np.ndarray], end: StepperSnapshot) -> None:
         """Append a compiled run, its rows stacked (``MotionStepper.advance_until``; evaluated in full where the
-        drive torque is not NaN); the last one restartable from ``end``."""
+        drive torque is not NaN, the others left for :meth:`read`, their constraint distance NaN until then);
+        the last one restartable from ``end``."""
         count = rows["t"].size
         if self._end + count > self._motion.size:
-            self._compact(self._end + count)
+            self._compact(count)
         new = slice(self._end, self._end + count)
         for name in ("t", "q", "qd", "qdd", "ee_position", "ee_rotation"):
             self._rows[name][new] = rows[name]
@@ -89,10 +90,11 @@ class History:
         self._end += count
         self._snapshots[self._end - 1] = end
 
-    def _compact(self, needed: int) -> None:
-        """Move the kept rows to the front of the storage, grown if they and ``needed`` - end more do not fit."""
+    def _compact(self, count: int) -> None:
+        """Move the kept rows to the front of the storage, grown to twice what they and ``count`` more need
+        unless that fits already."""
         kept = self._end - self._begin
-        capacity = max(self._motion.size, 2 * (kept + needed - self._end))
+        capacity = max(self._motion.size, 2 * (kept + count))
         for name, old in self._rows.items():
             grown = np.full((capacity, *old.shape[1:]), np.nan)
             grown[:kept] = old[self._begin:self._end]
@@ -148,6 +150,7 @@ class History:
         self._snapshots[row] = snapshot
         if self._motions[self._motion[row]] is not snapshot.motion:
             self._motions.append(snapshot.motion)
+            self._motion[row] = len(self._motions) - 1
 
     def truncate(self, k: int) -> list[StepperSnapshot]:
         """Forget everything after step k; returns the snapshots forgotten (freeing them takes a while: the

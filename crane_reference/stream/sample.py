@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import math
 from dataclasses import dataclass, replace
 from dataclasses import fields as dataclass_fields
@@ -67,10 +68,6 @@ class Samples(NamedTuple):
         return cls(*(np.repeat(np.asarray(getattr(sample, f.name))[None], count, axis=0)
                      for f in dataclass_fields(ReferenceSample)))
 
-    @property
-    def count(self) -> int:
-        return self.t.size
-
     def take(self, index: np.ndarray) -> Samples:
         """The rows ``index``."""
         return Samples(*(field[index] for field in self))
@@ -85,16 +82,20 @@ class Samples(NamedTuple):
     def finite(self) -> np.ndarray:
         """(N,): whether every number of a row is finite."""
         total = (self.q.sum(axis=1) + self.qd.sum(axis=1) + self.qdd.sum(axis=1) + self.effort.sum(axis=1)
-                 + self.ee_position.sum(axis=1) + self.ee_quaternion.sum(axis=1) + self.residual_distance + self.t)
+                 + self.ee_position.sum(axis=1) + self.ee_quaternion.sum(axis=1) + self.residual_distance)
         return np.isfinite(total)
+
+
+_TRUSTED = {"assume_valid": True} if "assume_valid" in inspect.signature(Rotation.from_matrix).parameters else {}
+"""scipy >= 1.17 can skip its orthonormality check (a fifth of the cost); older ones always make it."""
 
 
 def quaternions(rotations: np.ndarray) -> np.ndarray:
     """The quaternions (x, y, z, w) of rotation matrices (N, 3, 3) from the kinematics, which are orthonormal to
-    round-off (scipy's check of that skipped)."""
+    round-off (scipy's check of that skipped where scipy can)."""
     if not len(rotations):
         return np.empty((0, 4))
-    return Rotation.from_matrix(rotations, assume_valid=True).as_quat()
+    return Rotation.from_matrix(rotations, **_TRUSTED).as_quat()
 
 
 def between(a: Samples, b: Samples, t: np.ndarray, poses) -> Samples:

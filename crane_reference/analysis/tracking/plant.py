@@ -18,13 +18,13 @@ import numpy as np
 
 from ...dynamics.chain_dynamics import CraneDynamics
 from ...dynamics.closed_loop import closed_loop_run
-from ...dynamics.structures import ACCOUNTS, CONVERGED, STATUS_MESSAGES
+from ...dynamics.structures import ACCOUNTS, CONVERGED
 from ...model.chain import ACTUATED_JOINTS, build_model
 from ...model.drive import Actuated, make_drive
 from ...model.parameters import CraneParameters
 from ...motion.constraints import ConstraintSet
 from ...motion.equilibrium import static_equilibrium
-from ...motion.integration import IntegrationError, StepState
+from ...motion.integration import StepState
 from ...motion.programmed_motion import ProgrammedMotion
 from ...motion.simulation import SAMPLED_ACCOUNTS, MotionStepper, Scenario
 from ...motion.trajectory import Trajectory, make_sample, stack_samples
@@ -110,17 +110,15 @@ class Plant:
         run = closed_loop_run(state.q, state.qd, state.correction, stepper.snapshot().work, state.t,
                               np.asarray(ends, dtype=float), plan.first, plan.times, plan.on_jump, left, after,
                               motion.constraints.coefficients(state.t), motion.partition, self.dynamics.chain,
-                              stepper.integrator.settings, self.actuated, controller.period,
+                              stepper.integrator.settings, self.actuated, self.joint_damping, controller.period,
                               np.ascontiguousarray(reference_q, dtype=float),
                               np.ascontiguousarray(reference_qd, dtype=float),
                               np.ascontiguousarray(feedforward_start, dtype=float),
                               np.ascontiguousarray(feedforward_end, dtype=float), kp, kd, ki, limit, integral,
                               saturated)
         controller.ticks += run.ticks
-        if run.status != CONVERGED:
-            raise IntegrationError(STATUS_MESSAGES[run.status].format(
-                t0=run.t, t1=plan.times[run.steps], h=plan.times[run.steps] - run.t,
-                iterations=stepper.integrator.max_iterations))
+        if run.status != CONVERGED:  # the plant stays where it was; the controller went on to the failed tick
+            raise stepper.integrator.failure(run.status, run.t, float(plan.times[run.steps]))
         rows = run.rows
         times = np.concatenate(([state.t], plan.times))
         accounts = {name: rows.accounts[:, i] for i, name in enumerate(ACCOUNTS) if name in SAMPLED_ACCOUNTS}
