@@ -227,12 +227,14 @@ class MotionStepper:
 
 def simulate(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, step: float = ANALYSIS_STEP, t0: float = 0.0,
              qd0: np.ndarray | None = None, progress: Progress | None = None, chunk: float = 0.25,
-             tolerance: float = ONLINE_TOLERANCE, evaluations: int = EVALUATIONS) -> Trajectory:
+             tolerance: float = ONLINE_TOLERANCE, evaluations: int = EVALUATIONS, every_row: bool = True) -> Trajectory:
     """Programmed motion from (t0, q0, qd0) to t_end with the integrator (Newton ``evaluations`` and
     ``tolerance``, see :mod:`.integration`); one sample per step, computed in compiled runs
-    of ``chunk`` seconds (``progress`` is called after each)."""
+    of ``chunk`` seconds (``progress`` is called after each).  With ``every_row`` False only the motion
+    and E's pose are kept: the reactions, residuals, energies and work are NaN but at each run's last step
+    (:class:`MotionStepper`)."""
     qd0 = np.zeros_like(q0) if qd0 is None else qd0
-    stepper = MotionStepper(motion, t0, q0, qd0, step, tolerance, evaluations)
+    stepper = MotionStepper(motion, t0, q0, qd0, step, tolerance, evaluations, every_row)
     parts = [stack_samples([stepper.sample])]
     while stepper.state.t < t_end - 1e-9 * step:
         parts.append(stepper.advance_until(min(stepper.state.t + chunk, t_end)))

@@ -113,10 +113,11 @@ SUMMARY = ("ellipse_distance_max_m", "ellipse_distance_rms_m", "height_error_max
 
 @dataclass(frozen=True)
 class TrackingRun:
-    """A closed-loop run: the spec, the gains used, the plant's trajectory and actuator torques (N, 3) [N m]
-    per step, the reference on the same times, E's distance to the programmed path (N, 2) [m] (ellipse in
-    XY, height), the boom tip deflection of the plant and of the reference (N, 3) [m] (zeros for the rigid
-    boom), the saturated share of ticks per joint and the wall time [s]."""
+    """A closed-loop run: the spec, the gains used, the plant's trajectory and actuator torques (N, 3) [N m] per step,
+    the reference on the same times (its motion and E's pose; forces and energies not evaluated), E's distance
+    to the programmed path (N, 2) [m] (ellipse in XY, height), the boom tip deflection of the plant and of the
+    reference (N, 3) [m] (zeros for the rigid boom), the saturated share of ticks per joint and the wall time
+    [s]."""
 
     spec: TrackingSpec
     gains: list[JointGains]
@@ -221,7 +222,7 @@ def _paper_task(scenario: Scenario, realisation: str) -> tuple[ProgrammedMotion,
 def _reference(scenario: Scenario, spec: TrackingSpec, task: TaskMotion) -> tuple[Trajectory, ProgrammedMotion]:
     """The programmed motion ``task`` gives ``scenario``, on the plant's step grid, and its motion equations."""
     motion, q0 = task(scenario)
-    reference = simulate(motion, q0, spec.duration, step=spec.reference_step or spec.step)
+    reference = simulate(motion, q0, spec.duration, step=spec.reference_step or spec.step, every_row=False)
     return _every(reference, spec.reference_stride), motion
 
 
