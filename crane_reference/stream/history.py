@@ -91,10 +91,12 @@ class History:
         self._snapshots[self._end - 1] = end
 
     def _compact(self, count: int) -> None:
-        """Move the kept rows to the front of the storage, grown to twice what they and ``count`` more need
-        unless that fits already."""
+        """Move the kept rows to the front of the storage, which grows to twice what they and ``count`` more
+        need if that is more than it holds (so at least half of it is free after a compaction, and copying
+        the kept rows costs a fraction of a row per row appended)."""
         kept = self._end - self._begin
-        capacity = max(self._motion.size, 2 * (kept + count))
+        needed = 2 * (kept + count)
+        capacity = needed if needed > self._motion.size else self._motion.size
         for name, old in self._rows.items():
             grown = np.full((capacity, *old.shape[1:]), np.nan)
             grown[:kept] = old[self._begin:self._end]
