@@ -9,8 +9,8 @@
   they approximate (converting the accelerations at each refresh kicked it and made them differ).
 * A run's evaluated rows: which rows get the full evaluation does not change the motion (bit for bit),
   and the reactions of an evaluated row are lambda = (A A^T)^-1 A (M qdd + h - Q) assembled from the
-  unconstrained terms in numpy at the row's q, qd and the integrator's qdd; sigma_min(K_dc) is on every
-  row.
+  unconstrained terms in numpy at the row's q, qd and the integrator's qdd; rows evaluated after the run
+  equal those evaluated in it.
 * The Newton iteration's predictor: exact for accelerations quadratic in time; a run cut into several
   compiled calls equals the run in one.
 """
@@ -117,6 +117,13 @@ def test_evaluated_rows_do_not_change_the_motion_and_hold_the_kkt_reactions(scen
         imbalance = d.M @ every.qdd[i] + d.h - d.Q
         expected = np.linalg.solve(A @ A.T, A @ imbalance)
         np.testing.assert_allclose(every.reactions[i], expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+    # the rows left out, evaluated afterwards, are those evaluated in the run
+    later = ~shown
+    forces, torques, distances = motion.evaluated_rows(times[later], sparse.q[later], sparse.qd[later],
+                                                       sparse.qdd[later])
+    np.testing.assert_array_equal(forces, every.constraint_forces[later])
+    np.testing.assert_array_equal(torques, every.accounts[later, ACCOUNTS.index("drive_torque")])
+    np.testing.assert_array_equal(distances, every.residual_distance[later])
     singular_value = ACCOUNTS.index("kdc_min_singular_value")
     np.testing.assert_allclose(sparse.accounts[:, singular_value], every.accounts[:, singular_value], rtol=1e-12)
 

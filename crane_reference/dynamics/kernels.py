@@ -34,6 +34,7 @@ from .structures import (
     ACCOUNTS,
     CONSTRAINTS_UNSOLVABLE,
     CONVERGED,
+    DRIVE_TORQUE,
     NOT_CONVERGED,
     SINGULAR_VALUE,
     Accelerations,
@@ -609,7 +610,7 @@ def integration_run(q, qd, qdd, B, earlier, correction: ModalCorrection, t0, tim
     velocity map at t0 and ``earlier`` the accelerations of the two steps before (:func:`integration_step`).
     The rows of the steps where ``evaluated`` (N,) is True, and of the last one, carry the full evaluation
     (:func:`step_evaluation`: reactions, residuals, accounts); the others NaN there but for sigma_min(K_dc)
-    in the accounts (every step's).
+    in the accounts (every step's; :func:`evaluated_rows` completes them later).
     Stops at the first step that fails; returns a :class:`Run`."""
     N, n, m = times.size, q.size, k.order.size
     rows = StepRows(np.empty((N, n)), np.empty((N, n)), np.empty((N, n)), np.full((N, m), np.nan),
@@ -640,6 +641,20 @@ def integration_run(q, qd, qdd, B, earlier, correction: ModalCorrection, t0, tim
         last = evaluate(step.q, step.qd, _at_step(k, completed), drives[completed], partition, chain)
     return Run(completed, step.status, rows, Step(step.q, step.qd, last, step.earlier, step.correction, step.status,
                                                   step.iterations))
+
+
+@njit(cache=True, nogil=True)
+def evaluated_rows(q, qd, qdd, k: Coefficients, drives, partition: Partition, chain: ChainData):
+    """The full evaluation (:func:`step_evaluation`) of computed steps that :func:`integration_run` left
+    unevaluated: rows of q, qd and the integrator's qdd (N, n) with the constraint coefficients ``k`` (stacked
+    per row) and the drive parameters ``drives`` of each; returns the generalized force of the constraints
+    (N, n), the drive torque (N,) [N m] and the constraint distances (N, m) [m]."""
+    N, n, m = q.shape[0], q.shape[1], k.order.size
+    forces, torques, distances = np.empty((N, n)), np.empty(N), np.empty((N, m))
+    for i in range(N):
+        e = step_evaluation(q[i], qd[i], qdd[i], _at_step(k, i), drives[i], partition, chain)
+        forces[i], torques[i], distances[i] = e.constraint_forces, e.accounts[DRIVE_TORQUE], e.distance
+    return forces, torques, distances
 
 
 @njit(cache=True, nogil=True)

@@ -174,3 +174,15 @@ class ProgrammedMotion:
             np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float),
             self.constraints.coefficients(t), self.dynamics.drive.kernel_parameters(t, left_limit), self.partition,
             self.dynamics.chain))
+
+    def evaluated_rows(self, times: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What the full evaluation of computed steps gives that a run without it left out
+        (:meth:`~.integration.ExactFrequencyTrapezoidal.run` with ``every_row`` False): at each of ``times``
+        (N,) [s], with the rows of q, qd and the integrator's qdd (N, n) there, the generalized force of the
+        constraints (N, n), the drive torque (N,) [N m] and the constraint distances (N, m) [m]."""
+        times = np.asarray(times, dtype=float)
+        return kernels.evaluated_rows(np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float),
+                                      np.ascontiguousarray(qdd, dtype=float), self.constraints.coefficients_at(times),
+                                      self.dynamics.drive.kernel_parameters(times), self.partition,
+                                      self.dynamics.chain)

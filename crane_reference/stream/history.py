@@ -1,8 +1,10 @@
 """The computed motion kept for sampling and for rewinding (a re-target or a command in the past).
 
-The steps are kept as rows of arrays, in the order computed, with the generalized effort and the largest
-constraint distance of each (from its full evaluation in the compiled run); E's quaternion is computed for
-the rows that are read, when they are read.
+The steps are kept as rows of arrays, in the order computed.  What only a reader needs (the generalized
+effort and the constraint distance, from the full evaluation of a step; the quaternion of E's frame) is
+computed for the rows that are read, when they are first read: the stream's runs evaluate only their last
+step (:class:`~crane_reference.motion.simulation.MotionStepper` with ``every_row`` False), and a node
+publishing at 100 Hz reads one step in twenty.
 """
 
 from __future__ import annotations
@@ -18,8 +20,8 @@ from .sample import Samples, quaternions
 
 TIME_SLACK = 1e-12  # [s], rounding slack when locating a motion time among the computed ones
 STEP_FIELDS = ("t", "q", "qd", "qdd", "ee_position", "ee_rotation", "effort", "residual_distance")
-"""The arrays kept per step (from the rows of :meth:`~crane_reference.motion.simulation.MotionStepper.advance_until`:
-the effort and the largest constraint distance of each)."""
+"""The arrays kept per step (the rows of :meth:`~crane_reference.motion.simulation.MotionStepper.advance_until`,
+with the effort and the largest constraint distance, NaN until a read evaluates them)."""
 
 
 class Instant(NamedTuple):
@@ -68,17 +70,20 @@ class History:
         return self._snapshots[self._end - 1]
 
     def extend(self, rows: dict[str, np.ndarray], end: StepperSnapshot) -> None:
-        """Append a compiled run, its rows stacked (``MotionStepper.advance_until``, every row evaluated); the
-        last one restartable from ``end``."""
+        """Append a compiled run, its rows stacked (``MotionStepper.advance_until``; evaluated in full where the
+        drive torque is not NaN, the others left for :meth:`read`, their constraint distance NaN until then);
+        the last one restartable from ``end``."""
         count = rows["t"].size
         if self._end + count > self._motion.size:
             self._compact(count)
         new = slice(self._end, self._end + count)
         for name in ("t", "q", "qd", "qdd", "ee_position", "ee_rotation"):
             self._rows[name][new] = rows[name]
-        self._rows["effort"][new] = generalized_effort(rows["constraint_forces"], rows["drive_torque"],
-                                                       self.drive_joint)
-        self._rows["residual_distance"][new] = np.max(rows["residual_distance"], axis=-1)
+        torque = rows["drive_torque"]
+        evaluated = ~np.isnan(torque)
+        self._rows["effort"][new] = generalized_effort(rows["constraint_forces"], torque, self.drive_joint)
+        self._rows["residual_distance"][new] = np.where(evaluated, np.max(rows["residual_distance"], axis=-1),
+                                                        np.nan)
         if not self._motions or self._motions[-1] is not end.motion:
             self._motions.append(end.motion)
         self._motion[new] = len(self._motions) - 1
@@ -125,11 +130,20 @@ class History:
                        self._motions[self._motion[row]])
 
     def read(self, k: np.ndarray) -> Samples:
-        """The reference samples of steps ``k`` (indices)."""
+        """The reference samples of steps ``k`` (indices), evaluated first where no read has yet."""
         rows = self._begin + np.asarray(k, dtype=np.int64)
+        distance = self._rows["residual_distance"]
+        missing = np.unique(rows[np.isnan(distance[rows])])
+        for index in np.unique(self._motion[missing]):
+            some = missing[self._motion[missing] == index]
+            r = self._rows
+            forces, torques, distances = self._motions[index].evaluated_rows(r["t"][some], r["q"][some],
+                                                                             r["qd"][some], r["qdd"][some])
+            r["effort"][some] = generalized_effort(forces, torques, self.drive_joint)
+            distance[some] = np.max(distances, axis=-1)
         r = self._rows
         return Samples(r["t"][rows], r["q"][rows], r["qd"][rows], r["qdd"][rows], r["effort"][rows],
-                       r["ee_position"][rows], quaternions(r["ee_rotation"][rows]), r["residual_distance"][rows],
+                       r["ee_position"][rows], quaternions(r["ee_rotation"][rows]), distance[rows],
                        np.zeros(rows.size, dtype=bool))
 
     def set_snapshot(self, k: int, snapshot: StepperSnapshot) -> None:

@@ -108,7 +108,8 @@ class ReferenceStream:
         if near is not None:
             turns = np.where(self.whole_turn_coordinates(), np.round((near - start) / (2.0 * np.pi)), 0.0)
             start = start + 2.0 * np.pi * turns
-        self._stepper = MotionStepper(self._motion(constraints), 0.0, start, np.zeros_like(start), self.step)
+        self._stepper = MotionStepper(self._motion(constraints), 0.0, start, np.zeros_like(start), self.step,
+                                      every_row=False)
         self._history = History(self._stepper.snapshot(), self.model.drive_joint)
         self._warp = TimeWarp(self._warp.ramp_time, self.speed_scaling, tau)
         self._hold: ReferenceSample | None = None
