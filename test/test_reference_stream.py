@@ -184,3 +184,29 @@ def test_warm_up_makes_every_kernel_the_stream_uses_ready():
     stream.compute(0.5)
     stream.samples([0.41, 0.4123])
     assert _kernel_signatures() == before
+
+
+def test_history_compaction_keeps_every_sample(monkeypatch):
+    """A stream whose history storage starts at 64 rows (compacted and grown many times while it computes,
+    forgets old motion and re-targets) serves the same samples as one that starts with room for all."""
+    from crane_reference.stream import history
+
+    targets = Task(ellipse_a=3.2, ellipse_b=2.1, z_increment=0.1, rise_time=5.0)
+    served = []
+    for capacity in (100_000, 64):
+        monkeypatch.setattr(history.History.__init__, "__defaults__", (capacity,))
+        stream = ReferenceStream(load_config(), "rigid", step=STEP, blend_time=0.3)
+        taus = []
+        for i in range(12):
+            tau = 0.1 * i
+            stream.compute(tau + 0.3)
+            if i == 5:
+                stream.retarget(tau + 0.0537, targets)
+                stream.compute(tau + 0.3)
+            stream.release(tau, 0.05)
+            taus += [tau + 0.013 * j for j in range(8)]
+            served.append(stream.samples(taus[-8:]))
+    half = len(served) // 2
+    for wide, narrow in zip(served[:half], served[half:], strict=True):
+        for name in ("t", "q", "qd", "effort", "ee_position", "ee_quaternion", "residual_distance"):
+            np.testing.assert_array_equal(getattr(narrow, name), getattr(wide, name), err_msg=name)
