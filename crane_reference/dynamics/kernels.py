@@ -414,9 +414,16 @@ def newton_residual(q, qd, a1, T, S, Hw, p, C, k: Coefficients, drive, partition
     A, c_acc = acceleration_terms(p, matvec(C, qd), C, d, k)
     B, e_dc = constraint_map(A, c_acc, independent, dependent)
     qdd = _accelerations_from(a1[:independent.size], B, e_dc, independent, dependent)
-    imbalance = inverse_dynamics(S, Hw, velocity_term, qdd, chain) - generalized_forces(q, qd, np.zeros(q.size), chain,
-                                                                                         drive)
+    imbalance = _imbalance(q, qd, qdd, S, Hw, velocity_term, chain, drive)
     return qdd, project_rows(imbalance.reshape((q.size, 1)), B, independent, dependent, partition.servo)[:, 0], B
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _imbalance(q, qd, qdd, S, Hw, velocity_term, chain: ChainData, drive):
+    """M qdd + h - Q at (q, qd) by O(n) inverse dynamics (no M), from the twists S, world pseudo-inertias Hw
+    and velocity terms there: inverse dynamics with gravity, less the other generalized forces."""
+    return inverse_dynamics(S, Hw, velocity_term, qdd, chain) - generalized_forces(q, qd, np.zeros(q.size), chain,
+                                                                                   drive)
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -665,8 +672,7 @@ def imbalance_rows(q, qd, qdd, drives, chain: ChainData):
     for i in range(q.shape[0]):
         T, S = forward_kinematics(q[i], chain.kinds, chain.axes, chain.origins)
         Hw = world_pseudo_inertias(T, chain.body_joint, chain.body_H)
-        out[i] = inverse_dynamics(S, Hw, velocity_terms(qd[i], S), qdd[i], chain) - generalized_forces(
-            q[i], qd[i], np.zeros(q.shape[1]), chain, drives[i])
+        out[i] = _imbalance(q[i], qd[i], qdd[i], S, Hw, velocity_terms(qd[i], S), chain, drives[i])
     return out
 
 

@@ -70,20 +70,18 @@ class History:
         return self._snapshots[self._end - 1]
 
     def extend(self, rows: dict[str, np.ndarray], end: StepperSnapshot) -> None:
-        """Append a compiled run, its rows stacked (``MotionStepper.advance_until``; evaluated in full where the
-        drive torque is not NaN, the others left for :meth:`read`, their constraint distance NaN until then);
-        the last one restartable from ``end``."""
+        """Append a compiled run, its rows stacked (``MotionStepper.advance_until``; the rows it did not
+        evaluate, NaN in their constraint distance, are left for :meth:`read`); the last one restartable from
+        ``end``."""
         count = rows["t"].size
         if self._end + count > self._motion.size:
             self._compact(count)
         new = slice(self._end, self._end + count)
         for name in ("t", "q", "qd", "qdd", "ee_position", "ee_rotation"):
             self._rows[name][new] = rows[name]
-        torque = rows["drive_torque"]
-        evaluated = ~np.isnan(torque)
-        self._rows["effort"][new] = generalized_effort(rows["constraint_forces"], torque, self.drive_joint)
-        self._rows["residual_distance"][new] = np.where(evaluated, np.max(rows["residual_distance"], axis=-1),
-                                                        np.nan)
+        self._rows["effort"][new] = generalized_effort(rows["constraint_forces"], rows["drive_torque"],
+                                                       self.drive_joint)
+        self._rows["residual_distance"][new] = np.max(rows["residual_distance"], axis=-1)  # NaN: not evaluated
         if not self._motions or self._motions[-1] is not end.motion:
             self._motions.append(end.motion)
         self._motion[new] = len(self._motions) - 1
