@@ -1,6 +1,6 @@
 """Speed of the simulation core; prints the figures quoted in the README and the closing notes.
 
-    python benchmarks/bench_speed.py [--duration 10] [--repeats 3] [--only eval profile speed]
+    python benchmarks/bench_speed.py [--duration 10] [--repeats 3] [--only eval profile speed] [--rfe 6 24]
 
 The machine's speed drifts between days, so every time is also given as a multiple of one call of
 Pinocchio's ABA (forward dynamics) on the URDF that crane-reference exports for the same chain, measured in
@@ -8,7 +8,8 @@ the same run.
 
 1. [eval] Time of M(q) with h, gravity and E's kinematics, and of one full qdd from (8), at 24 DOF; the cost
    of calling a compiled function with the ChainData named tuple.
-2. [profile] The compiled cost of the parts of one step (timed in compiled loops): the modal correction
+2. [profile] Per crane of ``--rfe`` (default 6), the compiled cost of the parts of one step (timed in compiled
+   loops, also in ABA calls): the modal correction
    (an eigenproblem, every REFRESH_INTERVAL of motion), the iteration factor, per Newton evaluation a
    projection and a residual, and a full evaluation (on the rows a caller reads).
 3. [speed] Per case (rigid; flexible with n_rfe = 6, 12, 24): Pinocchio's ABA per call; at
@@ -188,12 +189,13 @@ def _repeat_evaluation(q, qd, k, drive, partition, chain, n):
     return total
 
 
-def component_times(params: CraneParameters, repeat: int = 3000) -> None:
-    """[profile] Compiled cost of the parts of a step (flexible, n_rfe = 6), each timed in a compiled loop
-    (no Python call overhead), best of 5: a step is a factor, per Newton evaluation a projection and a
-    residual, and at its end a projection and a full evaluation with the integrator's qdd; every
-    REFRESH_INTERVAL of motion the modal correction."""
-    scenario = Scenario(params, "flexible")
+def component_times(params: CraneParameters, rfe_count: int, repeat: int = 3000) -> None:
+    """[profile] Compiled cost of the parts of a step (flexible, ``rfe_count`` RFEs), each timed in a compiled
+    loop (no Python call overhead), best of 5, also as a multiple of one Pinocchio ABA call on the same chain
+    in this run: a step is a factor, per Newton evaluation a projection and a residual, and at its end a
+    projection and a full evaluation with the integrator's qdd; every REFRESH_INTERVAL of motion the modal
+    correction."""
+    scenario = Scenario(replace(params, boom=replace(params.boom, rfe_count=rfe_count)), "flexible")
     motion = scenario.motion
     q, chain, partition = scenario.equilibrium.q, motion.dynamics.chain, motion.partition
     qd = np.full_like(q, 0.01)
@@ -218,11 +220,14 @@ def component_times(params: CraneParameters, repeat: int = 3000) -> None:
              ("qdd from (8) solved (accelerations_at)", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
              ("full evaluation (+ residuals, reactions, accounts)", _repeat_evaluation,
               (q, qd, k, drive, partition, chain)))
+    aba = aba_time(scenario)
+    print(f"[profile] n_rfe={rfe_count:2d} dof={scenario.model.dof:2d} n_ic={partition.independent.size:2d}: "
+          f"Pinocchio ABA {aba * 1e6:.2f} us/call")
     for name, function, arguments in parts:
         function(*arguments, 10)
         timed = lambda f=function, a=arguments: f(*a, repeat)  # noqa: E731 (one compiled loop of repeat calls)
-        best = min(call_seconds(timed, 1, median=True) for _ in range(5))
-        print(f"[profile] {name:<52} {best / repeat * 1e6:7.2f} us")
+        best = min(call_seconds(timed, 1, median=True) for _ in range(5)) / repeat
+        print(f"[profile] n_rfe={rfe_count:2d} {name:<52} {best * 1e6:7.2f} us = {best / aba:5.1f} ABA")
 
 
 SECTIONS = ("eval", "profile", "speed")
@@ -233,12 +238,14 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=10.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--only", nargs="+", choices=SECTIONS, default=SECTIONS, help="sections to run")
+    parser.add_argument("--rfe", nargs="+", type=int, default=[6], help="[profile]: the cranes' RFE counts")
     args = parser.parse_args()
     params = load_config()
     if "eval" in args.only:
         evaluation_times(params)
     if "profile" in args.only:
-        component_times(params)
+        for rfe_count in args.rfe:
+            component_times(params, rfe_count, repeat=3000 if rfe_count <= 12 else 300)
     if "speed" in args.only:
         speed(params, args.duration, args.repeats)
 
