@@ -28,8 +28,8 @@ import numpy as np
 from common import aba_time
 
 from crane_reference.analysis.tracking.closed_loop import TrackingSpec, run_tracking
-from crane_reference.analysis.tracking.controller import JointGains
-from crane_reference.analysis.tracking.plant import ACTUATED_JOINTS, held_start
+from crane_reference.control.controller import JointGains
+from crane_reference.control.plant import ACTUATED_JOINTS, held_start
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import CraneParameters
 from crane_reference.motion.simulation import Scenario, simulate

@@ -149,8 +149,8 @@ def _by_joint(values: list[str], option: str, size: int) -> dict[str, tuple[floa
 
 def track_command(args: argparse.Namespace) -> int:
     from .analysis.tracking.closed_loop import TrackingSpec, run_tracking
-    from .analysis.tracking.controller import JointGains
     from .analysis.tracking.report import write_report
+    from .control.controller import JointGains
     from .motion.simulation import SOLVER_FAILURES
 
     try:

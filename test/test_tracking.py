@@ -17,9 +17,9 @@ from scipy.linalg import expm
 from test_simulation import quintic_z
 
 from crane_reference.analysis.tracking.closed_loop import TrackingSpec, run_tracking
-from crane_reference.analysis.tracking.controller import JointController, JointGains, bandwidth_gains
-from crane_reference.analysis.tracking.feedforward import RigidInverseDynamics
-from crane_reference.analysis.tracking.plant import ACTUATED_JOINTS, Plant, held_start
+from crane_reference.control.controller import JointController, JointGains, bandwidth_gains
+from crane_reference.control.feedforward import RigidInverseDynamics
+from crane_reference.control.plant import ACTUATED_JOINTS, Plant, held_start
 from crane_reference.model.drive import Actuated, TorqueSource, column_drive
 from crane_reference.motion.simulation import Scenario
 

@@ -31,7 +31,6 @@ from scipy.linalg import eigh
 
 from crane_reference.analysis.modal import linearise, modal_analysis, modal_assurance, scenario_motion
 from crane_reference.analysis.vibration import (
-    boom_tip_deflection,
     deflection_signals,
     match_peak,
     modal_bands,
@@ -40,6 +39,7 @@ from crane_reference.analysis.vibration import (
 )
 from crane_reference.cli import main
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
+from crane_reference.dynamics.deflection import boom_tip_deflection
 from crane_reference.model.chain import AXES, PRISMATIC, Body, ChainModel, Joint, build_model, rotation
 from crane_reference.model.drive import TorqueSource, make_drive
 from crane_reference.model.parameters import Damping, RigidBody

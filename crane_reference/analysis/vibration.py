@@ -3,14 +3,8 @@
 Signals of a run (:class:`~crane_reference.motion.trajectory.Trajectory`):
 
 * the RFE angles psi, theta, phi of every spring-damping element of the boom;
-* the boom-tip deflection relative to the rigid chord, in the frame of the first boom element (the frame
-  after the luff joint: x along the unbent boom, y up in the luffing plane, z along the luff axis),
-
-      w = R_0^T (r_tip(q) - r_tip(q with every RFE angle set to 0)),
-
-  r_tip the origin of the knuckle frame; R_0 is the same in both terms because the RFE joints come after
-  the luff joint.  w_y is the deflection in the luffing plane, w_z the horizontal one, w_x the
-  (second-order) shortening;
+* the boom-tip deflection w relative to the rigid chord
+  (:func:`~crane_reference.dynamics.deflection.boom_tip_deflection`): w_y in the luffing plane, w_z horizontal;
 * the tip torsion, the sum of the RFE twist angles (the twist of the tip element to first order).
 
 Spectra: Welch's method (scipy.signal.welch: Hann windows of 2^k samples, at least four per run, 50 %
@@ -50,7 +44,7 @@ import numpy as np
 from scipy import signal
 from scipy.ndimage import uniform_filter1d
 
-from ..dynamics.kinematics import forward_kinematics
+from ..dynamics.deflection import boom_tip_deflection, rfe_indices
 from ..dynamics.structures import ChainData
 from ..model.chain import ACTUATED_JOINTS, ChainModel
 from ..model.parameters import CraneParameters
@@ -67,28 +61,6 @@ SIGNALS = {"tip_vertical": "tip deflection $w_y$ (luffing plane) [m]",
            "tip_torsion": r"tip torsion $\sum \varphi$ [rad]"}
 MEAN_WINDOW = 0.1  # [s] moving mean that separates drift from ringing in the differences
 RUN_CHUNK = 0.25  # [s] of motion per compiled run
-
-
-def rfe_indices(model: ChainModel, suffix: str = "") -> np.ndarray:
-    """Indices of the boom's RFE angles (all, or those whose name ends with ``suffix``)."""
-    return np.array([k for k, name in enumerate(model.joint_names)
-                     if name.startswith("boom_sde") and name.endswith(suffix)], dtype=np.int64)
-
-
-def boom_tip_deflection(model: ChainModel, chain: ChainData, q: np.ndarray) -> np.ndarray:
-    """w (N, 3) [m] for q (N, n), see the module docstring; ``chain`` is ``CraneDynamics.chain``."""
-    kinds, axes, origins = chain.kinds, chain.axes, chain.origins
-    luff, tip = model.index("boom_luff"), model.index("knuckle")
-    rfe = rfe_indices(model)
-    q = np.atleast_2d(q)
-    out = np.empty((len(q), 3))
-    for i, qi in enumerate(q):
-        T, _ = forward_kinematics(np.ascontiguousarray(qi, dtype=float), kinds, axes, origins)
-        chord = qi.copy()
-        chord[rfe] = 0.0
-        T0, _ = forward_kinematics(chord, kinds, axes, origins)
-        out[i] = T[luff, :3, :3].T @ (T[tip, :3, 3] - T0[tip, :3, 3])
-    return out
 
 
 def deflection_signals(model: ChainModel, chain: ChainData, trajectory: Trajectory) -> dict[str, np.ndarray]:

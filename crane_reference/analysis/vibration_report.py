@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..dynamics.deflection import rfe_indices
 from ..model.chain import ACTUATED_JOINTS, VARIANTS
 from ..model.parameters import CraneParameters
 from ..motion.integration import CUTOFF, METHOD
@@ -26,7 +27,6 @@ from .vibration import (
     match_peak,
     modal_bands,
     moving_mean,
-    rfe_indices,
     run,
     spectral_peaks,
     spectrum,

@@ -1,8 +1,8 @@
 """Compiled closed loop: a joint controller's ticks and the actuated plant's integration steps in one call.
 
-The controller is :mod:`crane_reference.analysis.tracking.controller`'s (its tick is :func:`controller_tick`,
+The controller is :mod:`crane_reference.control.controller`'s (its tick is :func:`controller_tick`,
 which the Python controller calls too); the plant is the crane without programmed constraints driven by an
-:class:`~crane_reference.model.drive.Actuated` drive (:mod:`crane_reference.analysis.tracking.plant`), stepped
+:class:`~crane_reference.model.drive.Actuated` drive (:mod:`crane_reference.control.plant`), stepped
 by :func:`~.kernels.integration_step` exactly as :class:`~crane_reference.motion.simulation.MotionStepper`
 steps it: at each tick the command's forces jump and (8) is solved again there keeping the modal correction
 (:func:`~.kernels.corrected_accelerations`); at a jump of the column drive's torque the step ends on it and

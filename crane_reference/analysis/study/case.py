@@ -28,6 +28,7 @@ import time
 
 import numpy as np
 
+from ...dynamics.deflection import boom_tip_deflection
 from ...model.chain import ACTUATED_JOINTS, VARIANTS
 from ...model.config import load_config
 from ...model.drive import column_drive
@@ -40,7 +41,6 @@ from ...motion.trajectory import Trajectory
 from ...stream.targets import UnreachableTargetError, check_task
 from ..bands import CONTROLLER_BAND, controller_band
 from ..tracking.closed_loop import SUMMARY, TrackingSpec, run_tracking
-from ..vibration import boom_tip_deflection
 from .spec import PATH_SPEED_RISE, Case, StudySpec
 
 BAND = CONTROLLER_BAND  # [Hz]

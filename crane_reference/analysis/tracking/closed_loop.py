@@ -26,6 +26,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...control.controller import CONTROLLERS, JointController, JointGains, bandwidth_gains
+from ...control.feedforward import FEEDFORWARDS, RigidInverseDynamics
+from ...control.plant import Plant, held_start, servo_motion
+from ...dynamics.deflection import boom_tip_deflection
 from ...model.chain import ACTUATED_JOINTS, VARIANTS
 from ...model.parameters import CraneParameters
 from ...motion.constraints import ConstraintSet
@@ -34,10 +38,6 @@ from ...motion.simulation import Scenario, simulate
 from ...motion.steps import PLANT_STEP
 from ...motion.trajectory import Trajectory
 from ..bands import vibration_band
-from ..vibration import boom_tip_deflection
-from .controller import CONTROLLERS, JointController, JointGains, bandwidth_gains
-from .feedforward import FEEDFORWARDS, RigidInverseDynamics
-from .plant import Plant, held_start, servo_motion
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...dynamics.chain_dynamics import CraneDynamics
-from ...dynamics.kernels import imbalance_rows
-from ...model.chain import ACTUATED_JOINTS, build_model
-from ...model.drive import make_drive
-from ...model.parameters import CraneParameters
+from ..dynamics.chain_dynamics import CraneDynamics
+from ..dynamics.kernels import imbalance_rows
+from ..model.chain import ACTUATED_JOINTS, build_model
+from ..model.drive import make_drive
+from ..model.parameters import CraneParameters
 
 FEEDFORWARDS = ("none", "rigid")
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...dynamics.closed_loop import controller_tick
+from ..dynamics.closed_loop import controller_tick
 
 CONTROLLERS = ("pd", "pid")
 

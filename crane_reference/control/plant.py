@@ -16,18 +16,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...dynamics.chain_dynamics import CraneDynamics
-from ...dynamics.closed_loop import closed_loop_run
-from ...dynamics.structures import ACCOUNTS, CONVERGED
-from ...model.chain import ACTUATED_JOINTS, build_model
-from ...model.drive import Actuated, make_drive
-from ...model.parameters import CraneParameters
-from ...motion.constraints import ConstraintSet
-from ...motion.equilibrium import static_equilibrium
-from ...motion.integration import StepState
-from ...motion.programmed_motion import ProgrammedMotion
-from ...motion.simulation import SAMPLED_ACCOUNTS, MotionStepper, Scenario
-from ...motion.trajectory import Trajectory, make_sample, stack_samples
+from ..dynamics.chain_dynamics import CraneDynamics
+from ..dynamics.closed_loop import closed_loop_run
+from ..dynamics.structures import ACCOUNTS, CONVERGED
+from ..model.chain import ACTUATED_JOINTS, build_model
+from ..model.drive import Actuated, make_drive
+from ..model.parameters import CraneParameters
+from ..motion.constraints import ConstraintSet
+from ..motion.equilibrium import static_equilibrium
+from ..motion.integration import StepState
+from ..motion.programmed_motion import ProgrammedMotion
+from ..motion.simulation import SAMPLED_ACCOUNTS, MotionStepper, Scenario
+from ..motion.trajectory import Trajectory, make_sample, stack_samples
 from .controller import JointController
 
 
