@@ -18,7 +18,7 @@ import numpy as np
 
 from ..dynamics.chain_dynamics import CraneDynamics
 from ..dynamics.closed_loop import closed_loop_run
-from ..dynamics.structures import ACCOUNTS, CONVERGED
+from ..dynamics.structures import ACCOUNTS, CONVERGED, LoopRows
 from ..model.chain import ACTUATED_JOINTS, build_model
 from ..model.drive import Actuated, make_drive
 from ..model.parameters import CraneParameters
@@ -28,7 +28,7 @@ from ..motion.integration import StepState
 from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import SAMPLED_ACCOUNTS, MotionStepper, Scenario
 from ..motion.trajectory import Trajectory, make_sample, stack_samples
-from .controller import JointController
+from .controller import JointController, JointGains
 
 
 def servo_motion(scenario: Scenario) -> ProgrammedMotion:
@@ -61,10 +61,11 @@ def held_start(scenario: Scenario) -> HeldStart:
 class Plant:
     """The actuated crane of ``params`` (``variant`` flexible or rigid) from ``start`` at t0, integrated with
     the step ``step`` [s]; the joint drives' velocity loops add ``joint_damping`` kd [N m s/rad] (order of
-    :data:`ACTUATED_JOINTS`): the actuator torque is the command minus kd qd."""
+    :data:`ACTUATED_JOINTS`): the actuator torque is the command minus kd qd.  With ``keep`` False the run is
+    not kept (a plant that runs for ever: no :meth:`trajectory`)."""
 
     def __init__(self, params: CraneParameters, variant: str, start: HeldStart, step: float,
-                 joint_damping: np.ndarray | None = None, t0: float = 0.0):
+                 joint_damping: np.ndarray | None = None, t0: float = 0.0, keep: bool = True):
         self.model = build_model(params, variant)
         self.drive = Actuated(make_drive(params.drive, params.initial.column), self.model.dof)
         self.actuated = np.array([self.model.index(name) for name in ACTUATED_JOINTS], dtype=np.int64)
@@ -74,6 +75,7 @@ class Plant:
         self.dynamics = CraneDynamics(self.model, self.drive, params.damping, damping)
         motion = ProgrammedMotion(self.dynamics, ConstraintSet(()), dependent=())
         self.stepper = MotionStepper(motion, t0, start.q, np.zeros(self.model.dof), step)
+        self.keep = keep
         self._samples = [stack_samples([self.stepper.sample])]
         self._torque_rows = [np.zeros((1, len(ACTUATED_JOINTS)))]
 
@@ -88,6 +90,8 @@ class Plant:
             self._torque_rows[0] = (np.asarray(torque_start, dtype=float)
                                     - self.joint_damping * self.stepper.state.qd[self.actuated])[None, :]
         rows = self.stepper.advance_until(end)
+        if not self.keep:
+            return
         self._samples.append(rows)
         self._torque_rows.append(self.drive.forces(rows["t"])[:, self.actuated]
                                  - self.joint_damping * rows["qd"][:, self.actuated])
@@ -120,7 +124,28 @@ class Plant:
         if run.status != CONVERGED:  # the plant stays where it was; the controller went on to the failed tick
             raise stepper.integrator.failure(run.status, run.t, float(plan.times[run.steps]))
         rows = run.rows
-        times = np.concatenate(([state.t], plan.times))
+        if self.keep:
+            self._keep(np.concatenate(([state.t], plan.times)), rows)
+        solution = motion.solution_from_evaluation(run.last)
+        last = StepState(run.t, rows.q[-1], rows.qd[-1], solution, run.correction, run.earlier)
+        stepper.continue_from(last, plan.k, rows.work[-1], make_sample(run.t, last.q, last.qd, solution, rows.work[-1]))
+        last_start = plan.first[-2]
+        self.drive.command(float(plan.times[last_start - 1]) if last_start else state.t, float(ends[-1]),
+                           *(self._forces(torques) for torques in run.command))
+
+    def apply(self, ends: np.ndarray, efforts: np.ndarray) -> None:
+        """Hold the efforts u [N m] (K, 3) (order of :data:`ACTUATED_JOINTS`), each from now (then from ``ends``
+        [k - 1]) to ``ends`` [k] (K,) [s, on the step grid]; the torques are u - kd qd: the ticks of
+        :meth:`follow` with no feedback (a controller whose gains are all zero, so that u_k is its
+        feedforward)."""
+        efforts = np.asarray(efforts, dtype=float)
+        starts, finals = np.vstack([efforts, efforts[-1:]]), np.vstack([efforts[:1], efforts])
+        zeros = np.zeros_like(efforts)
+        open_loop = JointController([JointGains(0.0, 0.0)] * len(ACTUATED_JOINTS), float(ends[0]) - self.t)
+        self.follow(ends, zeros, zeros, starts, finals, open_loop)
+
+    def _keep(self, times: np.ndarray, rows: LoopRows) -> None:
+        """Keep the rows of a :meth:`follow` (from its start, at ``times``) for :meth:`trajectory`."""
         accounts = {name: rows.accounts[:, i] for i, name in enumerate(ACCOUNTS) if name in SAMPLED_ACCOUNTS}
         empty = np.zeros((times.size, 0))
         arrays = dict(t=times, q=rows.q, qd=rows.qd, qdd=rows.qdd, reactions=empty,
@@ -133,12 +158,6 @@ class Plant:
             self._torque_rows[0] = rows.torques[:1]
         self._samples.append({name: value[1:] for name, value in arrays.items()})
         self._torque_rows.append(rows.torques[1:])
-        solution = motion.solution_from_evaluation(run.last)
-        last = StepState(run.t, rows.q[-1], rows.qd[-1], solution, run.correction, run.earlier)
-        stepper.continue_from(last, plan.k, rows.work[-1], make_sample(run.t, last.q, last.qd, solution, rows.work[-1]))
-        last_start = plan.first[-2]
-        self.drive.command(float(plan.times[last_start - 1]) if last_start else state.t, float(ends[-1]),
-                           *(self._forces(torques) for torques in run.command))
 
     def _forces(self, torques: np.ndarray) -> np.ndarray:
         forces = np.zeros(self.model.dof)

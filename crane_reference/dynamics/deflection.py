@@ -11,6 +11,7 @@ shortening.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from ..model.chain import ChainModel
 from .kinematics import forward_kinematics
@@ -24,16 +25,22 @@ def rfe_indices(model: ChainModel, suffix: str = "") -> np.ndarray:
 
 
 def boom_tip_deflection(model: ChainModel, chain: ChainData, q: np.ndarray) -> np.ndarray:
-    """w (N, 3) [m] for q (N, n), see the module docstring; ``chain`` is ``CraneDynamics.chain``."""
-    kinds, axes, origins = chain.kinds, chain.axes, chain.origins
-    luff, tip = model.index("boom_luff"), model.index("knuckle")
-    rfe = rfe_indices(model)
-    q = np.atleast_2d(q)
-    out = np.empty((len(q), 3))
-    for i, qi in enumerate(q):
-        T, _ = forward_kinematics(np.ascontiguousarray(qi, dtype=float), kinds, axes, origins)
-        chord = qi.copy()
+    """w (N, 3) [m] for q (N, n) (one row for q (n,)), see the module docstring; ``chain`` is
+    ``CraneDynamics.chain``."""
+    rows = np.ascontiguousarray(np.atleast_2d(q), dtype=float)
+    w = _deflections(rows, rfe_indices(model), model.index("boom_luff"), model.index("knuckle"), chain.kinds,
+                     chain.axes, chain.origins)
+    return w
+
+
+@njit(cache=True, nogil=True)
+def _deflections(q, rfe, luff, tip, kinds, axes, origins):
+    out = np.empty((q.shape[0], 3))
+    for i in range(q.shape[0]):
+        T, _ = forward_kinematics(q[i], kinds, axes, origins)
+        chord = q[i].copy()
         chord[rfe] = 0.0
         T0, _ = forward_kinematics(chord, kinds, axes, origins)
-        out[i] = T[luff, :3, :3].T @ (T[tip, :3, 3] - T0[tip, :3, 3])
+        for a in range(3):  # R_0^T (r_tip - r_tip of the chord)
+            out[i, a] = sum([T[luff, b, a] * (T[tip, b, 3] - T0[tip, b, 3]) for b in range(3)])
     return out

@@ -157,3 +157,27 @@ def point_bias(B: np.ndarray, joint: int, p: np.ndarray):
     for r in range(3):
         d[r] = Bj[r, 0] * p[0] + Bj[r, 1] * p[1] + Bj[r, 2] * p[2] + Bj[r, 3]
     return d
+
+
+@njit(cache=True, nogil=True)
+def quaternion(R):
+    """The unit quaternion (x, y, z, w), w >= 0, of the rotation matrix R (3, 3) (Shepperd's method: from the
+    largest of 1 + trace and 1 + 2 R_ii - trace, so that no square root is taken of a small number)."""
+    trace = R[0, 0] + R[1, 1] + R[2, 2]
+    out = np.empty(4)
+    largest = max(trace, R[0, 0], R[1, 1], R[2, 2])
+    if largest == trace:
+        s = 2.0 * np.sqrt(1.0 + trace)
+        out[:] = (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s
+    elif largest == R[0, 0]:
+        s = 2.0 * np.sqrt(1.0 + 2.0 * R[0, 0] - trace)
+        out[:] = 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s
+    elif largest == R[1, 1]:
+        s = 2.0 * np.sqrt(1.0 + 2.0 * R[1, 1] - trace)
+        out[:] = (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s
+    else:
+        s = 2.0 * np.sqrt(1.0 + 2.0 * R[2, 2] - trace)
+        out[:] = (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s
+    if out[3] < 0.0:
+        out *= -1.0
+    return out / np.sqrt(out @ out)

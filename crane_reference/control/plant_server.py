@@ -1,0 +1,211 @@
+"""The plant node's ROS-free core: the actuated crane (:class:`~.plant.Plant`) driven by joint effort
+commands one control period at a time, as ros2_control's forward command controllers drive a robot.
+
+Commands.  A command is one effort u [N m] per joint of ``joints`` (a permutation of
+:data:`~crane_reference.model.chain.ACTUATED_JOINTS`), in that order, as a forward command controller's
+``joints`` order its std_msgs/Float64MultiArray.  Each joint's drive closes a velocity loop, so the
+torque it applies is
+
+    tau = u - kd qd        (kd: the drive's damping [N m s/rad], ``PlantSettings.drive_damping``)
+
+at every instant (exact in the integrator): a controller's D action lives in the drive, where a real
+drive has it, because a D term held over a 1 kHz period is unstable on the flexible boom
+(:mod:`.controller`).  A controller of :mod:`.controller` commands u_k of its tick.  u holds over the
+control period (zero-order hold), from the tick after it is accepted.  A command of another length, or
+with a NaN or an infinity, is refused with the reason (:class:`CommandRefusedError`), counted, and never
+applied: the previous command goes on.
+
+Timeout.  When no command has been accepted for ``command_timeout`` s (of the caller's clock: the
+plant node's wall clock in real time), the plant applies the *hold command*: the efforts that balance
+gravity, the springs and the column drive at the actuated joints in the configuration q_h where the
+timeout began, u(t) = (h(q_h, 0) - Q(q_h, t))[joints] (the column drive's torque or motor angle goes on
+with time); with the drives' damping the crane comes to rest near q_h, as a drive's hold does (its
+flexible boom and supports ring out).  The next accepted command ends it.
+
+Before the first command the plant holds its start (:func:`~.plant.held_start`: E on the task's start
+point, at rest) with the efforts that hold it there.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..dynamics.deflection import boom_tip_deflection
+from ..dynamics.kernels import imbalance_rows
+from ..dynamics.kinematics import quaternion
+from ..model.chain import ACTUATED_JOINTS, VARIANTS
+from ..model.parameters import CraneParameters
+from ..motion.simulation import Scenario
+from ..motion.steps import PLANT_STEP
+from .controller import bandwidth_gains
+from .plant import Plant, held_start
+
+DRIVE_BANDWIDTH = 2.0
+"""[Hz] closed-loop bandwidth whose D gain is the drives' default damping (as ``crane-reference track``'s
+default gains, with :data:`DRIVE_DAMPING_RATIO`)."""
+
+DRIVE_DAMPING_RATIO = 0.7
+
+
+class CommandRefusedError(ValueError):
+    """A command the plant does not apply (the message is the reason)."""
+
+
+@dataclass(frozen=True)
+class PlantSettings:
+    """The plant's settings: the crane ``variant``, the integrator ``step`` [s], the control ``rate`` [Hz] (a
+    whole number of steps per period), the command's ``joints`` (a permutation of ACTUATED_JOINTS), the
+    drives' damping kd per joint of ``joints`` [N m s/rad] (None: :func:`default_drive_damping`) and the
+    ``command_timeout`` [s]."""
+
+    variant: str = "flexible"
+    step: float = PLANT_STEP
+    rate: float = 1000.0
+    joints: tuple[str, ...] = ACTUATED_JOINTS
+    drive_damping: tuple[float, ...] | None = None
+    command_timeout: float = 0.1
+
+    def __post_init__(self) -> None:
+        if self.variant not in VARIANTS:
+            raise ValueError(f"variant = {self.variant!r}: must be one of {', '.join(VARIANTS)}")
+        if sorted(self.joints) != sorted(ACTUATED_JOINTS):
+            raise ValueError(f"joints = {list(self.joints)}: must name each of {', '.join(ACTUATED_JOINTS)} once")
+        for name in ("step", "rate", "command_timeout"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} = {value}: must be a finite number > 0")
+        if not abs(self.steps_per_period * self.step * self.rate - 1.0) <= 1e-9:
+            raise ValueError(f"rate = {self.rate} Hz with step = {self.step} s: the control period must be a "
+                             "whole number of integrator steps")
+        if self.drive_damping is not None and (len(self.drive_damping) != len(self.joints) or not all(
+                math.isfinite(kd) and kd >= 0.0 for kd in self.drive_damping)):
+            raise ValueError(f"drive_damping = {list(self.drive_damping)}: must be one finite number >= 0 "
+                             f"N m s/rad per joint of {list(self.joints)}")
+
+    @property
+    def steps_per_period(self) -> int:
+        return max(1, round(1.0 / (self.rate * self.step)))
+
+    @property
+    def period(self) -> float:
+        """[s] of one control period."""
+        return self.steps_per_period * self.step
+
+
+def default_drive_damping(scenario: Scenario, joints: Sequence[str]) -> tuple[float, ...]:
+    """kd = 2 zeta J w per joint of ``joints`` at :data:`DRIVE_BANDWIDTH` and :data:`DRIVE_DAMPING_RATIO`, J the
+    diagonal of M at the held start (:func:`~.controller.bandwidth_gains`, as ``crane-reference track``)."""
+    q = held_start(scenario).q
+    inertia = scenario.dynamics.terms(0.0, q, np.zeros_like(q)).M
+    return tuple(bandwidth_gains(inertia[j, j], DRIVE_BANDWIDTH, DRIVE_DAMPING_RATIO).kd
+                 for j in map(scenario.model.index, joints))
+
+
+@dataclass(frozen=True)
+class PlantState:
+    """The plant at time ``t`` [s] (from its start): q, qd of every coordinate (order of ``joint_names``),
+    the actuator ``effort`` u - kd qd per joint of the settings' ``joints`` [N m], E's ``position`` [m] and
+    ``orientation`` (quaternion x, y, z, w) in the world frame {0}, the boom tip's ``deflection`` [m] in the
+    first boom element's frame (:mod:`~crane_reference.dynamics.deflection`; zero on the rigid boom) and
+    whether the hold command acts (``holding``)."""
+
+    t: float
+    q: np.ndarray
+    qd: np.ndarray
+    effort: np.ndarray
+    position: np.ndarray
+    orientation: np.ndarray
+    deflection: np.ndarray
+    holding: bool
+
+
+class PlantServer:
+    """The crane ``params`` under the commands of the module docstring, started at rest at its held start."""
+
+    def __init__(self, params: CraneParameters, settings: PlantSettings):
+        self.settings = settings
+        scenario = Scenario(params, settings.variant)
+        start = held_start(scenario)
+        self._order = np.array([ACTUATED_JOINTS.index(name) for name in settings.joints], dtype=np.int64)
+        damping = settings.drive_damping or default_drive_damping(scenario, settings.joints)
+        self.drive_damping = np.asarray(damping, dtype=float)
+        """kd per joint of the settings' ``joints`` [N m s/rad]."""
+        actuated_damping = np.empty(len(ACTUATED_JOINTS))
+        actuated_damping[self._order] = self.drive_damping
+        self.plant = Plant(params, settings.variant, start, settings.step, actuated_damping, keep=False)
+        self.joint_names = tuple(self.plant.model.joint_names)
+        self._command = start.torques.copy()  # u in the order of ACTUATED_JOINTS
+        self._last_command = -math.inf  # when the last command was accepted [s, the caller's clock]
+        self._ticks = 0
+        self._held: np.ndarray | None = None  # q_h while the hold command acts
+        self.accepted = 0
+        self.refused = 0
+        self.timeouts = 0
+        """Commands accepted, refused, and the timeouts that started the hold command."""
+        self.last_refusal = ""
+
+    def command(self, values: Sequence[float], now: float) -> None:
+        """Accept the efforts ``values`` [N m] (order of the settings' ``joints``) received at ``now`` [s, the
+        caller's clock]; they act from the next :meth:`tick`.  :class:`CommandRefusedError` (counted) for a
+        wrong length, NaN or inf."""
+        joints = self.settings.joints
+        u = np.asarray(values, dtype=float)
+        reason = None
+        if u.ndim != 1 or u.size != len(joints):
+            reason = f"{u.size} values: a command has one effort [N m] per joint of {list(joints)}"
+        elif not np.all(np.isfinite(u)):
+            bad = [name for name, value in zip(joints, u, strict=True) if not math.isfinite(value)]
+            reason = f"effort of {', '.join(bad)} is not finite: a command must be finite numbers [N m]"
+        if reason is not None:
+            self.refused += 1
+            self.last_refusal = reason
+            raise CommandRefusedError(reason)
+        self._command = np.empty(len(ACTUATED_JOINTS))
+        self._command[self._order] = u
+        self._last_command = now
+        self._held = None
+        self.accepted += 1
+
+    def timed_out(self, now: float) -> bool:
+        """No command accepted within ``command_timeout`` of ``now`` [s] (and at least one before)."""
+        return math.isfinite(self._last_command) and now - self._last_command > self.settings.command_timeout
+
+    def tick(self, now: float) -> PlantState:
+        """Advance one control period under the command in force at ``now`` [s, the caller's clock]: the last
+        accepted one, or the hold command once it :meth:`timed_out` (starting it counts a timeout)."""
+        if self.timed_out(now) and self._held is None:
+            self._held = self.plant.q.copy()
+            self.timeouts += 1
+        if self._held is not None:
+            self._command = self.hold_efforts(self._held)
+        self._ticks += 1
+        end = self._ticks * self.settings.period
+        self.plant.apply(np.array([end]), self._command[None, :])
+        return self.state()
+
+    @property
+    def holding(self) -> bool:
+        """The hold command acts (a timeout)."""
+        return self._held is not None
+
+    def hold_efforts(self, q: np.ndarray) -> np.ndarray:
+        """u = (h(q, 0) - Q(q, t)) at the actuated joints (order of ACTUATED_JOINTS) [N m], t now: the efforts
+        that hold the configuration q at rest."""
+        plant = self.plant
+        q = np.ascontiguousarray(q, dtype=float)[None, :]
+        drives = plant.drive.drive.kernel_parameters(np.array([plant.t]))
+        return imbalance_rows(q, np.zeros_like(q), np.zeros_like(q), drives, plant.dynamics.chain)[0, plant.actuated]
+
+    def state(self) -> PlantState:
+        """The plant now (:class:`PlantState`)."""
+        plant = self.plant
+        sample = plant.stepper.sample
+        effort = (self._command - plant.joint_damping * plant.qd[plant.actuated])[self._order]
+        deflection = (boom_tip_deflection(plant.model, plant.dynamics.chain, plant.q)[0]
+                      if self.settings.variant == "flexible" else np.zeros(3))
+        return PlantState(plant.t, plant.q.copy(), plant.qd.copy(), effort, np.asarray(sample.ee_position).copy(),
+                          quaternion(sample.ee_rotation), deflection, self.holding)

@@ -1,0 +1,154 @@
+"""The plant node's core (crane_reference.control.plant_server), against independent truths.
+
+* The hold efforts at the held start are the torques of the servo-constraint equilibrium that
+  ``held_start`` solves (another computation: static equilibrium with the luff and knuckle as
+  servo-constraints), less the column drive's torque.
+* Under the efforts that hold it, the crane with its column drive off stays at rest.
+* A command held over the ticks (Plant.apply, the compiled loop) is the per-tick Python path
+  (Plant.actuate through the Actuated drive) with the same efforts.
+* Refused commands (length, NaN, inf) change nothing: a run with them interleaved is the run without them,
+  bit for bit; a command ordered by a permuted ``joints`` is the same command.
+* A timeout starts the hold command (counted), and the next command ends it.
+* The quaternion of a rotation matrix against scipy's.
+"""
+
+from __future__ import annotations
+
+import math
+from contextlib import suppress
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from crane_reference.control.plant import Plant, held_start
+from crane_reference.control.plant_server import CommandRefusedError, PlantServer, PlantSettings
+from crane_reference.dynamics.kinematics import quaternion
+from crane_reference.model.chain import ACTUATED_JOINTS
+from crane_reference.model.parameters import TorqueDrive
+from crane_reference.motion.simulation import Scenario
+
+
+@pytest.fixture(scope="module")
+def still(params):
+    """The default crane with its column drive off (nothing moves it but the commands)."""
+    return replace(params, drive=TorqueDrive(torque=0.0))
+
+
+def test_hold_efforts_at_the_held_start_are_the_servo_equilibrium_torques(params, flexible):
+    server = PlantServer(params, PlantSettings())
+    start = held_start(flexible)
+    drive = params.drive.torque if isinstance(params.drive, TorqueDrive) else 0.0
+    expected = start.torques - np.array([drive, 0.0, 0.0])
+    assert server.hold_efforts(start.q) == pytest.approx(expected, rel=1e-9, abs=1e-6)
+
+
+def test_the_crane_held_by_its_start_efforts_stays_at_rest(still):
+    server = PlantServer(still, PlantSettings())
+    q0 = server.plant.q.copy()
+    start = held_start(Scenario(still, "flexible"))
+    for k in range(200):
+        server.command(start.torques, k * 1e-3)
+        state = server.tick(k * 1e-3)
+    assert np.abs(state.q - q0).max() < 1e-9
+    assert np.abs(state.qd).max() < 1e-8
+    assert state.effort == pytest.approx(start.torques, rel=1e-9)
+
+
+def test_held_commands_are_the_per_tick_python_path(still):
+    start = held_start(Scenario(still, "flexible"))
+    kd = np.array([4e4, 4e4, 1.3e4])
+    efforts = start.torques + np.array([[2e3, -1e3, 50.0], [-1e3, 3e3, -20.0], [0.0, 0.0, 0.0]])
+    ends = 0.05 * np.arange(1, 4)
+    compiled = Plant(still, "flexible", start, 1e-3, kd)
+    compiled.apply(ends, efforts)
+    python = Plant(still, "flexible", start, 1e-3, kd)
+    for end, u in zip(ends, efforts, strict=True):
+        python.actuate(end, u, u)
+    assert compiled.t == python.t == pytest.approx(0.15)
+    assert np.abs(compiled.q - python.q).max() < 1e-9
+    assert np.abs(compiled.qd - python.qd).max() < 1e-7
+    assert np.abs(python.q - start.q).max() > 1e-3  # the commands moved it
+
+
+def _run(server, commands):
+    states = []
+    for k, command in enumerate(commands):
+        for values in command:
+            with suppress(CommandRefusedError):
+                server.command(values, k * 1e-3)
+        states.append(server.tick(k * 1e-3))
+    return states
+
+
+def test_refused_commands_change_nothing_and_are_counted(still):
+    start = held_start(Scenario(still, "flexible"))
+    good = [[start.torques + np.array([1e3 * math.sin(k / 7), 500.0, 0.0])] for k in range(40)]
+    bad = [[1.0, 2.0], [math.nan, 0.0, 0.0], [0.0, math.inf, 0.0], [1.0, 2.0, 3.0, 4.0]]
+    with_bad = [command + ([bad[k % 4]] if k % 3 == 0 else []) for k, command in enumerate(good)]
+    clean, server = PlantServer(still, PlantSettings()), PlantServer(still, PlantSettings())
+    expected, got = _run(clean, good), _run(server, with_bad)
+    assert all(np.array_equal(a.q, b.q) and np.array_equal(a.qd, b.qd) for a, b in zip(expected, got, strict=True))
+    assert server.refused == 14 and server.accepted == 40 and clean.refused == 0
+    assert all(np.isfinite(s.q).all() for s in got)
+    with pytest.raises(CommandRefusedError, match="2 values: a command has one effort"):
+        server.command([1.0, 2.0], 1.0)
+    with pytest.raises(CommandRefusedError, match="effort of boom_luff is not finite"):
+        server.command([0.0, math.inf, 0.0], 1.0)
+
+
+def test_a_command_in_permuted_joints_is_the_same_command(still):
+    order = ("knuckle", "column_slew", "boom_luff")
+    start = held_start(Scenario(still, "flexible"))
+    kd = (4e4, 4e4, 1.3e4)
+    default = PlantServer(still, PlantSettings(drive_damping=kd))
+    permuted = PlantServer(still, PlantSettings(joints=order, drive_damping=tuple(kd[ACTUATED_JOINTS.index(j)]
+                                                                               for j in order)))
+    u = start.torques + np.array([2e3, -1e3, 30.0])
+    for _ in range(5):
+        default.command(u, 0.0)
+        permuted.command([u[ACTUATED_JOINTS.index(j)] for j in order], 0.0)
+        a, b = default.tick(0.0), permuted.tick(0.0)
+    assert np.array_equal(a.q, b.q)
+    assert b.effort == pytest.approx([a.effort[ACTUATED_JOINTS.index(j)] for j in order], rel=1e-12)
+
+
+def test_a_timeout_starts_the_hold_command_and_a_command_ends_it(still):
+    settings = PlantSettings(command_timeout=0.05)
+    server = PlantServer(still, settings)
+    start = held_start(Scenario(still, "flexible"))
+    server.command(start.torques + np.array([5e3, 0.0, 0.0]), 0.0)  # slews the column
+    for k in range(50):
+        state = server.tick(k * 1e-3)
+    assert not state.holding and server.timeouts == 0
+    state = server.tick(0.051)
+    assert state.holding and server.timeouts == 1
+    for k in range(3000):  # held: the drives' damping brings the column to rest
+        state = server.tick(0.052 + k * 1e-3)
+    assert server.timeouts == 1 and abs(state.qd[server.plant.actuated[0]]) < 1e-3
+    server.command(start.torques, 3.1)
+    assert not server.tick(3.1).holding
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_quaternion_is_scipys(seed):
+    rng = np.random.default_rng(seed)
+    rotations = Rotation.random(50, random_state=rng)
+    # the four branches of Shepperd's method: near the identity and near half-turns about x, y, z
+    extra = Rotation.from_rotvec(np.array([[1e-3, 0, 0], [3.1, 0.1, 0], [0.1, 3.1, 0], [0, 0.1, 3.1]]))
+    for rotation in [*rotations, *extra]:
+        expected = rotation.as_quat()
+        expected = expected if expected[3] >= 0 else -expected
+        assert quaternion(rotation.as_matrix()) == pytest.approx(expected, abs=1e-14)
+
+
+def test_settings_refuse_what_they_cannot_run():
+    with pytest.raises(ValueError, match=r"joints = .*must name each of column_slew, boom_luff, knuckle once"):
+        PlantSettings(joints=("column_slew", "boom_luff"))
+    with pytest.raises(ValueError, match="whole number of integrator steps"):
+        PlantSettings(rate=300.0)
+    with pytest.raises(ValueError, match=r"drive_damping = .*one finite number >= 0"):
+        PlantSettings(drive_damping=(1.0, -1.0, 0.0))
+    with pytest.raises(ValueError, match="command_timeout = nan"):
+        PlantSettings(command_timeout=math.nan)
