@@ -59,8 +59,8 @@ class CommandRefusedError(ValueError):
 class PlantSettings:
     """The plant's settings: the crane ``variant``, the integrator ``step`` [s], the control ``rate`` [Hz] (a
     whole number of steps per period), the command's ``joints`` (a permutation of ACTUATED_JOINTS), the
-    drives' damping kd per joint of ``joints`` [N m s/rad] (None: :func:`default_drive_damping`) and the
-    ``command_timeout`` [s]."""
+    drives' damping kd per joint of ``joints`` [N m s/rad] (None: :func:`default_drive_damping`), the
+    ``command_timeout`` [s] and whether the state gives ``all_coordinates`` or the ``joints`` only."""
 
     variant: str = "flexible"
     step: float = PLANT_STEP
@@ -68,6 +68,7 @@ class PlantSettings:
     joints: tuple[str, ...] = ACTUATED_JOINTS
     drive_damping: tuple[float, ...] | None = None
     command_timeout: float = 0.1
+    all_coordinates: bool = False
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
@@ -107,18 +108,18 @@ def default_drive_damping(scenario: Scenario, joints: Sequence[str]) -> tuple[fl
 
 @dataclass(frozen=True)
 class PlantState:
-    """The plant at time ``t`` [s] (from its start): q, qd of every coordinate (order of ``joint_names``),
-    the actuator ``effort`` u - kd qd per joint of the settings' ``joints`` [N m], E's ``position`` [m] and
-    ``orientation`` (quaternion x, y, z, w) in the world frame {0}, the boom tip's ``deflection`` [m] in the
-    first boom element's frame (:mod:`~crane_reference.dynamics.deflection`; zero on the rigid boom) and
-    whether the hold command acts (``holding``)."""
+    """The plant at time ``t`` [s] (from its start): q, qd and the actuator ``effort`` u - kd qd [N m] of the
+    published coordinates (:attr:`PlantServer.published`; effort 0 where no actuator acts), E's
+    ``ee_position`` [m] and ``ee_quaternion`` (x, y, z, w) in the world frame {0}, the boom tip's
+    ``deflection`` [m] in the first boom element's frame (:mod:`~crane_reference.dynamics.deflection`; zero on
+    the rigid boom) and whether the hold command acts (``holding``)."""
 
     t: float
     q: np.ndarray
     qd: np.ndarray
     effort: np.ndarray
-    position: np.ndarray
-    orientation: np.ndarray
+    ee_position: np.ndarray
+    ee_quaternion: np.ndarray
     deflection: np.ndarray
     holding: bool
 
@@ -137,7 +138,13 @@ class PlantServer:
         actuated_damping = np.empty(len(ACTUATED_JOINTS))
         actuated_damping[self._order] = self.drive_damping
         self.plant = Plant(params, settings.variant, start, settings.step, actuated_damping, keep=False)
-        self.joint_names = tuple(self.plant.model.joint_names)
+        model = self.plant.model
+        self.published = model.joint_names if settings.all_coordinates else settings.joints
+        """The coordinates of :class:`PlantState` (q, qd, effort), by name."""
+        self._published = np.array([model.index(name) for name in self.published], dtype=np.int64)
+        luff = model.index("boom_luff")
+        self.deflection_frame = next(body.name for body in model.bodies if body.joint == luff)
+        """The frame of the tip deflection: the URDF link of the first boom element."""
         self._command = start.torques.copy()  # u in the order of ACTUATED_JOINTS
         self._last_command = -math.inf  # when the last command was accepted [s, the caller's clock]
         self._ticks = 0
@@ -204,8 +211,10 @@ class PlantServer:
         """The plant now (:class:`PlantState`)."""
         plant = self.plant
         sample = plant.stepper.sample
-        effort = (self._command - plant.joint_damping * plant.qd[plant.actuated])[self._order]
+        effort = np.zeros(plant.model.dof)
+        effort[plant.actuated] = self._command - plant.joint_damping * plant.qd[plant.actuated]
         deflection = (boom_tip_deflection(plant.model, plant.dynamics.chain, plant.q)[0]
                       if self.settings.variant == "flexible" else np.zeros(3))
-        return PlantState(plant.t, plant.q.copy(), plant.qd.copy(), effort, np.asarray(sample.ee_position).copy(),
+        rows = self._published
+        return PlantState(plant.t, plant.q[rows], plant.qd[rows], effort[rows], np.asarray(sample.ee_position).copy(),
                           quaternion(sample.ee_rotation), deflection, self.holding)

@@ -28,6 +28,7 @@ import numpy as np
 from ..model.units import NANOSECONDS
 
 if TYPE_CHECKING:
+    from ..control.plant_server import PlantState
     from ..model.parameters import Task
     from ..stream.sample import ReferenceSample
 
@@ -66,6 +67,7 @@ class MessageTypes:
     Point: Callable[..., Any]
     Quaternion: Callable[..., Any]
     Vector3: Callable[..., Any]
+    Vector3Stamped: Callable[..., Any]
     Pose: Callable[..., Any]
     PoseStamped: Callable[..., Any]
     JointState: Callable[..., Any]
@@ -99,6 +101,7 @@ def rosbags_types(typestore: Any = None) -> MessageTypes:
         Point=types["geometry_msgs/msg/Point"],
         Quaternion=types["geometry_msgs/msg/Quaternion"],
         Vector3=types["geometry_msgs/msg/Vector3"],
+        Vector3Stamped=types["geometry_msgs/msg/Vector3Stamped"],
         Pose=types["geometry_msgs/msg/Pose"],
         PoseStamped=types["geometry_msgs/msg/PoseStamped"],
         JointState=types["sensor_msgs/msg/JointState"],
@@ -157,10 +160,11 @@ def _pose(types: MessageTypes, position: Sequence[float], quaternion: Sequence[f
 # --- published messages ---------------------------------------------------------------------------
 
 
-def joint_state(types: MessageTypes, stamp_ns: int, joint_names: Sequence[str], sample: ReferenceSample,
+def joint_state(types: MessageTypes, stamp_ns: int, joint_names: Sequence[str], sample: ReferenceSample | PlantState,
                 message: Any = None) -> Any:
-    """sensor_msgs/JointState: positions, velocities and the generalized efforts of constraints and
-    drive, one entry per joint name (header.frame_id empty, as for every JointState).  ``message``: a
+    """sensor_msgs/JointState: positions, velocities and efforts (a reference's generalized efforts of
+    constraints and drive, a plant's actuator torques), one entry per joint name (header.frame_id empty, as
+    for every JointState).  ``message``: a
     JointState of these joint names made here before, filled again instead of a new one (a publisher
     serializes a message as it publishes it, so one object serves every sample)."""
     if message is None:
@@ -174,7 +178,7 @@ def joint_state(types: MessageTypes, stamp_ns: int, joint_names: Sequence[str], 
     return message
 
 
-def end_effector_pose(types: MessageTypes, stamp_ns: int, frame_id: str, sample: ReferenceSample,
+def end_effector_pose(types: MessageTypes, stamp_ns: int, frame_id: str, sample: ReferenceSample | PlantState,
                       message: Any = None) -> Any:
     """geometry_msgs/PoseStamped of E (position, and orientation of the last link) in ``frame_id``;
     ``message``: one made here before for ``frame_id``, filled again (see :func:`joint_state`)."""
@@ -185,6 +189,19 @@ def end_effector_pose(types: MessageTypes, stamp_ns: int, frame_id: str, sample:
     position, orientation = message.pose.position, message.pose.orientation
     position.x, position.y, position.z = (float(v) for v in sample.ee_position)
     orientation.x, orientation.y, orientation.z, orientation.w = (float(v) for v in sample.ee_quaternion)
+    return message
+
+
+def tip_deflection(types: MessageTypes, stamp_ns: int, frame_id: str, deflection: Sequence[float],
+                   message: Any = None) -> Any:
+    """geometry_msgs/Vector3Stamped of the boom tip's deflection [m] in ``frame_id`` (the first boom element's
+    link); ``message``: one made here before for ``frame_id``, filled again (see :func:`joint_state`)."""
+    if message is None:
+        message = types.Vector3Stamped(header=header(types, stamp_ns, frame_id),
+                                       vector=types.Vector3(x=0.0, y=0.0, z=0.0))
+    message.header.stamp = time_msg(types, stamp_ns)
+    vector = message.vector
+    vector.x, vector.y, vector.z = (float(v) for v in deflection)
     return message
 
 

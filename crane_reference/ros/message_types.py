@@ -7,7 +7,7 @@ import array
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3
+from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3, Vector3Stamped
 from sensor_msgs.msg import CompressedImage, JointState
 from std_msgs.msg import ColorRGBA, Header, String
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -21,8 +21,9 @@ def rclpy_types() -> MessageTypes:
 
     return MessageTypes(
         Time=Time, Duration=Duration, Header=Header, String=String, ColorRGBA=ColorRGBA, Point=Point,
-        Quaternion=Quaternion, Vector3=Vector3, Pose=Pose, PoseStamped=PoseStamped, JointState=JointState,
-        JointTrajectory=JointTrajectory, JointTrajectoryPoint=JointTrajectoryPoint, KeyValue=KeyValue,
+        Quaternion=Quaternion, Vector3=Vector3, Vector3Stamped=Vector3Stamped, Pose=Pose, PoseStamped=PoseStamped,
+        JointState=JointState, JointTrajectory=JointTrajectory, JointTrajectoryPoint=JointTrajectoryPoint,
+        KeyValue=KeyValue,
         DiagnosticStatus=DiagnosticStatus, DiagnosticArray=DiagnosticArray, CompressedImage=CompressedImage,
         MeshFile=MeshFile, Marker=Marker, MarkerArray=MarkerArray,
         float64_array=lambda values: array.array("d", np.ascontiguousarray(values, dtype=np.float64).tobytes()),
