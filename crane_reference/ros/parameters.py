@@ -261,17 +261,17 @@ def reach_descriptor(spec: ParameterSpec, low: float, high: float) -> ParameterD
     return descriptor
 
 
-def coerce_parameters(parameters: list[Parameter]) -> list[Parameter]:
-    """Pre-set callback: integer values of double parameters become doubles (all else unchanged)."""
+def coerce_parameters(parameters: list[Parameter], specs: dict[str, ParameterSpec] = SPECS) -> list[Parameter]:
+    """Pre-set callback: integer values of the table's double parameters become doubles (all else unchanged)."""
     return [Parameter(p.name, DOUBLE, float(p.value))
-            if p.name in SPECS and SPECS[p.name].type is DOUBLE and p.type_ is INTEGER else p
+            if p.name in specs and specs[p.name].type is DOUBLE and p.type_ is INTEGER else p
             for p in parameters]
 
 
-def check(parameters: Iterable[Parameter]) -> str | None:
-    """``None`` if every parameter of the table has an allowed value, else the first reason."""
+def check(parameters: Iterable[Parameter], specs: dict[str, ParameterSpec] = SPECS) -> str | None:
+    """``None`` if every parameter of the table ``specs`` has an allowed value, else the first reason."""
     for parameter in parameters:
-        spec = SPECS.get(parameter.name)
+        spec = specs.get(parameter.name)
         reason = spec.check(spec.coerce(parameter.value)) if spec is not None else None
         if reason is not None:
             return reason
@@ -293,28 +293,32 @@ def declare_all(node: Node) -> NodeParameters:
     return values
 
 
-def pre_set_callback(node: Node) -> Callable[[list[Parameter]], list[Parameter]]:
+def pre_set_callback(node: Node, specs: dict[str, ParameterSpec] = SPECS) -> Callable[[list[Parameter]],
+                                                                                    list[Parameter]]:
     """``node``'s pre-set callback (the only one: rclpy concatenates the lists its pre-set callbacks return),
-    run before rclpy's own checks: :func:`refuse_unknown`, then :func:`coerce_parameters`."""
+    run before rclpy's own checks: :func:`refuse_unknown`, then :func:`coerce_parameters` of the table
+    ``specs``."""
     def pre_set(parameters: list[Parameter]) -> list[Parameter]:
         refuse_unknown(node, parameters)
-        return coerce_parameters(parameters)
+        return coerce_parameters(parameters, specs)
     return pre_set
 
 
-def unknown_overrides(node: Node) -> list[str]:
+def unknown_overrides(node: Node, known: Iterable[str] = SPECS) -> list[str]:
     """The names ``node`` was given overrides for (``-p``, a params file, ``parameter_overrides``) that are not
-    its parameters.  The node declares every override (``automatically_declare_parameters_from_overrides``), so
-    they are the declared names that neither the table nor rclpy itself declares (the parameters of a bare node
-    of the same context, without the command line's arguments)."""
+    its parameters (``known``: the names of its table).  The node declares every override
+    (``automatically_declare_parameters_from_overrides``), so they are the declared names that neither the table
+    nor rclpy itself declares (the parameters of a bare node of the same context, without the command line's
+    arguments)."""
     bare = Node(f"{node.get_name()}_bare", context=node.context, use_global_arguments=False,
                 start_parameter_services=False, enable_rosout=False)
     try:
         builtin = set(bare.get_parameters_by_prefix(""))
     finally:
         bare.destroy_node()
+    known = set(known)
     return sorted(name for name in node.get_parameters_by_prefix("")
-                  if name not in SPECS and name not in builtin and not name.startswith("qos_overrides."))
+                  if name not in known and name not in builtin and not name.startswith("qos_overrides."))
 
 
 def parameter_names(node: Node) -> str:

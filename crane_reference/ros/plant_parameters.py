@@ -1,0 +1,113 @@
+"""The ROS parameters of the crane_plant node: one declared, validated table, as :mod:`.parameters` gives the
+reference node (the same :class:`~.parameters.ParameterSpec` rows, typed values in :class:`PlantParameters`).
+
+The drives' damping defaults come from the crane (:func:`~crane_reference.control.plant_server.default_drive_damping`
+of the config file and model), one parameter per actuated joint, ``drive_damping.<joint>``, as ros2_control
+names per-joint gains.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from rclpy.node import Node
+
+from ..control.plant_server import PlantSettings, default_drive_damping
+from ..model.chain import ACTUATED_JOINTS, VARIANTS
+from ..model.config import load_config
+from ..motion.simulation import Scenario
+from ..motion.steps import PLANT_STEP
+from .parameters import (
+    BOOL,
+    DOUBLE,
+    INTEGER,
+    STRING,
+    STRING_ARRAY,
+    ParameterError,
+    ParameterSpec,
+    declare,
+    parameter_names,
+    unknown_overrides,
+)
+
+CLOCK_MODES = ("realtime", "lockstep")
+MAX_CONTROL_RATE = 1000  # [Hz]
+
+PLANT_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec("config_file", STRING, "", "Crane description YAML (format of config/crane.yaml); '' loads the "
+                  "packaged default", empty_allowed=True, read_only=True),
+    ParameterSpec("model", STRING, "flexible", "Crane model variant: 'flexible' (rigid finite element boom) or "
+                  "'rigid'", choices=VARIANTS, read_only=True),
+    ParameterSpec("integrator.step", DOUBLE, PLANT_STEP, "Step of the plant's integrator (a control period is a "
+                  "whole number of steps)", "s", (1e-5, 1e-2), read_only=True),
+    ParameterSpec("control_rate", INTEGER, 1000, "Rate of the control periods: a command holds over one, and the "
+                  "state is published after each", "Hz", (1, MAX_CONTROL_RATE), read_only=True),
+    ParameterSpec("joints", STRING_ARRAY, list(ACTUATED_JOINTS), "The joints of ~/commands, in their order (a "
+                  "permutation of the actuated joints), as a forward command controller's joints", read_only=True),
+    *(ParameterSpec(f"drive_damping.{joint}", DOUBLE, 0.0, f"Damping kd of the {joint} drive's velocity loop: "
+                    "the drive applies the commanded effort minus kd times the joint's velocity; default: the D "
+                    "gain of a 2 Hz, 0.7-damped joint loop on the crane (as `crane-reference track`)",
+                    "N m s/rad", (0.0, 1e9), read_only=True) for joint in ACTUATED_JOINTS),
+    ParameterSpec("command_timeout", DOUBLE, 0.1, "With no command accepted for this long (real time), the plant "
+                  "applies the hold command (the efforts that hold the configuration where the timeout began) and "
+                  "WARNs", "s", (0.001, 3600.0)),
+    ParameterSpec("clock_mode", STRING, "realtime", "'realtime': a control period every period of the wall "
+                  "clock, like a robot; 'lockstep': the plant publishes /clock and advances one period per command "
+                  "received (deterministic, as fast as the loop runs)", choices=CLOCK_MODES, read_only=True),
+    ParameterSpec("all_coordinates", BOOL, False, "~/joint_states gives every coordinate of the model (supports, "
+                  "boom springs), not only the joints", read_only=True),
+    ParameterSpec("frame_id", STRING, "world", "Frame of ~/end_effector_pose (the world frame {0} of the crane)"),
+    ParameterSpec("frame_prefix", STRING, "", "Prefix of the frames the node names, as robot_state_publisher's "
+                  "frame_prefix", empty_allowed=True),
+    ParameterSpec("autostart", BOOL, True, "Configure and activate the (lifecycle) node at once", read_only=True),
+)
+PLANT_SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PLANT_PARAMETERS}
+DAMPING = tuple(f"drive_damping.{joint}" for joint in ACTUATED_JOINTS)
+
+
+@dataclass(frozen=True)
+class PlantParameters:
+    """The plant node's parameter values (the field of ``integrator.step`` is ``integrator_step``; the drives'
+    damping by joint name)."""
+
+    config_file: str
+    model: str
+    integrator_step: float
+    control_rate: int
+    joints: tuple[str, ...]
+    drive_damping: dict[str, float]
+    command_timeout: float
+    clock_mode: str
+    all_coordinates: bool
+    frame_id: str
+    frame_prefix: str
+    autostart: bool
+
+    def settings(self) -> PlantSettings:
+        """The plant's settings (:class:`~crane_reference.control.plant_server.PlantSettings`); ValueError if
+        they do not fit together (e.g. a rate that is not a whole number of steps)."""
+        return PlantSettings(self.model, self.integrator_step, float(self.control_rate), self.joints,
+                             tuple(self.drive_damping[joint] for joint in self.joints), self.command_timeout,
+                             self.all_coordinates)
+
+
+def declare_plant(node: Node) -> PlantParameters:
+    """Declare the table on ``node`` (the damping's defaults from its config file and model) and return the
+    values; :class:`~.parameters.ParameterError` for a value the table refuses or an unknown override."""
+    values = {}
+    for spec in PLANT_PARAMETERS:
+        if spec.name in DAMPING and DAMPING[0] not in values:
+            scenario = Scenario(load_config(values["config_file"] or None), values["model"])
+            defaults = dict(zip(DAMPING, default_drive_damping(scenario, ACTUATED_JOINTS), strict=True))
+        if spec.name in DAMPING:
+            spec = replace(spec, default=defaults[spec.name])
+        values[spec.name] = declare(node, spec)
+    unknown = unknown_overrides(node, PLANT_SPECS)
+    if unknown:
+        raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
+                             f"{parameter_names(node)}")
+    return PlantParameters(values["config_file"], values["model"], values["integrator.step"],
+                           values["control_rate"], tuple(values["joints"]),
+                           {joint: values[f"drive_damping.{joint}"] for joint in ACTUATED_JOINTS},
+                           values["command_timeout"], values["clock_mode"], values["all_coordinates"],
+                           values["frame_id"], values["frame_prefix"], values["autostart"])
