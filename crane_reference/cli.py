@@ -1,4 +1,5 @@
-"""Command line: ``crane-reference simulate | compile | study | track | urdf | node | record | modes | analyze``."""
+"""Command line: ``crane-reference simulate | compile | study | track | urdf | node | plant | record | modes |
+analyze``."""
 
 from __future__ import annotations
 
@@ -206,6 +207,12 @@ def node_command(args: argparse.Namespace, ros_args: list[str]) -> int:
     return node_main(ros_args)
 
 
+def plant_command(ros_args: list[str]) -> int:
+    from .ros.plant_node import main as plant_main
+
+    return plant_main(ros_args)
+
+
 def record_command(args: argparse.Namespace) -> int:
     from .ros.recorder import record_command as record
 
@@ -283,6 +290,8 @@ def parser() -> argparse.ArgumentParser:
     u.add_argument("--config")
     u.add_argument("--model", choices=VARIANTS, default="flexible")
     sub.add_parser("node", help="run the ROS 2 node (arguments after 'node' go to ROS)", add_help=False)
+    sub.add_parser("plant", help="run the ROS 2 plant node: the actuated crane under effort commands (arguments "
+                   "after 'plant' go to ROS)", add_help=False)
     r = sub.add_parser("record", help="record topics to a rosbag2 bag (default: every topic the crane_reference "
                        "node publishes) until SIGINT/SIGTERM or --duration")
     r.add_argument("topics", nargs="*", metavar="TOPIC", help="topics to record (default: every topic --node "
@@ -314,6 +323,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["node"]:
         return node_command(argparse.Namespace(), argv[1:])
+    if argv[:1] == ["plant"]:
+        return plant_command(argv[1:])
     args = parser().parse_args(argv)
     if args.command == "simulate" and not (np.isfinite(args.duration) and args.duration > 0):
         parser().error(f"--duration {args.duration}: must be a finite number of seconds > 0")

@@ -154,6 +154,8 @@ class PlantServer:
         self.timeouts = 0
         """Commands accepted, refused, and the timeouts that started the hold command."""
         self.last_refusal = ""
+        self.refused_last = False
+        """The last command received was refused."""
 
     def command(self, values: Sequence[float], now: float) -> None:
         """Accept the efforts ``values`` [N m] (order of the settings' ``joints``) received at ``now`` [s, the
@@ -169,13 +171,19 @@ class PlantServer:
             reason = f"effort of {', '.join(bad)} is not finite: a command must be finite numbers [N m]"
         if reason is not None:
             self.refused += 1
-            self.last_refusal = reason
+            self.last_refusal, self.refused_last = reason, True
             raise CommandRefusedError(reason)
         self._command = np.empty(len(ACTUATED_JOINTS))
         self._command[self._order] = u
         self._last_command = now
         self._held = None
         self.accepted += 1
+        self.refused_last = False
+
+    @property
+    def ticks(self) -> int:
+        """Control periods done."""
+        return self._ticks
 
     def timed_out(self, now: float) -> bool:
         """No command accepted within ``command_timeout`` of ``now`` [s] (and at least one before)."""
@@ -218,3 +226,36 @@ class PlantServer:
         rows = self._published
         return PlantState(plant.t, plant.q[rows], plant.qd[rows], effort[rows], np.asarray(sample.ee_position).copy(),
                           quaternion(sample.ee_rotation), deflection, self.holding)
+
+
+@dataclass(frozen=True)
+class PlantHealth:
+    """The plant's health as /diagnostics reports it: ``level`` with the values of
+    diagnostic_msgs/DiagnosticStatus (0 OK, 1 WARN, 2 ERROR, as :class:`crane_reference.stream.health.Level`),
+    a ``message`` and the key/value pairs."""
+
+    level: int
+    message: str
+    values: dict[str, str]
+
+
+def plant_health(server: PlantServer, doing: str, failure: str, late_ticks: int, newly_late: int) -> PlantHealth:
+    """The worst first: the integration failed (``failure``: ERROR); the hold command acts (a timeout: WARN);
+    the last command was refused (WARN); periods started late in real time since the last report
+    (``newly_late`` of ``late_ticks`` in all: WARN); else OK with what the node is ``doing``.  The values: plant
+    time, ticks, commands accepted and refused, the last refusal, timeouts, late ticks."""
+    values = {"time_s": f"{server.plant.t:.6f}", "ticks": str(server.ticks), "commands_accepted": str(server.accepted),
+              "commands_refused": str(server.refused), "last_refusal": server.last_refusal,
+              "timeouts": str(server.timeouts), "late_ticks": str(late_ticks)}
+    if failure:
+        return PlantHealth(2, f"integration failed: {failure}; the plant stopped (cleanup and configure start it "
+                              "again)", values)
+    if server.holding:
+        return PlantHealth(1, f"{doing}: no command for {server.settings.command_timeout:g} s: the hold command "
+                              "acts", values)
+    if server.refused and server.refused_last:
+        return PlantHealth(1, f"{doing}: command refused: {server.last_refusal}", values)
+    if newly_late:
+        return PlantHealth(1, f"{doing}: {newly_late} periods started late (the machine is too slow for the "
+                              "control rate)", values)
+    return PlantHealth(0, doing, values)

@@ -1,0 +1,280 @@
+"""ROS 2 node simulating the actuated crane as a plant for a controller: ``ros2 run crane_reference plant``.
+
+A managed (lifecycle) node that only wires: the plant is the ROS-free
+:class:`~crane_reference.control.plant_server.PlantServer` (the crane of the config without programmed
+constraints: flexible boom, supports, column drive; effort commands with the drives' damping, refusals, the
+hold command on a timeout); the parameters are :mod:`.plant_parameters`.
+
+* ``~/commands`` (std_msgs/Float64MultiArray): one effort [N m] per joint of the ``joints`` parameter, in
+  its order, as a ros2_control forward command controller publishes them.  Refused commands are counted and
+  reported in /diagnostics, and never applied.
+* After each control period: ``~/joint_states`` (sensor_msgs/JointState: q, qd and the actuator torque of the
+  joints, or of every coordinate with ``all_coordinates``), ``~/end_effector_pose`` (geometry_msgs/PoseStamped,
+  E in ``frame_id``) and ``~/tip_deflection`` (geometry_msgs/Vector3Stamped, the boom tip's deflection from
+  its rigid chord in the first boom element's link), stamped with the end of the period.
+* ``clock_mode`` realtime: a period every period of the steady clock (a thread of its own paces them; a period
+  that starts more than a period late counts as late, and the next is due a period after it), stamped with
+  the node's clock;
+  lockstep: the node publishes /clock (the plant's time from 0) and advances one period per command
+  received, so a controller with ``use_sim_time`` runs in step with it, deterministically.
+* ``configure`` builds the plant (held at rest at its start), ``activate`` runs it, ``deactivate`` stops the
+  periods (the plant's time stands still), ``cleanup`` drops it; ``autostart`` (default) configures and
+  activates at construction.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from dataclasses import replace
+
+import rclpy
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock as ClockMessage
+from std_msgs.msg import Float64MultiArray
+
+from ..control.plant_server import CommandRefusedError, PlantServer, PlantState, plant_health
+from ..interface import messages
+from ..model.config import ConfigError, load_config
+from ..model.units import NANOSECONDS
+from ..motion.integration import IntegrationError
+from ..motion.programmed_motion import ProjectionError
+from ..stream.health import CANNOT
+from .message_types import rclpy_types
+from .parameters import ParameterError, check, pre_set_callback
+from .plant_parameters import PLANT_SPECS, declare_plant
+from .publishing import run_until_shutdown
+from .settings import StartupError
+
+NODE_NAME = "crane_plant"
+COMMANDS_TOPIC = "~/commands"
+JOINT_STATES_TOPIC = "~/joint_states"
+END_EFFECTOR_POSE_TOPIC = "~/end_effector_pose"
+TIP_DEFLECTION_TOPIC = "~/tip_deflection"
+CLOCK_TOPIC = "/clock"
+
+
+class CranePlantNode(LifecycleNode):
+    """Simulates the actuated crane under effort commands; see the module documentation."""
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs) -> None:
+        """Declare and read the parameters; with ``autostart`` configure and activate (StartupError if it
+        cannot configure).  ``kwargs`` go to :class:`rclpy.node.Node`."""
+        super().__init__(node_name, **{"automatically_declare_parameters_from_overrides": True, **kwargs})
+        self._types = rclpy_types()
+        self._params = declare_plant(self)
+        self.add_pre_set_parameters_callback(pre_set_callback(self, PLANT_SPECS))
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self._server: PlantServer | None = None
+        self._lock = threading.Lock()  # the server: the command callbacks and the real-time thread
+        self._running = threading.Event()  # the real-time thread runs while set
+        self._thread: threading.Thread | None = None
+        self._outputs: dict[str, object] = {}
+        self._made: dict[str, object] = {}
+        self._doing = "unconfigured"
+        self._failure = ""
+        self._late = 0  # real-time periods that started more than a period late
+        self._late_reported = 0
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_subscription(Float64MultiArray, COMMANDS_TOPIC, self._on_command, messages.PUBLISHER_DEPTH)
+        self._diagnostics = self.create_publisher(self._types.DiagnosticArray, messages.DIAGNOSTICS_TOPIC,
+                                                  messages.PUBLISHER_DEPTH)
+        self.create_timer(messages.DIAGNOSTICS_PERIOD, self._publish_diagnostics, clock=self._steady)
+        if self._params.autostart:
+            if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+                raise StartupError(self._doing.removeprefix(f"{CANNOT} configure: "))
+            self.trigger_activate()
+
+    # -- lifecycle --------------------------------------------------------------------------------------
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Build the plant at rest at its held start and create the publishers."""
+        v = self._params
+        try:
+            self._server = PlantServer(load_config(v.config_file or None), v.settings())
+        except (ConfigError, ValueError) as error:
+            self._doing = f"{CANNOT} configure: {error}"
+            self.get_logger().error(self._doing)
+            return TransitionCallbackReturn.FAILURE
+        types = self._types
+        depth = messages.PUBLISHER_DEPTH
+        self._outputs = {
+            "joints": self.create_lifecycle_publisher(types.JointState, JOINT_STATES_TOPIC, depth),
+            "pose": self.create_lifecycle_publisher(types.PoseStamped, END_EFFECTOR_POSE_TOPIC, depth),
+            "deflection": self.create_lifecycle_publisher(types.Vector3Stamped, TIP_DEFLECTION_TOPIC, depth)}
+        if v.clock_mode == "lockstep":
+            self._outputs["clock"] = self.create_lifecycle_publisher(ClockMessage, CLOCK_TOPIC, depth)
+        self._made = {}
+        self._failure = ""
+        self._doing = "inactive: configured; activate to run"
+        self.get_logger().info(f"configured: the {v.model} crane as a plant, {v.control_rate} Hz {v.clock_mode}, "
+                               f"commands for {', '.join(v.joints)}")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Run: publish the state now; in real time start the periods, in lock-step wait for commands."""
+        result = super().on_activate(state)
+        self._doing = f"active ({self._params.clock_mode})"
+        self._publish(self._server.state())
+        if self._params.clock_mode == "realtime":
+            self._running.set()
+            self._thread = threading.Thread(target=run_until_shutdown(self, self._run_periods), daemon=True,
+                                            name="plant periods")
+            self._thread.start()
+        return result
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_periods()
+        self._doing = "inactive: the plant's time stands still; activate to run"
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release()
+        self._doing = "unconfigured"
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release()
+        self._doing = "finalized"
+        return TransitionCallbackReturn.SUCCESS
+
+    def _stop_periods(self) -> None:
+        self._running.clear()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join()
+            self._thread = None
+
+    def _release(self) -> None:
+        self._stop_periods()
+        for publisher in self._outputs.values():
+            self.destroy_publisher(publisher)
+        self._outputs, self._made, self._server = {}, {}, None
+
+    def _active(self) -> bool:
+        return self._server is not None and self._outputs["joints"].is_activated and not self._failure
+
+    # -- periods and commands (executor thread) ---------------------------------------------------------
+
+    def _seconds(self) -> float:
+        return self._steady.now().nanoseconds / NANOSECONDS
+
+    def _run_periods(self) -> None:
+        """The real-time periods (a thread): each waits until due, then advances and publishes."""
+        period = self._server.settings.period
+        due = self._seconds() + period
+        while self._running.is_set():
+            wait = due - self._seconds()
+            if wait > 0.0:
+                time.sleep(wait)  # at most a period: a deactivation is noticed within one
+                continue
+            if -wait > period:
+                self._late += 1
+                due = self._seconds()
+            self._advance(self._seconds())
+            due += period
+
+    def _on_command(self, msg: Float64MultiArray) -> None:
+        """~/commands: accepted or refused (counted, WARN); in lock-step a period follows either way (under the
+        last accepted command), so that the loop never stalls."""
+        if not self._active():
+            self.get_logger().warn(f"command ignored: the plant is {self._doing}", throttle_duration_sec=1.0)
+            return
+        lockstep = self._params.clock_mode == "lockstep"
+        with self._lock:
+            now = self._server.plant.t if lockstep else self._seconds()
+            try:
+                self._server.command(msg.data, now)
+            except CommandRefusedError as error:
+                self.get_logger().warn(f"command refused: {error}", throttle_duration_sec=1.0)
+        if lockstep:
+            self._advance(now)
+
+    def _advance(self, now: float) -> None:
+        server = self._server
+        timeouts = server.timeouts
+        try:
+            with self._lock:
+                state = server.tick(now)
+        except (IntegrationError, ProjectionError) as error:
+            self._failure = str(error)
+            self._stop_periods()
+            self.get_logger().error(f"the plant stopped: {error}")
+            return
+        if server.timeouts > timeouts:
+            self.get_logger().warn(f"no command for {server.settings.command_timeout:g} s: applying the hold command "
+                                   "(the efforts that hold the configuration where the timeout began)")
+        self._publish(state)
+
+    def _publish(self, state: PlantState) -> None:
+        """The state's messages (each made once, then filled again), after /clock in lock-step."""
+        v, types, made = self._params, self._types, self._made
+        if v.clock_mode == "lockstep":
+            stamp_ns = round(state.t * NANOSECONDS)
+            self._outputs["clock"].publish(ClockMessage(clock=messages.time_msg(types, stamp_ns)))
+        else:
+            stamp_ns = self.get_clock().now().nanoseconds
+        prefix = v.frame_prefix
+        made["joints"] = messages.joint_state(types, stamp_ns, self._server.published, state, made.get("joints"))
+        made["pose"] = messages.end_effector_pose(types, stamp_ns, prefix + v.frame_id, state, made.get("pose"))
+        made["deflection"] = messages.tip_deflection(types, stamp_ns, prefix + self._server.deflection_frame,
+                                                     state.deflection, made.get("deflection"))
+        for name in ("joints", "pose", "deflection"):
+            self._outputs[name].publish(made[name])
+
+    def _publish_diagnostics(self) -> None:
+        if self._server is None:
+            level, message, values = (2 if self._doing.startswith(CANNOT) else 0), self._doing, {}
+        else:
+            late = self._late
+            health = plant_health(self._server, self._doing, self._failure, late, late - self._late_reported)
+            self._late_reported = late
+            level, message, values = health.level, health.message, health.values
+        self._diagnostics.publish(messages.diagnostics(self._types, self.get_clock().now().nanoseconds,
+                                                       f"{self.get_name()}: plant", self.get_fully_qualified_name(),
+                                                       level, message, values))
+
+    # -- parameters -------------------------------------------------------------------------------------
+
+    def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        reason = check(parameters, PLANT_SPECS)
+        return SetParametersResult(successful=reason is None, reason=reason or "")
+
+    def _apply_parameters(self, parameters: list[Parameter]) -> None:
+        """The values that may change while it runs: the timeout (from the next period on) and the frames."""
+        changed = {p.name: p.value for p in parameters if p.name in ("command_timeout", "frame_id", "frame_prefix")}
+        self._params = replace(self._params, **changed)
+        if self._server is not None and "command_timeout" in changed:
+            self._server.settings = self._params.settings()
+        self._made = {}  # the frames may have changed
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the plant node until SIGINT / shutdown; exit code 0, or 1 if it cannot start."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = CranePlantNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (StartupError, ConfigError, ParameterError) as error:
+        rclpy.logging.get_logger(NODE_NAME).fatal(f"{CANNOT} start: {error}")
+        return 1
+    except Exception:
+        if rclpy.ok():
+            raise
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,239 @@
+"""The crane_plant node (crane_reference.ros.plant_node): in-process with a probe node (one Context per test), and
+as a process for the signals.
+
+* Lock-step over ROS equals the plant core driven directly with the same commands (another path: the
+  messages, the executor, /clock), bit for bit, and /clock and the stamps advance one period per command.
+* Bad commands (length, NaN, inf) are refused and counted in /diagnostics, never integrated: the run equals
+  the core's with them refused, and the stream goes on.
+* In real time, silence beyond ``command_timeout`` starts the hold command, reported at WARN.
+* The lifecycle transitions through the standard services; SIGINT and SIGTERM end the process with 0.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from contextlib import suppress
+from typing import Any
+
+import numpy as np
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from crane_reference.control.plant import held_start
+from crane_reference.control.plant_server import CommandRefusedError, PlantServer, PlantSettings
+from crane_reference.motion.simulation import Scenario
+from crane_reference.ros.plant_node import NODE_NAME, CranePlantNode
+
+NS = 10**9
+PERIOD = 1e-3
+
+
+class Probe:
+    """The plant node and a probe (joint_states, /clock, /diagnostics; publishes ~/commands), each spun by an
+    executor thread of its own."""
+
+    def __init__(self, **parameters: Any) -> None:
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.states: list[JointState] = []
+        self.clock: list[Clock] = []
+        self.diagnostics: list[DiagnosticArray] = []
+        self.probe = Node("probe", context=self.context)
+        self.probe.create_subscription(JointState, f"/{NODE_NAME}/joint_states", self.states.append, 10000)
+        self.probe.create_subscription(Clock, "/clock", self.clock.append, 10000)
+        self.probe.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 100)
+        self.commands = self.probe.create_publisher(Float64MultiArray, f"/{NODE_NAME}/commands", 100)
+        self.change_state = self.probe.create_client(ChangeState, f"/{NODE_NAME}/change_state")
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        overrides = [Parameter(name.replace("__", "."), value=value) for name, value in parameters.items()]
+        self.node = CranePlantNode(context=self.context, parameter_overrides=overrides)
+        for node in (self.probe, self.node):
+            self._spin(node)
+
+    def _spin(self, node: Node) -> None:
+        executor = SingleThreadedExecutor(context=self.context)
+        executor.add_node(node)
+
+        def spin() -> None:
+            with suppress(ExternalShutdownException):
+                while not self._stop.is_set():
+                    executor.spin_once(timeout_sec=0.02)
+
+        thread = threading.Thread(target=spin, daemon=True)
+        thread.start()
+        self._threads.append(thread)
+
+    def wait_for(self, condition, what: str, timeout: float = 30.0) -> None:
+        deadline = time.monotonic() + timeout
+        while not condition():
+            assert time.monotonic() < deadline, f"timed out waiting for {what}"
+            time.sleep(0.005)
+
+    def command(self, values) -> None:
+        self.commands.publish(Float64MultiArray(data=[float(v) for v in values]))
+
+    def lockstep(self, commands) -> None:
+        """Each command after the state of the period before it arrived (as a controller answers each state)."""
+        self.wait_for(lambda: self.states and self.commands.get_subscription_count() > 0, "the plant")
+        for k, values in enumerate(commands):
+            self.wait_for(lambda k=k: len(self.states) >= k + 1, f"state {k}")
+            self.command(values)
+        self.wait_for(lambda: len(self.states) >= len(commands) + 1, "the last state")
+
+    def latest_diagnostics(self) -> dict[str, str]:
+        status = self.diagnostics[-1].status[0]
+        return {"level": status.level[0] if isinstance(status.level, bytes) else status.level,
+                "message": status.message, **{kv.key: kv.value for kv in status.values}}
+
+    def close(self) -> None:
+        self._stop.set()
+        for thread in self._threads:
+            thread.join()
+        self.node.destroy_node()
+        self.probe.destroy_node()
+        self.context.try_shutdown()
+
+
+@pytest.fixture
+def probe_factory():
+    probes = []
+
+    def make(**parameters: Any) -> Probe:
+        probes.append(Probe(**parameters))
+        return probes[-1]
+
+    yield make
+    for probe in probes:
+        probe.close()
+
+
+@pytest.fixture(scope="module")
+def start_efforts(params):
+    return held_start(Scenario(params, "flexible")).torques
+
+
+def _direct(params, commands) -> list[np.ndarray]:
+    """The core driven directly: q of the joints after each command (refused ones leave the last in force)."""
+    server = PlantServer(params, PlantSettings())
+    out = []
+    for values in commands:
+        with suppress(CommandRefusedError):
+            server.command(values, server.plant.t)
+        out.append(server.tick(server.plant.t).q)
+    return out
+
+
+def test_lockstep_over_ros_is_the_core_driven_directly(params, probe_factory, start_efforts):
+    commands = [start_efforts + np.array([3e3 * math.sin(0.1 * k), -2e3, 40.0]) for k in range(60)]
+    probe = probe_factory(clock_mode="lockstep")
+    probe.lockstep(commands)
+    stamps = [s.header.stamp.sec * NS + s.header.stamp.nanosec for s in probe.states]
+    assert stamps == [round(k * PERIOD * NS) for k in range(61)]
+    assert [c.clock.sec * NS + c.clock.nanosec for c in probe.clock] == stamps
+    assert probe.states[0].name == ["column_slew", "boom_luff", "knuckle"]
+    direct = _direct(params, commands)
+    assert all(np.array_equal(np.array(s.position), q) for s, q in zip(probe.states[1:], direct, strict=True))
+    assert np.abs(np.array(probe.states[-1].position) - probe.states[0].position).max() > 1e-4  # it moved
+
+
+def test_bad_commands_are_refused_counted_and_never_integrated(params, probe_factory, start_efforts):
+    good = [start_efforts + np.array([2e3, 0.0, 0.0])] * 20
+    bad = {5: [1.0, 2.0], 9: [math.nan, 0.0, 0.0], 13: [0.0, -math.inf, 0.0]}
+    commands = [bad.get(k, values) for k, values in enumerate(good)]
+    probe = probe_factory(clock_mode="lockstep")
+    probe.lockstep(commands)
+    direct = _direct(params, commands)
+    assert all(np.array_equal(np.array(s.position), q) for s, q in zip(probe.states[1:], direct, strict=True))
+    assert all(np.isfinite(s.position).all() and np.isfinite(s.velocity).all() for s in probe.states)
+    probe.wait_for(lambda: probe.diagnostics and probe.latest_diagnostics()["commands_refused"] == "3",
+                   "the refusals in /diagnostics", timeout=5.0)
+    report = probe.latest_diagnostics()
+    assert report["commands_accepted"] == "17" and "not finite" in report["last_refusal"]
+
+
+def test_silence_starts_the_hold_command_with_a_warning(probe_factory, start_efforts):
+    probe = probe_factory(command_timeout=0.05, control_rate=100)  # the semantics, not the speed
+    probe.wait_for(lambda: probe.states and probe.commands.get_subscription_count() > 0, "the plant")
+    probe.command(start_efforts)
+    probe.wait_for(lambda: probe.diagnostics and probe.latest_diagnostics()["timeouts"] == "1",
+                   "a timeout in /diagnostics", timeout=10.0)
+    report = probe.latest_diagnostics()
+    assert report["level"] == 1 and "the hold command acts" in report["message"]
+    count = len(probe.states)
+    probe.wait_for(lambda: len(probe.states) > count + 20, "states while holding")  # the stream goes on
+    assert probe.node.set_parameters([Parameter("command_timeout", value=60)])[0].successful  # an integer, too
+    probe.command(start_efforts)  # ends the hold
+    probe.wait_for(lambda: probe.latest_diagnostics()["level"] == 0, f"OK after a command: {probe.latest_diagnostics()}", timeout=5.0)
+    assert probe.latest_diagnostics()["timeouts"] == "1"
+
+
+def test_lifecycle_transitions(probe_factory):
+    probe = probe_factory(autostart=False, clock_mode="lockstep")
+    assert probe.change_state.wait_for_service(timeout_sec=10.0)
+
+    def transition(transition_id: int) -> bool:
+        future = probe.change_state.call_async(ChangeState.Request(transition=Transition(id=transition_id)))
+        probe.wait_for(future.done, f"transition {transition_id}")
+        return future.result().success
+
+    assert not probe.states
+    assert transition(Transition.TRANSITION_CONFIGURE) and not probe.states
+    assert transition(Transition.TRANSITION_ACTIVATE)
+    probe.wait_for(lambda: probe.states, "the state on activation")
+    assert transition(Transition.TRANSITION_DEACTIVATE)
+    assert transition(Transition.TRANSITION_CLEANUP)
+    assert transition(Transition.TRANSITION_CONFIGURE) and transition(Transition.TRANSITION_ACTIVATE)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM])
+def test_the_process_ends_with_0_on_a_signal(signal_number):
+    process = subprocess.Popen([sys.executable, "-m", "crane_reference.ros.plant_node", "--ros-args", "-p",
+                                "control_rate:=100", "-p", "integrator.step:=0.001"], env=os.environ,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    received: list = []
+    try:
+        node = Node("listener", context=context)
+        node.create_subscription(JointState, f"/{NODE_NAME}/joint_states", received.append, 100)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        deadline = time.monotonic() + 60.0
+        while len(received) < 20 and time.monotonic() < deadline and process.poll() is None:
+            executor.spin_once(timeout_sec=0.1)
+        node.destroy_node()
+    finally:
+        context.try_shutdown()
+        process.send_signal(signal_number)
+        stdout, stderr = process.communicate(timeout=30)
+    assert len(received) >= 20, stderr
+    assert process.returncode == 0, stderr
+    assert "Traceback" not in stderr + stdout, stderr
+
+
+def test_configuration_errors_name_the_parameter():
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        with pytest.raises(Exception, match=r"rate = 300.0 Hz with step"):
+            CranePlantNode(context=context, parameter_overrides=[Parameter("control_rate", value=300),
+                                                                 Parameter("integrator.step", value=1e-3)])
+    finally:
+        context.try_shutdown()
