@@ -23,7 +23,7 @@ setup(
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
         (f"share/{PACKAGE}/rviz", glob("rviz/*.rviz")),
-        (f"lib/{PACKAGE}", ["scripts/node", "scripts/plant"]),
+        (f"lib/{PACKAGE}", ["scripts/node", "scripts/plant", "scripts/controller"]),
     ],
     python_requires=">=3.10",
     install_requires=[

@@ -1,5 +1,5 @@
-"""Command line: ``crane-reference simulate | compile | study | track | urdf | node | plant | record | modes |
-analyze``."""
+"""Command line: ``crane-reference simulate | compile | study | track | urdf | node | plant | controller | record |
+modes | analyze``."""
 
 from __future__ import annotations
 
@@ -213,6 +213,12 @@ def plant_command(ros_args: list[str]) -> int:
     return plant_main(ros_args)
 
 
+def controller_command(ros_args: list[str]) -> int:
+    from .ros.controller_node import main as controller_main
+
+    return controller_main(ros_args)
+
+
 def record_command(args: argparse.Namespace) -> int:
     from .ros.recorder import record_command as record
 
@@ -292,6 +298,8 @@ def parser() -> argparse.ArgumentParser:
     sub.add_parser("node", help="run the ROS 2 node (arguments after 'node' go to ROS)", add_help=False)
     sub.add_parser("plant", help="run the ROS 2 plant node: the actuated crane under effort commands (arguments "
                    "after 'plant' go to ROS)", add_help=False)
+    sub.add_parser("controller", help="run the example ROS 2 controller node for the plant (arguments after "
+                   "'controller' go to ROS)", add_help=False)
     r = sub.add_parser("record", help="record topics to a rosbag2 bag (default: every topic the crane_reference "
                        "node publishes) until SIGINT/SIGTERM or --duration")
     r.add_argument("topics", nargs="*", metavar="TOPIC", help="topics to record (default: every topic --node "
@@ -325,6 +333,8 @@ def main(argv: list[str] | None = None) -> int:
         return node_command(argparse.Namespace(), argv[1:])
     if argv[:1] == ["plant"]:
         return plant_command(argv[1:])
+    if argv[:1] == ["controller"]:
+        return controller_command(argv[1:])
     args = parser().parse_args(argv)
     if args.command == "simulate" and not (np.isfinite(args.duration) and args.duration > 0):
         parser().error(f"--duration {args.duration}: must be a finite number of seconds > 0")

@@ -44,7 +44,9 @@ fi
 EXECUTABLE=install/crane_reference/lib/crane_reference/node
 [ -f "$EXECUTABLE" ] || fail "$EXECUTABLE was not installed"
 [ -x "$EXECUTABLE" ] || fail "$EXECUTABLE is not executable"
-[ -x install/crane_reference/lib/crane_reference/plant ] || fail "the plant executable was not installed"
+for executable in plant controller; do
+  [ -x "install/crane_reference/lib/crane_reference/$executable" ] || fail "the $executable executable was not installed"
+done
 [ -f install/crane_reference/share/crane_reference/config/crane.yaml ] || fail "config/crane.yaml not installed"
 [ -f install/crane_reference/share/crane_reference/launch/crane_reference.launch.py ] || fail "the launch file was not installed"
 [ -f install/crane_reference/share/crane_reference/rviz/crane_reference.rviz ] || fail "the RViz config was not installed"

@@ -131,7 +131,8 @@ def test_launch_starts_the_node_robot_state_publisher_and_rviz_consistently(laun
     node = nodes["crane_reference"].kwargs
     # the executable ros2 run / launch finds: installed by setup.py into lib/crane_reference
     setup = (ROOT / "setup.py").read_text()
-    assert node["executable"] == "node" and '(f"lib/{PACKAGE}", ["scripts/node", "scripts/plant"])' in setup
+    assert node["executable"] == "node"
+    assert '(f"lib/{PACKAGE}", ["scripts/node", "scripts/plant", "scripts/controller"])' in setup
     assert node["name"] == messages.NODE_NAME
     params_file, overrides, _ = node["parameters"]
     assert Path(params_file).is_file() and overrides == {"autostart": False}  # the launch drives the lifecycle

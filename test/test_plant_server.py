@@ -10,6 +10,8 @@
   bit for bit; a command ordered by a permuted ``joints`` is the same command.
 * A timeout starts the hold command (counted), and the next command ends it.
 * The quaternion of a rotation matrix against scipy's.
+* The example controller's preview sampling: exact on cubic motion; a state waits for a preview that spans
+  it and is answered once.
 """
 
 from __future__ import annotations
@@ -22,8 +24,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from crane_reference.control.controller import JointGains
 from crane_reference.control.plant import Plant, held_start
 from crane_reference.control.plant_server import CommandRefusedError, PlantServer, PlantSettings
+from crane_reference.control.preview_tracking import Preview, PreviewTracker
 from crane_reference.dynamics.kinematics import quaternion
 from crane_reference.model.chain import ACTUATED_JOINTS
 from crane_reference.model.parameters import TorqueDrive
@@ -153,3 +157,35 @@ def test_settings_refuse_what_they_cannot_run():
         PlantSettings(drive_damping=(1.0, -1.0, 0.0))
     with pytest.raises(ValueError, match="command_timeout = nan"):
         PlantSettings(command_timeout=math.nan)
+
+
+def test_the_preview_is_sampled_exactly_on_cubic_motion():
+    """Between a preview's points q is cubic Hermite in positions and velocities and qd in velocities and
+    accelerations: exact on a cubic q(t) (joint_trajectory_controller's sampling of such points)."""
+    times_ns = np.array([1_000_000_000, 1_100_000_000, 1_250_000_000, 1_300_000_000], dtype=np.int64)
+    s = (times_ns - times_ns[0]) / 1e9
+    coefficients = np.array([[0.3, -1.0, 2.0], [1.0, 0.5, -0.2], [-0.7, 0.0, 0.4], [2.0, -3.0, 1.0]])  # (4, J)
+    q = lambda t: sum(c * t[:, None] ** k for k, c in enumerate(coefficients))  # noqa: E731
+    qd = lambda t: sum(k * c * t[:, None] ** (k - 1) for k, c in enumerate(coefficients) if k)  # noqa: E731
+    qdd = lambda t: sum(k * (k - 1) * c * t[:, None] ** (k - 2) for k, c in enumerate(coefficients) if k > 1)  # noqa: E731
+    preview = Preview(times_ns, q(s), qd(s), qdd(s) + 0.0 * s[:, None])
+    for t_ns in (1_000_000_000, 1_037_000_001, 1_180_000_000, 1_300_000_000):
+        t = np.array([(t_ns - times_ns[0]) / 1e9])
+        q_ref, qd_ref = preview.at(t_ns)
+        assert q_ref == pytest.approx(q(t)[0], abs=1e-12)
+        # qd is quadratic: cubic Hermite in qd and qdd reproduces it
+        assert qd_ref == pytest.approx(qd(t)[0], abs=1e-12)
+
+
+def test_the_tracker_waits_for_a_preview_and_answers_a_stamp_once():
+    gains = [JointGains(100.0, 10.0)] * 3
+    tracker = PreviewTracker(ACTUATED_JOINTS, gains, 1e-3)
+    zeros = np.zeros(3)
+    assert tracker.take_state(1_000_000_000, zeros, zeros) is None  # no preview yet: waits
+    preview = Preview(np.array([1_000_000_000, 2_000_000_000], dtype=np.int64), np.array([[1.0, 2.0, 3.0]] * 2),
+                      np.zeros((2, 3)), np.zeros((2, 3)))
+    u = tracker.take_preview(preview)  # the waiting state is answered: u = kp (q_ref - q) + kd qd_ref
+    assert u == pytest.approx([100.0, 200.0, 300.0])
+    assert tracker.take_state(1_000_000_000, zeros, zeros) is None  # the same stamp again: answered already
+    assert tracker.take_state(1_001_000_000, zeros, zeros) == pytest.approx([100.0, 200.0, 300.0])
+    assert tracker.take_state(3_000_000_000, zeros, zeros) is None  # beyond the preview: waits

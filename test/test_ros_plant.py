@@ -7,6 +7,8 @@ as a process for the signals.
   the core's with them refused, and the stream goes on.
 * In real time, silence beyond ``command_timeout`` starts the hold command, reported at WARN.
 * The lifecycle transitions through the standard services; SIGINT and SIGTERM end the process with 0.
+* The closed loop over ROS (reference node, plant in lock-step, example controller) is ``crane-reference
+  track``'s loop in one process, bit for bit.
 """
 
 from __future__ import annotations
@@ -34,9 +36,13 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
+from crane_reference.analysis.tracking.closed_loop import TrackingSpec, run_tracking
 from crane_reference.control.plant import held_start
 from crane_reference.control.plant_server import CommandRefusedError, PlantServer, PlantSettings
+from crane_reference.model.chain import ACTUATED_JOINTS
 from crane_reference.motion.simulation import Scenario
+from crane_reference.ros.controller_node import CraneControllerNode
+from crane_reference.ros.node import CraneReferenceNode
 from crane_reference.ros.plant_node import NODE_NAME, CranePlantNode
 
 NS = 10**9
@@ -144,7 +150,7 @@ def test_lockstep_over_ros_is_the_core_driven_directly(params, probe_factory, st
     probe = probe_factory(clock_mode="lockstep")
     probe.lockstep(commands)
     stamps = [s.header.stamp.sec * NS + s.header.stamp.nanosec for s in probe.states]
-    assert stamps == [round(k * PERIOD * NS) for k in range(61)]
+    assert stamps == [round((1.0 + k * PERIOD) * NS) for k in range(61)]  # from clock_start
     assert [c.clock.sec * NS + c.clock.nanosec for c in probe.clock] == stamps
     assert probe.states[0].name == ["column_slew", "boom_luff", "knuckle"]
     direct = _direct(params, commands)
@@ -179,7 +185,7 @@ def test_silence_starts_the_hold_command_with_a_warning(probe_factory, start_eff
     probe.wait_for(lambda: len(probe.states) > count + 20, "states while holding")  # the stream goes on
     assert probe.node.set_parameters([Parameter("command_timeout", value=60)])[0].successful  # an integer, too
     probe.command(start_efforts)  # ends the hold
-    probe.wait_for(lambda: probe.latest_diagnostics()["level"] == 0, f"OK after a command: {probe.latest_diagnostics()}", timeout=5.0)
+    probe.wait_for(lambda: probe.latest_diagnostics()["level"] == 0, "OK after a command", timeout=5.0)
     assert probe.latest_diagnostics()["timeouts"] == "1"
 
 
@@ -237,3 +243,57 @@ def test_configuration_errors_name_the_parameter():
                                                                  Parameter("integrator.step", value=1e-3)])
     finally:
         context.try_shutdown()
+
+
+@pytest.mark.slow
+def test_the_loop_over_ros_is_crane_reference_track(params):
+    """The reference node (sim time, 1 ms steps, a preview point every 1 ms), the plant (lock-step) and the example
+    controller, each a node: the plant's motion equals ``crane-reference track``'s (the compiled loop in one
+    process, its reference simulated in one call) with the same gains, rate and step, bit for bit."""
+    duration = 0.3
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    sim = [Parameter("use_sim_time", value=True)]
+    nodes = [CranePlantNode(context=context, parameter_overrides=[Parameter("clock_mode", value="lockstep")]),
+             CraneReferenceNode(context=context, parameter_overrides=[
+                 *sim, Parameter("integrator.step", value=1e-3), Parameter("preview.points", value=1000),
+                 Parameter("preview.horizon", value=0.999)]),
+             CraneControllerNode(context=context, parameter_overrides=sim)]
+    states: list[JointState] = []
+    probe = Node("probe", context=context)
+    probe.create_subscription(JointState, f"/{NODE_NAME}/joint_states", states.append, 100000)
+    stop = threading.Event()
+
+    def spin(node: Node) -> None:
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        with suppress(ExternalShutdownException):
+            while not stop.is_set():
+                executor.spin_once(timeout_sec=0.01)
+
+    threads = [threading.Thread(target=spin, args=(node,), daemon=True) for node in (*nodes, probe)]
+    for thread in threads:
+        thread.start()
+    try:
+        deadline = time.monotonic() + 120.0
+        end_ns = round((1.0 + duration) * NS)
+        while not states or states[-1].header.stamp.sec * NS + states[-1].header.stamp.nanosec < end_ns:
+            assert time.monotonic() < deadline, f"{len(states)} states in 120 s"
+            time.sleep(0.01)
+    finally:
+        stop.set()
+        for thread in threads:
+            thread.join()
+        for node in (*nodes, probe):
+            node.destroy_node()
+        context.try_shutdown()
+    track = run_tracking(params, TrackingSpec(feedforward="none", duration=duration))
+    columns = [track.plant.joint_names.index(joint) for joint in ACTUATED_JOINTS]
+    by_tick = {}
+    for state in states:  # a repeated state (heartbeat) is the same state
+        by_tick.setdefault(round((state.header.stamp.sec * NS + state.header.stamp.nanosec) / 1e6) - 1000, state)
+    ticks = round(duration * 1000)
+    assert sorted(by_tick)[:ticks + 1] == list(range(ticks + 1))
+    over_ros = np.array([by_tick[k].position for k in range(ticks + 1)])
+    assert np.array_equal(over_ros, track.plant.q[:ticks + 1, columns])
+    assert np.abs(over_ros[-1] - over_ros[0]).max() > 1e-2  # it moved

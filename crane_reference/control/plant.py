@@ -12,6 +12,7 @@ its start, where the forces jump (keeping its modal correction).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,7 +29,7 @@ from ..motion.integration import StepState
 from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import SAMPLED_ACCOUNTS, MotionStepper, Scenario
 from ..motion.trajectory import Trajectory, make_sample, stack_samples
-from .controller import JointController, JointGains
+from .controller import JointController, JointGains, bandwidth_gains
 
 
 def servo_motion(scenario: Scenario) -> ProgrammedMotion:
@@ -56,6 +57,20 @@ def held_start(scenario: Scenario) -> HeldStart:
     torques = {names[j]: float(tau) for j, tau in zip(motion.dependent, solution.reactions, strict=True)}
     torques[names[scenario.model.drive_joint]] = equilibrium.holding_torque
     return HeldStart(equilibrium.q, np.array([torques[name] for name in ACTUATED_JOINTS]))
+
+
+BANDWIDTH = 2.0
+"""[Hz] the default closed-loop bandwidth of each joint (as ``crane-reference track``)."""
+
+DAMPING_RATIO = 0.7
+
+
+def default_gains(scenario: Scenario, joints: Sequence[str]) -> list[JointGains]:
+    """PD gains per joint of ``joints`` for :data:`BANDWIDTH` and :data:`DAMPING_RATIO` with J the diagonal of M
+    at the held start (:func:`~.controller.bandwidth_gains`, as ``crane-reference track``)."""
+    q = held_start(scenario).q
+    inertia = scenario.dynamics.terms(0.0, q, np.zeros_like(q)).M
+    return [bandwidth_gains(inertia[j, j], BANDWIDTH, DAMPING_RATIO) for j in map(scenario.model.index, joints)]
 
 
 class Plant:

@@ -41,14 +41,7 @@ from ..model.chain import ACTUATED_JOINTS, VARIANTS
 from ..model.parameters import CraneParameters
 from ..motion.simulation import Scenario
 from ..motion.steps import PLANT_STEP
-from .controller import bandwidth_gains
-from .plant import Plant, held_start
-
-DRIVE_BANDWIDTH = 2.0
-"""[Hz] closed-loop bandwidth whose D gain is the drives' default damping (as ``crane-reference track``'s
-default gains, with :data:`DRIVE_DAMPING_RATIO`)."""
-
-DRIVE_DAMPING_RATIO = 0.7
+from .plant import Plant, default_gains, held_start
 
 
 class CommandRefusedError(ValueError):
@@ -98,12 +91,9 @@ class PlantSettings:
 
 
 def default_drive_damping(scenario: Scenario, joints: Sequence[str]) -> tuple[float, ...]:
-    """kd = 2 zeta J w per joint of ``joints`` at :data:`DRIVE_BANDWIDTH` and :data:`DRIVE_DAMPING_RATIO`, J the
-    diagonal of M at the held start (:func:`~.controller.bandwidth_gains`, as ``crane-reference track``)."""
-    q = held_start(scenario).q
-    inertia = scenario.dynamics.terms(0.0, q, np.zeros_like(q)).M
-    return tuple(bandwidth_gains(inertia[j, j], DRIVE_BANDWIDTH, DRIVE_DAMPING_RATIO).kd
-                 for j in map(scenario.model.index, joints))
+    """kd of :func:`~.plant.default_gains` per joint of ``joints`` (the D action a ``crane-reference track``
+    controller with its default gains puts in the drives)."""
+    return tuple(gains.kd for gains in default_gains(scenario, joints))
 
 
 @dataclass(frozen=True)

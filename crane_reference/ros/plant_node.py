@@ -15,8 +15,10 @@ hold command on a timeout); the parameters are :mod:`.plant_parameters`.
 * ``clock_mode`` realtime: a period every period of the steady clock (a thread of its own paces them; a period
   that starts more than a period late counts as late, and the next is due a period after it), stamped with
   the node's clock;
-  lockstep: the node publishes /clock (the plant's time from 0) and advances one period per command
-  received, so a controller with ``use_sim_time`` runs in step with it, deterministically.
+  lockstep: the node publishes /clock (``clock_start`` plus the plant's time) and advances one period per
+  command received, so nodes with ``use_sim_time`` run in step with it, deterministically; while no command
+  comes, it publishes /clock and the state again every :data:`HEARTBEAT` s of wall time (for nodes that
+  joined late: a controller answers a state stamp once).
 * ``configure`` builds the plant (held at rest at its start), ``activate`` runs it, ``deactivate`` stops the
   periods (the plant's time stands still), ``cleanup`` drops it; ``autostart`` (default) configures and
   activates at construction.
@@ -57,6 +59,7 @@ JOINT_STATES_TOPIC = "~/joint_states"
 END_EFFECTOR_POSE_TOPIC = "~/end_effector_pose"
 TIP_DEFLECTION_TOPIC = "~/tip_deflection"
 CLOCK_TOPIC = "/clock"
+HEARTBEAT = 0.5  # [s] of wall time between repetitions of an unanswered lock-step state
 
 
 class CranePlantNode(LifecycleNode):
@@ -86,6 +89,8 @@ class CranePlantNode(LifecycleNode):
         self._diagnostics = self.create_publisher(self._types.DiagnosticArray, messages.DIAGNOSTICS_TOPIC,
                                                   messages.PUBLISHER_DEPTH)
         self.create_timer(messages.DIAGNOSTICS_PERIOD, self._publish_diagnostics, clock=self._steady)
+        self._heard = False  # a command came since the last heartbeat
+        self.create_timer(HEARTBEAT, self._heartbeat, clock=self._steady)
         if self._params.autostart:
             if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
                 raise StartupError(self._doing.removeprefix(f"{CANNOT} configure: "))
@@ -186,6 +191,7 @@ class CranePlantNode(LifecycleNode):
             self.get_logger().warn(f"command ignored: the plant is {self._doing}", throttle_duration_sec=1.0)
             return
         lockstep = self._params.clock_mode == "lockstep"
+        self._heard = True
         with self._lock:
             now = self._server.plant.t if lockstep else self._seconds()
             try:
@@ -215,7 +221,7 @@ class CranePlantNode(LifecycleNode):
         """The state's messages (each made once, then filled again), after /clock in lock-step."""
         v, types, made = self._params, self._types, self._made
         if v.clock_mode == "lockstep":
-            stamp_ns = round(state.t * NANOSECONDS)
+            stamp_ns = round((v.clock_start + state.t) * NANOSECONDS)
             self._outputs["clock"].publish(ClockMessage(clock=messages.time_msg(types, stamp_ns)))
         else:
             stamp_ns = self.get_clock().now().nanoseconds
@@ -226,6 +232,14 @@ class CranePlantNode(LifecycleNode):
                                                      state.deflection, made.get("deflection"))
         for name in ("joints", "pose", "deflection"):
             self._outputs[name].publish(made[name])
+
+    def _heartbeat(self) -> None:
+        """Lock-step: the current state again if no command came since the last heartbeat."""
+        if self._params.clock_mode == "lockstep" and self._active() and not self._heard:
+            with self._lock:
+                state = self._server.state()
+            self._publish(state)
+        self._heard = False
 
     def _publish_diagnostics(self) -> None:
         if self._server is None:

@@ -54,6 +54,8 @@ PLANT_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("clock_mode", STRING, "realtime", "'realtime': a control period every period of the wall "
                   "clock, like a robot; 'lockstep': the plant publishes /clock and advances one period per command "
                   "received (deterministic, as fast as the loop runs)", choices=CLOCK_MODES, read_only=True),
+    ParameterSpec("clock_start", DOUBLE, 1.0, "lockstep: the /clock time of the plant's start (ROS time 0 means "
+                  "'no clock yet' to nodes with use_sim_time)", "s", (1e-9, 1e9), read_only=True),
     ParameterSpec("all_coordinates", BOOL, False, "~/joint_states gives every coordinate of the model (supports, "
                   "boom springs), not only the joints", read_only=True),
     ParameterSpec("frame_id", STRING, "world", "Frame of ~/end_effector_pose (the world frame {0} of the crane)"),
@@ -78,6 +80,7 @@ class PlantParameters:
     drive_damping: dict[str, float]
     command_timeout: float
     clock_mode: str
+    clock_start: float
     all_coordinates: bool
     frame_id: str
     frame_prefix: str
@@ -109,5 +112,5 @@ def declare_plant(node: Node) -> PlantParameters:
     return PlantParameters(values["config_file"], values["model"], values["integrator.step"],
                            values["control_rate"], tuple(values["joints"]),
                            {joint: values[f"drive_damping.{joint}"] for joint in ACTUATED_JOINTS},
-                           values["command_timeout"], values["clock_mode"], values["all_coordinates"],
-                           values["frame_id"], values["frame_prefix"], values["autostart"])
+                           values["command_timeout"], values["clock_mode"], values["clock_start"],
+                           values["all_coordinates"], values["frame_id"], values["frame_prefix"], values["autostart"])

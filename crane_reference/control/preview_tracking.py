@@ -1,0 +1,81 @@
+"""The example controller node's decisions, without ROS: the reference node's preview sampled as
+joint_trajectory_controller samples its trajectory, and a :class:`~.controller.JointController` tick on each
+measured state of the plant.
+
+The reference at time t comes from the latest preview that spans t (points at t_i = stamp + time_from_start_i,
+in integer nanoseconds, so that a state stamped on a point gets that point exactly):
+q cubic Hermite in the points' positions and velocities, qd cubic Hermite in their velocities and
+accelerations (:func:`~crane_reference.motion.trajectory.cubic_hermite`; exact at the points).  The plant's
+state stamped t gets the command of the controller's tick there,
+
+    u = tau_ff + kp (q_ref - q) + kd qd_ref + ki I    (:mod:`.controller`; the drive subtracts kd qd),
+
+sent for the plant's next period; with no preview spanning t yet (at the start, before the reference
+node's first preview), the state waits for one.  This example has no feedforward (tau_ff = 0): a user's
+controller adds its own.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model.units import NANOSECONDS
+from ..motion.trajectory import cubic_hermite
+from .controller import JointController, JointGains
+
+
+@dataclass(frozen=True)
+class Preview:
+    """A preview's points: times [ns] (P,) (int64), positions, velocities and accelerations (P, J) of the
+    joints."""
+
+    times_ns: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray
+    accelerations: np.ndarray
+
+    def spans(self, t_ns: int) -> bool:
+        return bool(self.times_ns[0] <= t_ns <= self.times_ns[-1])
+
+    def at(self, t_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        """q_ref and qd_ref at t_ns [ns] (inside the preview)."""
+        seconds = (self.times_ns - self.times_ns[0]) / NANOSECONDS
+        t = np.asarray([(t_ns - self.times_ns[0]) / NANOSECONDS])
+        return (cubic_hermite(t, seconds, self.positions, self.velocities)[0],
+                cubic_hermite(t, seconds, self.velocities, self.accelerations)[0])
+
+
+class PreviewTracker:
+    """The module docstring's controller for ``joints`` with ``gains``, ticking every ``period`` [s]."""
+
+    def __init__(self, joints: Sequence[str], gains: Sequence[JointGains], period: float):
+        self.joints = tuple(joints)
+        self.controller = JointController(gains, period)
+        self.preview: Preview | None = None
+        self._pending: tuple[int, np.ndarray, np.ndarray] | None = None
+        self._answered = -1  # the stamp [ns] of the last state answered
+
+    def take_preview(self, preview: Preview) -> np.ndarray | None:
+        """A new preview; the command for a waiting state if it spans that state's time, else None."""
+        self.preview = preview
+        return self._tick() if self._pending is not None else None
+
+    def take_state(self, t_ns: int, q: np.ndarray, qd: np.ndarray) -> np.ndarray | None:
+        """The plant's state stamped t_ns [ns] (q, qd of ``joints``): the command u [N m] for its next period, or None
+        while no preview spans t (the state then waits for one) and for a state not after the last answered (a
+        repetition: one command per period)."""
+        if t_ns <= self._answered:
+            return None
+        self._pending = (t_ns, np.asarray(q, dtype=float), np.asarray(qd, dtype=float))
+        return self._tick()
+
+    def _tick(self) -> np.ndarray | None:
+        t_ns, q, qd = self._pending
+        if self.preview is None or not self.preview.spans(t_ns):
+            return None
+        self._pending, self._answered = None, t_ns
+        q_ref, qd_ref = self.preview.at(t_ns)
+        return self.controller(q_ref - q, qd_ref, qd, np.zeros(len(self.joints)))

@@ -1,0 +1,137 @@
+"""An example controller node for the crane plant: ``ros2 run crane_reference controller``.
+
+Written to be replaced by a user's own controller, as the ros2/examples nodes are: it subscribes to the
+reference node's ``~/reference_preview`` (trajectory_msgs/JointTrajectory) and to the plant's
+``~/joint_states``, and answers each measured state with a command on the plant's ``~/commands``
+(std_msgs/Float64MultiArray, one effort per joint of ``joints``); the decisions are
+:class:`~crane_reference.control.preview_tracking.PreviewTracker`'s (the preview sampled as
+joint_trajectory_controller samples its trajectory, then a PD/PID tick).
+
+Parameters: ``joints``; the gains per joint ``gains.<joint>.p`` [N m/rad], ``.d`` [N m s/rad] and ``.i``
+[N m/(rad s)] (ros2_control's names; defaults: a 2 Hz, 0.7-damped loop on the crane of ``config_file`` and
+``model``, as ``crane-reference track``); ``.d`` is the D action the plant's drives apply, so it must equal
+the plant's ``drive_damping.<joint>`` (the defaults agree); ``control_rate`` [Hz], the plant's, for the
+integral; the three topics.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import JointTrajectory
+
+from ..control.controller import JointGains
+from ..control.plant import default_gains
+from ..control.preview_tracking import Preview, PreviewTracker
+from ..model.chain import ACTUATED_JOINTS, VARIANTS
+from ..model.config import ConfigError, load_config
+from ..model.units import NANOSECONDS
+from ..motion.simulation import Scenario
+from ..stream.health import CANNOT
+from .parameters import DOUBLE, INTEGER, STRING, STRING_ARRAY, ParameterError, ParameterSpec, declare
+
+NODE_NAME = "crane_controller"
+DEPTH = 10
+
+_TOPICS = (
+    ParameterSpec("reference_topic", STRING, "/crane_reference/reference_preview", "The reference node's preview "
+                  "(trajectory_msgs/JointTrajectory)", read_only=True),
+    ParameterSpec("state_topic", STRING, "/crane_plant/joint_states", "The plant's measured joint states",
+                  read_only=True),
+    ParameterSpec("command_topic", STRING, "/crane_plant/commands", "The plant's commands "
+                  "(std_msgs/Float64MultiArray)", read_only=True),
+)
+
+
+def _stamp_ns(msg) -> int:
+    return msg.header.stamp.sec * NANOSECONDS + msg.header.stamp.nanosec
+
+
+class CraneControllerNode(Node):
+    """Tracks the reference preview on the plant; see the module documentation."""
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs) -> None:
+        super().__init__(node_name, **kwargs)
+        config_file = declare(self, ParameterSpec("config_file", STRING, "", "Crane description YAML; '' loads the "
+                                                  "packaged default", empty_allowed=True, read_only=True))
+        model = declare(self, ParameterSpec("model", STRING, "flexible", "Crane model variant (for the default "
+                                            "gains)", choices=VARIANTS, read_only=True))
+        joints = tuple(declare(self, ParameterSpec("joints", STRING_ARRAY, list(ACTUATED_JOINTS), "The joints of "
+                                                   "the commands, in their order", read_only=True)))
+        if sorted(joints) != sorted(ACTUATED_JOINTS):
+            raise ParameterError(f"joints = {list(joints)}: must name each of {', '.join(ACTUATED_JOINTS)} once")
+        rate = declare(self, ParameterSpec("control_rate", INTEGER, 1000, "The plant's control rate (the integral's "
+                                           "period)", "Hz", (1, 1000), read_only=True))
+        defaults = default_gains(Scenario(load_config(config_file or None), model), joints)
+        gains = []
+        for joint, default in zip(joints, defaults, strict=True):
+            p, d, i = (declare(self, ParameterSpec(f"gains.{joint}.{name}", DOUBLE, value, f"{what} of {joint}",
+                                                   unit, (0.0, 1e12), read_only=True))
+                       for name, value, what, unit in (("p", default.kp, "Proportional gain", "N m/rad"),
+                                                       ("d", default.kd, "Derivative gain (in the plant's drive)",
+                                                        "N m s/rad"),
+                                                       ("i", 0.0, "Integral gain", "N m/(rad s)")))
+            gains.append(JointGains(p, d, i))
+        reference, state, command = (declare(self, spec) for spec in _TOPICS)
+        self.tracker = PreviewTracker(joints, gains, 1.0 / rate)
+        self._commands = self.create_publisher(Float64MultiArray, command, DEPTH)
+        self.create_subscription(JointTrajectory, reference, self._on_preview, DEPTH)
+        self.create_subscription(JointState, state, self._on_state, DEPTH)
+        self.get_logger().info(f"tracking {reference} on {state}, commanding {command} ({', '.join(joints)})")
+
+    def _columns(self, names: list[str], what: str) -> list[int] | None:
+        missing = [joint for joint in self.tracker.joints if joint not in names]
+        if missing:
+            self.get_logger().error(f"{what} lacks {', '.join(missing)}", throttle_duration_sec=5.0)
+            return None
+        return [names.index(joint) for joint in self.tracker.joints]
+
+    def _on_preview(self, msg: JointTrajectory) -> None:
+        columns = self._columns(list(msg.joint_names), "the reference preview")
+        if columns is None or not msg.points:
+            return
+        start = _stamp_ns(msg)
+        times = np.array([start + p.time_from_start.sec * NANOSECONDS + p.time_from_start.nanosec
+                          for p in msg.points], dtype=np.int64)
+        fields = (np.array([[getattr(p, name)[c] for c in columns] for p in msg.points], dtype=float)
+                  for name in ("positions", "velocities", "accelerations"))
+        self._send(self.tracker.take_preview(Preview(times, *fields)))
+
+    def _on_state(self, msg: JointState) -> None:
+        columns = self._columns(list(msg.name), "the plant's joint states")
+        if columns is not None:
+            self._send(self.tracker.take_state(_stamp_ns(msg), [msg.position[c] for c in columns],
+                                               [msg.velocity[c] for c in columns]))
+
+    def _send(self, command) -> None:
+        if command is not None:
+            self._commands.publish(Float64MultiArray(data=[float(u) for u in command]))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the controller until SIGINT / shutdown; exit code 0, or 1 if it cannot start."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = CraneControllerNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ConfigError, ParameterError) as error:
+        rclpy.logging.get_logger(NODE_NAME).fatal(f"{CANNOT} start: {error}")
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
