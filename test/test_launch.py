@@ -235,3 +235,49 @@ def test_the_launch_drives_the_lifecycle_unless_autostart_is_off(monkeypatch, tm
     (activate,) = on_inactive.kwargs["entities"]
     assert activate.kwargs["event"].kwargs == {"lifecycle_node_matcher": ("matches", node),
                                                "transition_id": Transition.TRANSITION_ACTIVATE}
+
+
+CLOSED_LOOP = ROOT / "launch" / "closed_loop.launch.py"
+
+
+def closed_loop(monkeypatch, tmp_path, **overrides):
+    """The nodes closed_loop.launch.py starts with its default arguments and ``overrides``, by name."""
+    for name, module in stand_ins(tmp_path).items():
+        monkeypatch.setitem(sys.modules, name, module)
+    spec = importlib.util.spec_from_file_location("closed_loop_launch", CLOSED_LOOP)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    description = module.generate_launch_description()
+    arguments = {a.args[0]: a.kwargs["default_value"] for a in description.args[0] if a.args}
+    (opaque,) = [a for a in description.args[0] if "function" in a.kwargs]
+    return {node.kwargs["name"]: node for node in opaque.kwargs["function"]({**arguments, **overrides})}
+
+
+@pytest.mark.ros  # reads the nodes' parameter tables (rclpy)
+@pytest.mark.parametrize("clock_mode", ["lockstep", "realtime"])
+@pytest.mark.parametrize("namespace", ["", "crane1"])
+def test_the_closed_loop_launch_connects_the_three_nodes(monkeypatch, tmp_path, clock_mode, namespace):
+    from crane_reference.ros import controller_node, plant_node
+    from crane_reference.ros.parameters import SPECS
+    from crane_reference.ros.plant_parameters import PLANT_SPECS
+
+    nodes = closed_loop(monkeypatch, tmp_path, clock_mode=clock_mode, namespace=namespace, control_rate="1000")
+    assert set(nodes) == {messages.NODE_NAME, plant_node.NODE_NAME, controller_node.NODE_NAME}
+    setup = (ROOT / "setup.py").read_text()
+    for node in nodes.values():
+        assert f'"scripts/{node.kwargs["executable"]}"' in setup and node.kwargs["namespace"] == namespace
+    assert isinstance(nodes["crane_reference"], LifecycleNode) and isinstance(nodes["crane_plant"], LifecycleNode)
+    (reference,), (plant,), (controller,) = (nodes[name].kwargs["parameters"] for name in
+                                             ("crane_reference", "crane_plant", "crane_controller"))
+    assert set(reference) - {"use_sim_time"} <= set(SPECS) and set(plant) <= set(PLANT_SPECS)
+    assert reference["use_sim_time"] == controller["use_sim_time"] == (clock_mode == "lockstep")
+    assert plant["clock_mode"] == clock_mode and plant["control_rate"] == controller["control_rate"] == 1000
+    # a preview point every control period: the node spaces preview.points - 1 intervals over the horizon
+    assert reference["preview.horizon"] / (reference["preview.points"] - 1) == pytest.approx(1e-3, rel=1e-12)
+    topics = {spec.name: spec.default for spec in controller_node._TOPICS}
+    assert resolve(topics["reference_topic"], namespace, "crane_controller") == resolve(
+        messages.REFERENCE_PREVIEW_TOPIC, namespace, messages.NODE_NAME)
+    assert resolve(topics["state_topic"], namespace, "crane_controller") == resolve(
+        plant_node.JOINT_STATES_TOPIC, namespace, plant_node.NODE_NAME)
+    assert resolve(topics["command_topic"], namespace, "crane_controller") == resolve(
+        plant_node.COMMANDS_TOPIC, namespace, plant_node.NODE_NAME)

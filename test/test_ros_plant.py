@@ -41,6 +41,7 @@ from crane_reference.control.plant import held_start
 from crane_reference.control.plant_server import CommandRefusedError, PlantServer, PlantSettings
 from crane_reference.model.chain import ACTUATED_JOINTS
 from crane_reference.motion.simulation import Scenario
+from crane_reference.motion.steps import ONLINE_STEP
 from crane_reference.ros.controller_node import CraneControllerNode
 from crane_reference.ros.node import CraneReferenceNode
 from crane_reference.ros.plant_node import NODE_NAME, CranePlantNode
@@ -247,17 +248,17 @@ def test_configuration_errors_name_the_parameter():
 
 @pytest.mark.slow
 def test_the_loop_over_ros_is_crane_reference_track(params):
-    """The reference node (sim time, 1 ms steps, a preview point every 1 ms), the plant (lock-step) and the example
-    controller, each a node: the plant's motion equals ``crane-reference track``'s (the compiled loop in one
-    process, its reference simulated in one call) with the same gains, rate and step, bit for bit."""
+    """The reference node (sim time, its default step, a preview point every 1 ms as closed_loop.launch.py sets),
+    the plant (lock-step) and the example controller, each a node: the plant's motion equals ``crane-reference
+    track``'s (the compiled loop in one process, its reference simulated in one call) with the same gains,
+    rate and steps, bit for bit."""
     duration = 0.3
     context = rclpy.Context()
     rclpy.init(context=context)
     sim = [Parameter("use_sim_time", value=True)]
     nodes = [CranePlantNode(context=context, parameter_overrides=[Parameter("clock_mode", value="lockstep")]),
              CraneReferenceNode(context=context, parameter_overrides=[
-                 *sim, Parameter("integrator.step", value=1e-3), Parameter("preview.points", value=1000),
-                 Parameter("preview.horizon", value=0.999)]),
+                 *sim, Parameter("preview.points", value=1000), Parameter("preview.horizon", value=0.999)]),
              CraneControllerNode(context=context, parameter_overrides=sim)]
     states: list[JointState] = []
     probe = Node("probe", context=context)
@@ -287,7 +288,7 @@ def test_the_loop_over_ros_is_crane_reference_track(params):
         for node in (*nodes, probe):
             node.destroy_node()
         context.try_shutdown()
-    track = run_tracking(params, TrackingSpec(feedforward="none", duration=duration))
+    track = run_tracking(params, TrackingSpec(feedforward="none", duration=duration, reference_step=ONLINE_STEP))
     columns = [track.plant.joint_names.index(joint) for joint in ACTUATED_JOINTS]
     by_tick = {}
     for state in states:  # a repeated state (heartbeat) is the same state

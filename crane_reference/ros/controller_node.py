@@ -40,11 +40,11 @@ NODE_NAME = "crane_controller"
 DEPTH = 10
 
 _TOPICS = (
-    ParameterSpec("reference_topic", STRING, "/crane_reference/reference_preview", "The reference node's preview "
-                  "(trajectory_msgs/JointTrajectory)", read_only=True),
-    ParameterSpec("state_topic", STRING, "/crane_plant/joint_states", "The plant's measured joint states",
+    ParameterSpec("reference_topic", STRING, "crane_reference/reference_preview", "The reference node's preview "
+                  "(trajectory_msgs/JointTrajectory; relative names resolve in the node's namespace)", read_only=True),
+    ParameterSpec("state_topic", STRING, "crane_plant/joint_states", "The plant's measured joint states",
                   read_only=True),
-    ParameterSpec("command_topic", STRING, "/crane_plant/commands", "The plant's commands "
+    ParameterSpec("command_topic", STRING, "crane_plant/commands", "The plant's commands "
                   "(std_msgs/Float64MultiArray)", read_only=True),
 )
 
