@@ -1,5 +1,5 @@
-"""Command line: ``crane-reference simulate | compile | study | track | urdf | node | plant | controller | record |
-modes | analyze``."""
+"""Command line: ``crane-reference simulate | compile | study | track | loop | urdf | node | plant | controller |
+record | modes | analyze``."""
 
 from __future__ import annotations
 
@@ -189,6 +189,34 @@ def track_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def loop_command(args: argparse.Namespace) -> int:
+    from .analysis.tracking.closed_loop import TrackingSpec, recorded_run
+    from .analysis.tracking.report import write_report
+    from .ros.loop import LoopError, run_loop
+
+    try:
+        spec = TrackingSpec(variant=args.model, feedforward="none", rate=args.rate, duration=args.duration)
+    except ValueError as error:
+        print(f"crane-reference loop: {error}", file=sys.stderr)
+        return 2
+    params = load_config(args.config)
+    with progress_bar(f"loop ({args.clock_mode})", spec.duration) as bar:
+        try:
+            recording = run_loop(spec.duration, args.clock_mode, round(spec.rate), spec.variant, args.config or "",
+                                 advance_to(bar))
+        except LoopError as error:
+            print(f"crane-reference loop: {error}", file=sys.stderr)
+            return 1
+    run = recorded_run(params, spec, recording)
+    files = write_report([run], args.out)
+    s = run.summary()
+    print(f"over ROS ({args.clock_mode}): E off the ellipse <= {s['ellipse_distance_max_m']:.2e} m, height error <= "
+          f"{s['height_error_max_m']:.2e} m, tip 40-250 Hz RMS {s['tip_vibration_rms_m']:.2e} m, "
+          f"{recording.t[-1] / recording.wall:.2f} s of the plant per s of wall time")
+    print(f"wrote {', '.join(f.name for f in files)} to {args.out}")
+    return 0
+
+
 def compile_command(args: argparse.Namespace) -> int:
     from .stream.warmup import warm_up
 
@@ -290,6 +318,16 @@ def parser() -> argparse.ArgumentParser:
     tr.add_argument("--step", type=float, default=PLANT_STEP,
                     help=f"the plant's integrator step [s] (default {PLANT_STEP:g})")
     tr.add_argument("--out", default="results/tracking", help="output directory (default ./results/tracking)")
+    lo = sub.add_parser("loop", help="the closed loop over ROS without launch: the reference node, the plant and the "
+                        "example controller as processes; records the plant and writes track's summary and figure")
+    lo.add_argument("--config", help="crane YAML (default: the packaged config/crane.yaml)")
+    lo.add_argument("--model", choices=VARIANTS, default="flexible", help="crane (plant and reference)")
+    lo.add_argument("--clock-mode", choices=["lockstep", "realtime"], default="lockstep",
+                    help="lockstep: the plant's /clock paces the three, deterministically (default); realtime: the "
+                         "wall clock")
+    lo.add_argument("--rate", type=int, default=1000, help="control rate [Hz] (default 1000)")
+    lo.add_argument("--duration", type=float, default=5.0, help="seconds of the plant's time (default 5)")
+    lo.add_argument("--out", default="results/loop", help="output directory (default ./results/loop)")
     sub.add_parser("compile", help="compile the numba kernels ahead of the first run (fills the cache; run it "
                    "after installing, e.g. after colcon build)")
     u = sub.add_parser("urdf", help="print the URDF of a model variant")
@@ -341,7 +379,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return {"simulate": simulate_command, "urdf": urdf_command, "record": record_command, "modes": modes_command,
                 "analyze": analyze_command, "compile": compile_command, "study": study_command,
-                "track": track_command}[args.command](args)
+                "track": track_command, "loop": loop_command}[args.command](args)
     except ConfigError as error:
         print(f"crane-reference: {error}", file=sys.stderr)
         return 2

@@ -5,8 +5,9 @@
 
 * ``crane_reference`` (lifecycle): the reference, its preview with a point every control period over the
   next second (the controller reads the reference there, as joint_trajectory_controller reads its
-  trajectory);
-* ``crane_plant`` (lifecycle): the actuated crane of the same model and config under effort commands;
+  trajectory), its joint states at the control rate;
+* ``crane_plant`` (lifecycle): the actuated crane of the same model and config under effort commands (its
+  joint states with every coordinate);
 * ``crane_controller``: the example controller, to be replaced by one's own (it reads
   ``crane_reference/reference_preview`` and ``crane_plant/joint_states`` and writes
   ``crane_plant/commands``, names relative to the namespace).
@@ -14,7 +15,9 @@
 With ``clock_mode:=lockstep`` (default) the plant publishes /clock and advances one control period per
 command, and the other two follow it (``use_sim_time``): a deterministic run, as fast as the three processes
 allow.  With ``realtime`` the plant runs on the wall clock, like a robot, and nobody uses sim time.  The
-lifecycle nodes configure and activate themselves (their ``autostart``).
+lifecycle nodes configure and activate themselves (their ``autostart``).  The parameters are
+:func:`crane_reference.interface.bringup.closed_loop_parameters`'s (``crane-reference loop`` starts the same
+three nodes where launch is not installed).
 """
 
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
@@ -24,26 +27,24 @@ from launch_ros.actions import LifecycleNode, Node
 from launch import LaunchDescription
 
 PACKAGE = "crane_reference"
-PREVIEW_HORIZON = 1.0  # [s], about
 
 
 def _nodes(context):
+    from crane_reference.interface.bringup import CONTROLLER_NODE, PLANT_NODE, closed_loop_parameters
+    from crane_reference.interface.messages import NODE_NAME
+
     arguments = {name: LaunchConfiguration(name).perform(context)
                  for name in ("clock_mode", "namespace", "model", "config_file", "control_rate")}
-    namespace, rate = arguments["namespace"], int(arguments["control_rate"])
-    lockstep = arguments["clock_mode"] == "lockstep"
-    crane = {"model": arguments["model"], "config_file": arguments["config_file"]}
-    points = min(1000, round(PREVIEW_HORIZON * rate) + 1)  # the sample's, then one every control period
-    reference = {**crane, "preview.points": points, "preview.horizon": (points - 1) / rate, "use_sim_time": lockstep}
-    plant = {**crane, "clock_mode": arguments["clock_mode"], "control_rate": rate}
-    controller = {**crane, "control_rate": rate, "use_sim_time": lockstep}
+    namespace = arguments["namespace"]
+    parameters = closed_loop_parameters(arguments["clock_mode"], int(arguments["control_rate"]), arguments["model"],
+                                        arguments["config_file"])
     return [
-        LifecycleNode(package=PACKAGE, executable="node", name="crane_reference", namespace=namespace,
-                      output="screen", parameters=[reference]),
-        LifecycleNode(package=PACKAGE, executable="plant", name="crane_plant", namespace=namespace, output="screen",
-                      parameters=[plant]),
-        Node(package=PACKAGE, executable="controller", name="crane_controller", namespace=namespace,
-             output="screen", parameters=[controller]),
+        LifecycleNode(package=PACKAGE, executable="node", name=NODE_NAME, namespace=namespace, output="screen",
+                      parameters=[parameters[NODE_NAME]]),
+        LifecycleNode(package=PACKAGE, executable="plant", name=PLANT_NODE, namespace=namespace, output="screen",
+                      parameters=[parameters[PLANT_NODE]]),
+        Node(package=PACKAGE, executable="controller", name=CONTROLLER_NODE, namespace=namespace, output="screen",
+             parameters=[parameters[CONTROLLER_NODE]]),
     ]
 
 

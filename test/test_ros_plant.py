@@ -13,6 +13,7 @@ as a process for the signals.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import signal
@@ -298,3 +299,22 @@ def test_the_loop_over_ros_is_crane_reference_track(params):
     over_ros = np.array([by_tick[k].position for k in range(ticks + 1)])
     assert np.array_equal(over_ros, track.plant.q[:ticks + 1, columns])
     assert np.abs(over_ros[-1] - over_ros[0]).max() > 1e-2  # it moved
+
+
+@pytest.mark.slow
+def test_crane_reference_loop_writes_tracks_summary(params, tmp_path):
+    """``crane-reference loop`` (three processes, lock-step) writes the summary ``crane-reference track`` writes for
+    the same controller, every metric equal (but the energy balance, which the messages do not carry)."""
+    duration = 0.2
+    result = subprocess.run([sys.executable, "-m", "crane_reference.cli", "loop", "--duration", str(duration),
+                             "--out", str(tmp_path)], env=os.environ, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    over_ros = json.loads((tmp_path / "summary.json").read_text())["pd_ff-none"]
+    track = run_tracking(params, TrackingSpec(feedforward="none", duration=duration,
+                                              reference_step=ONLINE_STEP)).summary()
+    assert math.isnan(over_ros.pop("energy_balance_error_j"))
+    for name in ("energy_balance_error_j", "real_time_factor"):
+        track.pop(name)
+    over_ros.pop("real_time_factor")
+    assert over_ros == track
+    assert (tmp_path / "tracking.png").stat().st_size > 0

@@ -25,11 +25,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from ...control.controller import CONTROLLERS, JointController, JointGains, bandwidth_gains
 from ...control.feedforward import FEEDFORWARDS, RigidInverseDynamics
 from ...control.plant import Plant, held_start, servo_motion
 from ...dynamics.deflection import boom_tip_deflection
+from ...interface.bringup import LoopRecording
 from ...model.chain import ACTUATED_JOINTS, VARIANTS
 from ...model.parameters import CraneParameters
 from ...motion.constraints import ConstraintSet
@@ -210,6 +212,43 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
                    else np.zeros((len(trajectory.t), 3)) for q in (trajectory.q, reference.q)]
     return TrackingRun(spec, gains, trajectory, torques, reference, path_error, *deflections,
                        controller.saturated_ticks / max(1, controller.ticks), time.perf_counter() - started)
+
+
+def recorded_run(params: CraneParameters, spec: TrackingSpec, recording: LoopRecording) -> TrackingRun:
+    """The :class:`TrackingRun` of a closed loop over ROS (``crane-reference loop``: the example controller with
+    the default gains and no feedforward, ``spec`` saying so) from what it recorded: the plant's motion, efforts,
+    E's pose and tip deflection, and the reference node's samples (their q and qd; the reference's E and tip
+    deflection from the kinematics of its q).  What the messages do not carry is NaN: the accelerations, the
+    energies and works (so the energy balance), E's velocity; no torque limit, so nothing saturates."""
+    scenario = Scenario(params, spec.variant)
+    model, dynamics = scenario.model, scenario.dynamics
+    if tuple(recording.joint_names) != tuple(model.joint_names):
+        raise ValueError(f"the recording's coordinates {list(recording.joint_names)} are not the {spec.variant} "
+                         f"model's {list(model.joint_names)}")
+    t = recording.t
+    N, n = recording.q.shape
+
+    def trajectory(q, qd, ee_position, ee_quaternion) -> Trajectory:
+        unknown = np.full((N, n), np.nan)
+        scalar = np.full(N, np.nan)
+        return Trajectory(spec.variant, model.joint_names, model.drive_joint, t, q, qd, unknown, np.zeros((N, 0)),
+                          unknown, scalar, ee_position, ee_quaternion, np.full((N, 3), np.nan), np.zeros((N, 0)),
+                          np.zeros((N, 0)), scalar, scalar, scalar, scalar, scalar, scalar)
+
+    positions, rotations = dynamics.end_effector_poses(recording.reference_q)
+    plant = trajectory(recording.q, recording.qd, recording.ee_position, recording.ee_quaternion)
+    reference = trajectory(recording.reference_q, recording.reference_qd, positions,
+                           Rotation.from_matrix(rotations).as_quat())
+    actuated = [model.index(name) for name in ACTUATED_JOINTS]
+    constraints = ConstraintSet(tuple(c for c in scenario.motion.constraints.constraints if c.order == 0))
+    start = held_start(scenario).q
+    inertia = dynamics.terms(0.0, start, np.zeros_like(start)).M
+    gains = spec.joint_gains(np.array([inertia[j, j] for j in actuated]))
+    reference_deflection = (boom_tip_deflection(model, dynamics.chain, recording.reference_q)
+                            if spec.variant == "flexible" else np.zeros((N, 3)))
+    path_error = constraints.surface_offsets(t, recording.ee_position)
+    return TrackingRun(spec, gains, plant, recording.effort[:, actuated], reference, path_error, recording.deflection,
+                       reference_deflection, np.zeros(len(ACTUATED_JOINTS)), recording.wall)
 
 
 def _paper_task(scenario: Scenario, realisation: str) -> tuple[ProgrammedMotion, np.ndarray]:

@@ -1,0 +1,147 @@
+"""``crane-reference loop``: the closed loop over ROS without launch, and its recording.
+
+Starts the reference node, the plant and the example controller as processes of their own (the parameters
+of :func:`~crane_reference.interface.bringup.closed_loop_parameters`, as ``launch/closed_loop.launch.py``),
+records the plant's states, E's pose, the tip deflection and the reference node's samples until the plant
+has run ``duration`` s, then ends the three with SIGINT (each must exit with code 0).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import rclpy
+import yaml
+from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import JointState
+
+from ..interface.bringup import CONTROLLER_NODE, PLANT_NODE, LoopRecording, closed_loop_parameters
+from ..interface.messages import NODE_NAME
+from ..model.units import NANOSECONDS
+
+MODULES = {NODE_NAME: "crane_reference.ros.node", PLANT_NODE: "crane_reference.ros.plant_node",
+           CONTROLLER_NODE: "crane_reference.ros.controller_node"}
+START_TIMEOUT = 600.0  # [s] of wall time for the three to start (a first start compiles the kernels)
+EXIT_TIMEOUT = 30.0  # [s] after SIGINT
+
+
+class LoopError(RuntimeError):
+    """The loop did not run to its end (a node failed or did not start)."""
+
+
+def _stamp_ns(msg) -> int:
+    return msg.header.stamp.sec * NANOSECONDS + msg.header.stamp.nanosec
+
+
+def run_loop(duration: float, clock_mode: str = "lockstep", control_rate: int = 1000, model: str = "flexible",
+             config_file: str = "", progress: Callable[[float], None] | None = None) -> LoopRecording:
+    """Run the loop for ``duration`` s of the plant's time and return what it recorded (``progress`` gets the
+    plant's time)."""
+    parameters = closed_loop_parameters(clock_mode, control_rate, model, config_file)
+    with tempfile.TemporaryDirectory(prefix="crane_loop_") as directory:
+        params_file = Path(directory) / "loop.yaml"
+        params_file.write_text(yaml.safe_dump({name: {"ros__parameters": values}
+                                               for name, values in parameters.items()}))
+        processes = {name: subprocess.Popen([sys.executable, "-m", module, "--ros-args", "-r", f"__node:={name}",
+                                             "--params-file", str(params_file)], env=os.environ,
+                                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                     for name, module in MODULES.items()}
+        try:
+            recorded = _record(duration, processes, progress)
+        finally:
+            outputs = _end(processes)
+    failed = {name: output for name, (code, output) in outputs.items() if code != 0}
+    if failed:
+        raise LoopError("; ".join(f"{name} exited with {outputs[name][0]}: {text[-2000:]}"
+                                  for name, text in failed.items()))
+    return recorded
+
+
+def _end(processes: dict[str, subprocess.Popen]) -> dict[str, tuple[int, str]]:
+    """SIGINT to each process still running; their exit codes and stderr."""
+    for process in processes.values():
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+    outputs = {}
+    for name, process in processes.items():
+        try:
+            _, stderr = process.communicate(timeout=EXIT_TIMEOUT)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            _, stderr = process.communicate()
+        outputs[name] = (process.returncode, stderr)
+    return outputs
+
+
+def _record(duration: float, processes: dict[str, subprocess.Popen],
+            progress: Callable[[float], None] | None) -> LoopRecording:
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    states, poses, deflections, references = {}, {}, {}, {}
+    names: list[tuple[str, ...]] = []
+    reference_names: list[tuple[str, ...]] = []
+    try:
+        node = rclpy.create_node("crane_loop_recorder", context=context)
+
+        def on_state(msg: JointState) -> None:
+            names[:] = [tuple(msg.name)]
+            states.setdefault(_stamp_ns(msg), (msg.position, msg.velocity, msg.effort))
+
+        node.create_subscription(JointState, f"/{PLANT_NODE}/joint_states", on_state, 100000)
+        node.create_subscription(PoseStamped, f"/{PLANT_NODE}/end_effector_pose", lambda msg: poses.setdefault(
+            _stamp_ns(msg), (*(getattr(msg.pose.position, a) for a in "xyz"),
+                             *(getattr(msg.pose.orientation, a) for a in "xyzw"))), 100000)
+        node.create_subscription(Vector3Stamped, f"/{PLANT_NODE}/tip_deflection", lambda msg: deflections.setdefault(
+            _stamp_ns(msg), tuple(getattr(msg.vector, a) for a in "xyz")), 100000)
+        def on_reference(msg: JointState) -> None:
+            reference_names[:] = [tuple(msg.name)]
+            references.setdefault(_stamp_ns(msg), (msg.position, msg.velocity))
+
+        node.create_subscription(JointState, f"/{NODE_NAME}/joint_states", on_reference, 100000)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        started = deadline = None
+        first = last = None
+        start_by = time.monotonic() + START_TIMEOUT
+        while last is None or last - first < round(duration * NANOSECONDS):
+            executor.spin_once(timeout_sec=0.05)
+            ended = [name for name, process in processes.items() if process.poll() is not None]
+            if ended:
+                raise LoopError(f"{', '.join(ended)} ended before the loop did")
+            if states:
+                first, last = min(states), max(states)
+                if started is None:
+                    started = time.monotonic()
+                    deadline = started + 100.0 * duration + 60.0
+                if progress is not None:
+                    progress((last - first) / NANOSECONDS)
+                if time.monotonic() > deadline:
+                    raise LoopError(f"the loop ran {(last - first) / NANOSECONDS:.3f} s of {duration:g} s in "
+                                    f"{time.monotonic() - started:.0f} s of wall time")
+            elif time.monotonic() > start_by:
+                raise LoopError(f"no state of the plant within {START_TIMEOUT:g} s")
+        wall = time.monotonic() - started
+        for _ in range(20):  # the last pose, deflection and reference samples in flight
+            executor.spin_once(timeout_sec=0.01)
+        node.destroy_node()
+    finally:
+        context.try_shutdown()
+    stamps = np.array(sorted(k for k in states if k <= last and k in poses and k in deflections), dtype=np.int64)
+    reference_stamps = np.array(sorted(references), dtype=np.int64)
+    columns = [reference_names[0].index(name) for name in names[0]]  # the plant's order
+    reference = [np.array([references[k][i] for k in reference_stamps])[:, columns] for i in (0, 1)]
+    seconds = (stamps - first) / NANOSECONDS
+    interpolated = [np.column_stack([np.interp(stamps, reference_stamps, column) for column in values.T])
+                    for values in reference]
+    return LoopRecording(names[0], seconds, *(np.array([states[k][i] for k in stamps]) for i in range(3)),
+                         np.array([poses[k][:3] for k in stamps]), np.array([poses[k][3:] for k in stamps]),
+                         np.array([deflections[k] for k in stamps]), *interpolated, wall)
