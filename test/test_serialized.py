@@ -12,12 +12,13 @@ from rosbags.typesys import Stores, get_typestore
 from sensor_msgs.msg import JointState
 
 from crane_reference.interface import messages
-from crane_reference.interface.serialized import SerializedJointState, SerializedPose
+from crane_reference.interface.serialized import SerializedJointState, SerializedPose, SerializedVector3
 from crane_reference.ros.message_types import rclpy_types
 from crane_reference.stream.sample import ReferenceSample
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-JOINT_STATE, POSE = "sensor_msgs/msg/JointState", "geometry_msgs/msg/PoseStamped"
+JOINT_STATE, POSE, VECTOR = ("sensor_msgs/msg/JointState", "geometry_msgs/msg/PoseStamped",
+                             "geometry_msgs/msg/Vector3Stamped")
 # frame_ids and names of every length modulo 8, so that each field's alignment padding varies
 FRAME_IDS = ["", "w", "ab", "abc", "world", "crane_1", "map/base", "crane/world"]
 NAME_SETS = [["column_slew"], ["a", "bb", "ccc"], [f"joint_{'x' * i}" for i in range(9)]]
@@ -109,3 +110,18 @@ def test_a_prototype_that_does_not_fit_is_refused():
     with pytest.raises(ValueError, match="ends inside its float64 fields"):
         SerializedPose(bytes(TYPESTORE.serialize_cdr(messages.end_effector_pose(types, 0, "w", zero_sample(3)),
                                                      POSE))[:-8])
+
+
+@pytest.mark.parametrize("little_endian", [True, False])
+def test_vectors_filled_in_place_equal_rosbags_serialization(little_endian):
+    types, rng = messages.rosbags_types(TYPESTORE), np.random.default_rng(3)
+    for frame_id in FRAME_IDS:
+        prototype = messages.tip_deflection(types, 0, frame_id, np.zeros(3))
+        writer = SerializedVector3(bytes(TYPESTORE.serialize_cdr(prototype, VECTOR, little_endian=little_endian)))
+        assert writer.frame_id == frame_id
+        for stamp in STAMPS:
+            vector = rng.normal(size=3)
+            data = writer.fill(stamp, vector)
+            expected = TYPESTORE.serialize_cdr(messages.tip_deflection(types, stamp, frame_id, vector), VECTOR,
+                                               little_endian=little_endian)
+            assert data == bytes(expected)

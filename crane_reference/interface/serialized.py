@@ -127,3 +127,19 @@ class SerializedPose(_SerializedMessage):
         self._pose[:3] = sample.ee_position
         self._pose[3:] = sample.ee_quaternion
         return self._stamped(stamp_ns)
+
+
+class SerializedVector3(_SerializedMessage):
+    """geometry_msgs/Vector3Stamped: header, then x, y, z (see :func:`~.messages.tip_deflection`)."""
+
+    def __init__(self, prototype: bytes):
+        layout = _Layout(prototype)
+        self.frame_id = layout.string()
+        offset = layout.doubles(3)
+        super().__init__(prototype, layout)
+        self._vector = self._doubles(offset, 3)
+
+    def fill(self, stamp_ns: int, vector: np.ndarray) -> bytes:
+        """The serialized Vector3Stamped of ``vector`` stamped ``stamp_ns``."""
+        self._vector[:] = vector
+        return self._stamped(stamp_ns)

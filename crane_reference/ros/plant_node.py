@@ -37,11 +37,13 @@ from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
+from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock as ClockMessage
 from std_msgs.msg import Float64MultiArray
 
 from ..control.plant_server import CommandRefusedError, PlantServer, PlantState, plant_health
 from ..interface import messages
+from ..interface.serialized import SerializedJointState, SerializedPose, SerializedVector3
 from ..model.config import ConfigError, load_config
 from ..model.units import NANOSECONDS
 from ..motion.integration import IntegrationError
@@ -79,7 +81,7 @@ class CranePlantNode(LifecycleNode):
         self._running = threading.Event()  # the real-time thread runs while set
         self._thread: threading.Thread | None = None
         self._outputs: dict[str, object] = {}
-        self._made: dict[str, object] = {}
+        self._made: dict[str, object] = {}  # the serialized messages' writers
         self._doing = "unconfigured"
         self._failure = ""
         self._late = 0  # real-time periods that started more than a period late
@@ -218,20 +220,27 @@ class CranePlantNode(LifecycleNode):
         self._publish(state)
 
     def _publish(self, state: PlantState) -> None:
-        """The state's messages (each made once, then filled again), after /clock in lock-step."""
-        v, types, made = self._params, self._types, self._made
+        """The state's messages, serialized once and then filled in place
+        (:mod:`~crane_reference.interface.serialized`), after /clock in lock-step."""
+        v, types = self._params, self._types
         if v.clock_mode == "lockstep":
             stamp_ns = round((v.clock_start + state.t) * NANOSECONDS)
             self._outputs["clock"].publish(ClockMessage(clock=messages.time_msg(types, stamp_ns)))
         else:
             stamp_ns = self.get_clock().now().nanoseconds
-        prefix = v.frame_prefix
-        made["joints"] = messages.joint_state(types, stamp_ns, self._server.published, state, made.get("joints"))
-        made["pose"] = messages.end_effector_pose(types, stamp_ns, prefix + v.frame_id, state, made.get("pose"))
-        made["deflection"] = messages.tip_deflection(types, stamp_ns, prefix + self._server.deflection_frame,
-                                                     state.deflection, made.get("deflection"))
-        for name in ("joints", "pose", "deflection"):
-            self._outputs[name].publish(made[name])
+        if not self._made:  # the writers of this configuration and these frames
+            prefix = v.frame_prefix
+            self._made = {
+                "joints": SerializedJointState(serialize_message(messages.joint_state(
+                    types, 0, self._server.published, state))),
+                "pose": SerializedPose(serialize_message(messages.end_effector_pose(
+                    types, 0, prefix + v.frame_id, state))),
+                "deflection": SerializedVector3(serialize_message(messages.tip_deflection(
+                    types, 0, prefix + self._server.deflection_frame, state.deflection)))}
+        made = self._made
+        self._outputs["joints"].publish(made["joints"].fill(stamp_ns, state))
+        self._outputs["pose"].publish(made["pose"].fill(stamp_ns, state))
+        self._outputs["deflection"].publish(made["deflection"].fill(stamp_ns, state.deflection))
 
     def _heartbeat(self) -> None:
         """Lock-step: the current state again if no command came since the last heartbeat."""
