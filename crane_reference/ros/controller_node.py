@@ -19,8 +19,6 @@ from __future__ import annotations
 import sys
 
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -30,11 +28,11 @@ from ..control.controller import JointGains
 from ..control.plant import default_gains
 from ..control.preview_tracking import Preview, PreviewTracker
 from ..model.chain import ACTUATED_JOINTS, VARIANTS
-from ..model.config import ConfigError, load_config
+from ..model.config import load_config
 from ..model.units import NANOSECONDS
 from ..motion.simulation import Scenario
-from ..stream.health import CANNOT
 from .parameters import DOUBLE, INTEGER, STRING, STRING_ARRAY, ParameterError, ParameterSpec, declare
+from .running import run_node
 
 NODE_NAME = "crane_controller"
 DEPTH = 10
@@ -115,22 +113,8 @@ class CraneControllerNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the controller until SIGINT / shutdown; exit code 0, or 1 if it cannot start."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = CraneControllerNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ConfigError, ParameterError) as error:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f"{CANNOT} start: {error}")
-        return 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    """Run the controller until SIGINT / SIGTERM (:func:`~.running.run_node`)."""
+    return run_node(CraneControllerNode, NODE_NAME, args)
 
 
 if __name__ == "__main__":

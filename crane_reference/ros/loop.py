@@ -14,7 +14,8 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -46,24 +47,30 @@ def run_loop(duration: float, clock_mode: str = "lockstep", control_rate: int = 
              config_file: str = "", progress: Callable[[float], None] | None = None) -> LoopRecording:
     """Run the loop for ``duration`` s of the plant's time and return what it recorded (``progress`` gets the
     plant's time)."""
-    parameters = closed_loop_parameters(clock_mode, control_rate, model, config_file)
+    with closed_loop_processes(closed_loop_parameters(clock_mode, control_rate, model, config_file)) as processes:
+        return _record(duration, processes, progress)
+
+
+@contextmanager
+def closed_loop_processes(parameters: dict[str, dict[str, object]]) -> Iterator[dict[str, subprocess.Popen]]:
+    """The three nodes as processes with ``parameters`` by node name; on leaving, SIGINT to each, and
+    :class:`LoopError` if one did not exit with code 0 (with the end of its stderr)."""
     with tempfile.TemporaryDirectory(prefix="crane_loop_") as directory:
         params_file = Path(directory) / "loop.yaml"
         params_file.write_text(yaml.safe_dump({name: {"ros__parameters": values}
                                                for name, values in parameters.items()}))
-        processes = {name: subprocess.Popen([sys.executable, "-m", module, "--ros-args", "-r", f"__node:={name}",
-                                             "--params-file", str(params_file)], env=os.environ,
+        processes = {name: subprocess.Popen([sys.executable, "-m", MODULES[name], "--ros-args", "-r",
+                                             f"__node:={name}", "--params-file", str(params_file)], env=os.environ,
                                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-                     for name, module in MODULES.items()}
+                     for name in parameters}
         try:
-            recorded = _record(duration, processes, progress)
+            yield processes
         finally:
             outputs = _end(processes)
     failed = {name: output for name, (code, output) in outputs.items() if code != 0}
     if failed:
         raise LoopError("; ".join(f"{name} exited with {outputs[name][0]}: {text[-2000:]}"
                                   for name, text in failed.items()))
-    return recorded
 
 
 def _end(processes: dict[str, subprocess.Popen]) -> dict[str, tuple[int, str]]:
@@ -112,7 +119,7 @@ def _record(duration: float, processes: dict[str, subprocess.Popen],
         started = deadline = None
         first = last = None
         start_by = time.monotonic() + START_TIMEOUT
-        while last is None or last - first < round(duration * NANOSECONDS):
+        while last is None or last - first < round(duration * NANOSECONDS):  # then exactly duration is kept
             executor.spin_once(timeout_sec=0.05)
             ended = [name for name, process in processes.items() if process.poll() is not None]
             if ended:
@@ -135,7 +142,8 @@ def _record(duration: float, processes: dict[str, subprocess.Popen],
         node.destroy_node()
     finally:
         context.try_shutdown()
-    stamps = np.array(sorted(k for k in states if k <= last and k in poses and k in deflections), dtype=np.int64)
+    end = first + round(duration * NANOSECONDS)
+    stamps = np.array(sorted(k for k in states if k <= end and k in poses and k in deflections), dtype=np.int64)
     reference_stamps = np.array(sorted(references), dtype=np.int64)
     columns = [reference_names[0].index(name) for name in names[0]]  # the plant's order
     reference = [np.array([references[k][i] for k in reference_stamps])[:, columns] for i in (0, 1)]

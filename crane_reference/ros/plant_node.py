@@ -31,10 +31,8 @@ import threading
 import time
 from dataclasses import replace
 
-import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
@@ -50,9 +48,10 @@ from ..motion.integration import IntegrationError
 from ..motion.programmed_motion import ProjectionError
 from ..stream.health import CANNOT
 from .message_types import rclpy_types
-from .parameters import ParameterError, check, pre_set_callback
+from .parameters import check, pre_set_callback
 from .plant_parameters import PLANT_SPECS, declare_plant
 from .publishing import run_until_shutdown
+from .running import run_node
 from .settings import StartupError
 
 NODE_NAME = "crane_plant"
@@ -276,27 +275,15 @@ class CranePlantNode(LifecycleNode):
             self._server.settings = self._params.settings()
         self._made = {}  # the frames may have changed
 
+    def destroy_node(self) -> None:
+        """Stop the real-time periods, then destroy the node."""
+        self._stop_periods()
+        super().destroy_node()
+
 
 def main(args: list[str] | None = None) -> int:
-    """Run the plant node until SIGINT / shutdown; exit code 0, or 1 if it cannot start."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = CranePlantNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (StartupError, ConfigError, ParameterError) as error:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f"{CANNOT} start: {error}")
-        return 1
-    except Exception:
-        if rclpy.ok():
-            raise
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    """Run the plant node until SIGINT / SIGTERM (:func:`~.running.run_node`)."""
+    return run_node(CranePlantNode, NODE_NAME, args)
 
 
 if __name__ == "__main__":
