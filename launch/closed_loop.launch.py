@@ -37,7 +37,7 @@ def _nodes(context):
                  for name in ("clock_mode", "namespace", "model", "config_file", "control_rate")}
     namespace = arguments["namespace"]
     parameters = closed_loop_parameters(arguments["clock_mode"], int(arguments["control_rate"]), arguments["model"],
-                                        arguments["config_file"])
+                                        arguments["config_file"], namespace)
     return [
         LifecycleNode(package=PACKAGE, executable="node", name=NODE_NAME, namespace=namespace, output="screen",
                       parameters=[parameters[NODE_NAME]]),

@@ -269,7 +269,11 @@ def test_the_closed_loop_launch_connects_the_three_nodes(monkeypatch, tmp_path, 
     assert isinstance(nodes["crane_reference"], LifecycleNode) and isinstance(nodes["crane_plant"], LifecycleNode)
     (reference,), (plant,), (controller,) = (nodes[name].kwargs["parameters"] for name in
                                              ("crane_reference", "crane_plant", "crane_controller"))
-    assert set(reference) - {"use_sim_time"} <= set(SPECS) and set(plant) <= set(PLANT_SPECS)
+    latched = {name for name in (*reference, *controller) if name.startswith("qos_overrides.")}
+    assert set(reference) - {"use_sim_time"} - latched <= set(SPECS) and set(plant) <= set(PLANT_SPECS)
+    preview = resolve(messages.REFERENCE_PREVIEW_TOPIC, namespace, messages.NODE_NAME)
+    assert reference[f"qos_overrides.{preview}.publisher.durability"] == "transient_local"
+    assert controller[f"qos_overrides.{preview}.subscription.durability"] == "transient_local"
     assert reference["use_sim_time"] == controller["use_sim_time"] == (clock_mode == "lockstep")
     assert plant["clock_mode"] == clock_mode and plant["control_rate"] == controller["control_rate"] == 1000
     # a preview point every control period: the node spaces preview.points - 1 intervals over the horizon

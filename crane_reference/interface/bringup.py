@@ -22,16 +22,23 @@ CLOCK_START = 1.0
 PREVIEW_HORIZON = 1.0  # [s], about
 
 
-def closed_loop_parameters(clock_mode: str, control_rate: int, model: str = "flexible",
-                           config_file: str = "") -> dict[str, dict[str, object]]:
-    """The parameters of the reference node, the plant and the controller, by node name."""
+def closed_loop_parameters(clock_mode: str, control_rate: int, model: str = "flexible", config_file: str = "",
+                           namespace: str = "") -> dict[str, dict[str, object]]:
+    """The parameters of the reference node, the plant and the controller (in ``namespace``), by node name.
+    The preview is transient-local on both ends (rclpy's ``qos_overrides``): a controller that starts after the
+    reference node still gets its last preview, which in lock-step is the only one until the plant moves."""
     crane = {"model": model, "config_file": config_file}
     lockstep = clock_mode == "lockstep"
     points = min(1000, round(PREVIEW_HORIZON * control_rate) + 1)  # the sample's, then one per control period
+    parts = (*namespace.strip("/").split("/"), NODE_NAME, "reference_preview")
+    preview = "/" + "/".join(part for part in parts if part)
+    latched = {f"qos_overrides.{preview}.{end}.durability": "transient_local" for end in ("publisher", "subscription")}
     return {NODE_NAME: {**crane, "preview.points": points, "preview.horizon": (points - 1) / control_rate,
-                        "publish_rate": min(control_rate, MAX_PUBLISH_RATE), "use_sim_time": lockstep},
+                        "publish_rate": min(control_rate, MAX_PUBLISH_RATE), "use_sim_time": lockstep,
+                        **{name: value for name, value in latched.items() if ".publisher." in name}},
             PLANT_NODE: {**crane, "clock_mode": clock_mode, "control_rate": control_rate, "all_coordinates": True},
-            CONTROLLER_NODE: {**crane, "control_rate": control_rate, "use_sim_time": lockstep}}
+            CONTROLLER_NODE: {**crane, "control_rate": control_rate, "use_sim_time": lockstep,
+                              **{name: value for name, value in latched.items() if ".subscription." in name}}}
 
 
 @dataclass(frozen=True)

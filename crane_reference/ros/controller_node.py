@@ -11,7 +11,8 @@ Parameters: ``joints``; the gains per joint ``gains.<joint>.p`` [N m/rad], ``.d`
 [N m/(rad s)] (ros2_control's names; defaults: a 2 Hz, 0.7-damped loop on the crane of ``config_file`` and
 ``model``, as ``crane-reference track``); ``.d`` is the D action the plant's drives apply, so it must equal
 the plant's ``drive_damping.<joint>`` (the defaults agree); ``control_rate`` [Hz], the plant's, for the
-integral; the three topics.
+integral; the three topics.  The preview's subscription takes rclpy's ``qos_overrides`` (closed_loop.launch.py
+makes it transient-local on both ends, so that a controller started late still gets the last preview).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import sys
 
 import numpy as np
 from rclpy.node import Node
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
@@ -79,7 +81,8 @@ class CraneControllerNode(Node):
         reference, state, command = (declare(self, spec) for spec in _TOPICS)
         self.tracker = PreviewTracker(joints, gains, 1.0 / rate)
         self._commands = self.create_publisher(Float64MultiArray, command, DEPTH)
-        self.create_subscription(JointTrajectory, reference, self._on_preview, DEPTH)
+        self.create_subscription(JointTrajectory, reference, self._on_preview, DEPTH,
+                                 qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self.create_subscription(JointState, state, self._on_state, DEPTH)
         self.get_logger().info(f"tracking {reference} on {state}, commanding {command} ({', '.join(joints)})")
 

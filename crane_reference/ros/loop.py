@@ -65,8 +65,14 @@ def closed_loop_processes(parameters: dict[str, dict[str, object]]) -> Iterator[
                      for name in parameters}
         try:
             yield processes
-        finally:
+        except LoopError as error:
             outputs = _end(processes)
+            raise LoopError(f"{error}; " + "; ".join(f"{name} (exit code {code}) said: {text[-1500:]}"
+                                                     for name, (code, text) in outputs.items())) from None
+        except BaseException:
+            _end(processes)
+            raise
+        outputs = _end(processes)
     failed = {name: output for name, (code, output) in outputs.items() if code != 0}
     if failed:
         raise LoopError("; ".join(f"{name} exited with {outputs[name][0]}: {text[-2000:]}"

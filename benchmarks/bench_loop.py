@@ -1,0 +1,249 @@
+"""The closed loop over ROS (issue 31's figures): the plant node in real time and the loop in lock-step.
+
+    python benchmarks/bench_loop.py [--only tick realtime lockstep] [--duration 60] [--lockstep-duration 5]
+                                    [--rate 1000]
+
+1. [tick] In this process: the plant's control period (PlantServer.tick: the compiled period and the state) and
+   filling its three serialized messages, per period, as a multiple of one Pinocchio ABA call on the same chain
+   measured in this run; the CPU share [%] of those periods alone at ``--rate``.
+2. [realtime] The reference node, the plant (``clock_mode`` realtime, ``--rate``) and the example controller as
+   processes (``crane-reference loop``'s parameters), for ``--duration`` s of wall time after the first state:
+   the plant's periods, those that started more than a period late (its /diagnostics ``late_ticks``), the
+   command-to-state latency (in this process: from a command's arrival to the arrival of the next state, which
+   is the first under it; p50, p99, largest), the plant process's CPU share beside its floor measured in this
+   run: a paced process that only publishes the plant's three serialized messages at the rate (a subscriber in
+   another process) plus the periods alone ([tick]).
+3. [lockstep] The three in lock-step (as ``crane-reference loop``) for ``--lockstep-duration`` s of the plant's
+   time after its first 0.1 s: seconds of the plant per second of wall time, and each process's CPU share (the
+   reference node with its solver's process).
+
+ROS_DOMAIN_ID is this process's (set it apart from other ROS traffic), the next one for [lockstep]; discovery on
+localhost.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import time
+from contextlib import suppress
+
+import numpy as np
+import rclpy
+from common import aba_time, process_cpu_seconds
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from crane_reference.control.plant_server import PlantServer, PlantSettings
+from crane_reference.interface import messages
+from crane_reference.interface.bringup import PLANT_NODE, closed_loop_parameters
+from crane_reference.interface.serialized import SerializedJointState, SerializedPose, SerializedVector3
+from crane_reference.model.config import load_config
+from crane_reference.motion.simulation import Scenario
+from crane_reference.ros.loop import closed_loop_processes
+from crane_reference.ros.message_types import rclpy_types
+
+SUBSCRIBER = """
+import rclpy
+from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+rclpy.init()
+node = Node("bench_loop_subscriber")
+for kind, topic in ((JointState, "/bench/joint_states"), (PoseStamped, "/bench/pose"),
+                    (Vector3Stamped, "/bench/tip")):
+    node.create_subscription(kind, topic, lambda msg: None, 1000)
+try:
+    rclpy.spin(node)
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+"""
+
+
+def writers(server: PlantServer) -> tuple:
+    """The plant node's three serialized-message writers for ``server``'s state."""
+    types, state = rclpy_types(), server.state()
+    return (SerializedJointState(serialize_message(messages.joint_state(types, 0, server.published, state))),
+            SerializedPose(serialize_message(messages.end_effector_pose(types, 0, "world", state))),
+            SerializedVector3(serialize_message(messages.tip_deflection(types, 0, server.deflection_frame,
+                                                                        state.deflection))))
+
+
+def tick_costs(rate: int, periods: int = 2000) -> float:
+    """[tick]: prints the per-period costs; returns the CPU share [%] of the periods alone at ``rate``."""
+    params = load_config()
+    server = PlantServer(params, PlantSettings(rate=float(rate), all_coordinates=True))
+    joint, pose, tip = writers(server)
+    server.tick(0.0)
+    start = time.perf_counter()
+    for _ in range(periods):
+        state = server.tick(0.0)
+    period = (time.perf_counter() - start) / periods
+    start = time.perf_counter()
+    for k in range(periods):
+        joint.fill(k, state), pose.fill(k, state), tip.fill(k, state.deflection)
+    fill = (time.perf_counter() - start) / periods
+    aba = aba_time(Scenario(params, "flexible"))
+    print(f"[tick] a control period (compiled period + state) {period * 1e6:.0f} us = {period / aba:.1f} ABA; filling "
+          f"the three messages {fill * 1e6:.1f} us; Pinocchio ABA {aba * 1e6:.2f} us")
+    share = 100.0 * period * rate
+    print(f"[tick] the periods alone at {rate} Hz: {share:.1f} % of a core")
+    return share
+
+
+def publish_floor(rate: int, seconds: float = 5.0) -> float:
+    """CPU share [%] of this process publishing the plant's three serialized messages at ``rate``, paced, with a
+    subscriber in another process."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node("bench_loop_floor", context=context)
+    subscriber = subprocess.Popen([sys.executable, "-c", SUBSCRIBER], env=os.environ)
+    try:
+        server = PlantServer(load_config(), PlantSettings(rate=float(rate), all_coordinates=True))
+        state, (joint, pose, tip) = server.state(), writers(server)
+        publishers = [node.create_publisher(kind, topic, 10) for kind, topic in (
+            (JointState, "/bench/joint_states"), (PoseStamped, "/bench/pose"), (Vector3Stamped, "/bench/tip"))]
+        deadline = time.monotonic() + 30.0
+        while any(p.get_subscription_count() == 0 for p in publishers) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        start, cpu, k = time.monotonic(), time.process_time(), 0
+        while (now := time.monotonic()) - start < seconds:
+            publishers[0].publish(joint.fill(k, state))
+            publishers[1].publish(pose.fill(k, state))
+            publishers[2].publish(tip.fill(k, state.deflection))
+            k += 1
+            time.sleep(max(0.0, start + k / rate - now))
+        return 100.0 * (time.process_time() - cpu) / (time.monotonic() - start)
+    finally:
+        subscriber.send_signal(signal.SIGINT)
+        subscriber.wait(timeout=10)
+        node.destroy_node()
+        context.try_shutdown()
+
+
+def realtime(rate: int, duration: float, periods_share: float) -> None:
+    """[realtime]: prints the plant's periods, late periods, latency and CPU beside its floor."""
+    floor = publish_floor(rate)
+    parameters = closed_loop_parameters("realtime", rate)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    states, commands, diagnostics = [], [], []
+    try:
+        with closed_loop_processes(parameters) as processes:
+            node = rclpy.create_node("bench_loop_listener", context=context)
+            node.create_subscription(JointState, f"/{PLANT_NODE}/joint_states",
+                                     lambda msg: states.append(time.monotonic()), 10000)
+            node.create_subscription(Float64MultiArray, f"/{PLANT_NODE}/commands",
+                                     lambda msg: commands.append(time.monotonic()), 10000)
+            node.create_subscription(DiagnosticArray, "/diagnostics", lambda msg: diagnostics.extend(
+                {kv.key: kv.value for kv in status.values} for status in msg.status
+                if status.name.startswith(f"{PLANT_NODE}:")), 100)
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(node)
+            deadline = time.monotonic() + 600.0
+            while len(commands) < 100 and time.monotonic() < deadline:  # the loop closed (the reference is up)
+                executor.spin_once(timeout_sec=0.05)
+            before = next(d for d in reversed(diagnostics)) if diagnostics else {}
+            states.clear(), commands.clear()
+            pid = processes[PLANT_NODE].pid
+            cpu, start = process_cpu_seconds(pid), time.monotonic()
+            while time.monotonic() - start < duration:
+                executor.spin_once(timeout_sec=0.05)
+            wall = time.monotonic() - start
+            share = 100.0 * (process_cpu_seconds(pid) - cpu) / wall
+            for _ in range(40):  # the next diagnostics
+                executor.spin_once(timeout_sec=0.05)
+            node.destroy_node()
+    finally:
+        context.try_shutdown()
+    after = diagnostics[-1]
+    late = int(after["late_ticks"]) - int(before.get("late_ticks", 0))
+    ticks = int(after["ticks"]) - int(before.get("ticks", 0))
+    arrivals = np.array(states)
+    following = np.searchsorted(arrivals, commands)
+    latency = np.array([arrivals[i] - c for i, c in zip(following, commands, strict=True) if i < arrivals.size])
+    print(f"[realtime] {rate} Hz for {wall:.0f} s: {ticks} periods, {late} started late (> 1 period); "
+          f"{len(commands)} commands answered; command-to-state latency p50 {np.median(latency) * 1e3:.2f} ms, "
+          f"p99 {np.quantile(latency, 0.99) * 1e3:.2f} ms, largest {latency.max() * 1e3:.2f} ms")
+    print(f"[realtime] plant process CPU {share:.1f} % of a core; floor {floor + periods_share:.1f} % (publishing "
+          f"only {floor:.1f} % + the periods alone {periods_share:.1f} %), ratio {share / (floor + periods_share):.2f}")
+
+
+def lockstep(rate: int, duration: float) -> None:
+    """[lockstep]: prints the plant's seconds per wall second and each process's CPU share."""
+    os.environ["ROS_DOMAIN_ID"] = str(int(os.environ["ROS_DOMAIN_ID"]) % 100 + 1)  # apart from [realtime]'s nodes
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    stamps: list[int] = []
+    try:
+        with closed_loop_processes(closed_loop_parameters("lockstep", rate)) as processes:
+            node = rclpy.create_node("bench_loop_listener", context=context)
+            node.create_subscription(JointState, f"/{PLANT_NODE}/joint_states", lambda msg: stamps.append(
+                msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec), 10000)
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(node)
+            deadline = time.monotonic() + 600.0
+            while (not stamps or stamps[-1] - stamps[0] < 10**8) and time.monotonic() < deadline:  # 0.1 s run
+                executor.spin_once(timeout_sec=0.05)
+            pids = {name: [process.pid, *descendants(process.pid)] for name, process in processes.items()}
+            cpu = {name: sum(map(process_cpu_seconds, group)) for name, group in pids.items()}
+            first, start = stamps[-1], time.monotonic()
+            while stamps[-1] - first < round(duration * 10**9):
+                count = len(stamps)
+                executor.spin_once(timeout_sec=0.05)
+                if len(stamps) == count and time.monotonic() - start > 60.0 + 100.0 * duration:
+                    raise RuntimeError(f"the loop stalled at the plant's {(stamps[-1] - stamps[0]) / 1e9:.3f} s")
+            wall = time.monotonic() - start
+            shares = {name: 100.0 * (sum(map(process_cpu_seconds, group)) - cpu[name]) / wall
+                      for name, group in pids.items()}
+            simulated = (stamps[-1] - first) / 10**9
+            node.destroy_node()
+    finally:
+        context.try_shutdown()
+    print(f"[lockstep] {simulated:g} s of the plant at {rate} Hz in {wall:.1f} s of wall time: "
+          f"{simulated / wall:.3f} s of the plant per s of wall time; CPU " +
+          ", ".join(f"{name} {share:.0f} %" for name, share in shares.items()) + " of a core")
+
+
+def descendants(pid: int) -> list[int]:
+    """The processes started by ``pid`` (the reference node's solver process), from /proc."""
+    children = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            with suppress(OSError), open(f"/proc/{entry}/stat", encoding="ascii") as stat:
+                if int(stat.read().rsplit(")", 1)[1].split()[1]) == pid:
+                    children += [int(entry), *descendants(int(entry))]
+    return children
+
+
+SECTIONS = ("tick", "realtime", "lockstep")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--only", nargs="+", choices=SECTIONS, default=SECTIONS)
+    parser.add_argument("--duration", type=float, default=60.0, help="[realtime] wall seconds")
+    parser.add_argument("--lockstep-duration", type=float, default=5.0, help="[lockstep] seconds of the plant")
+    parser.add_argument("--rate", type=int, default=1000, help="control rate [Hz]")
+    args = parser.parse_args()
+    os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    print(f"# bench_loop {time.strftime('%Y-%m-%d %H:%M')} on {os.cpu_count()} cores")
+    share = tick_costs(args.rate) if "tick" in args.only or "realtime" in args.only else 0.0
+    if "realtime" in args.only:
+        realtime(args.rate, args.duration, share)
+    if "lockstep" in args.only:
+        lockstep(args.rate, args.lockstep_duration)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
