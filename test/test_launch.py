@@ -276,8 +276,10 @@ def test_the_closed_loop_launch_connects_the_three_nodes(monkeypatch, tmp_path, 
     assert controller[f"qos_overrides.{preview}.subscription.durability"] == "transient_local"
     assert reference["use_sim_time"] == controller["use_sim_time"] == (clock_mode == "lockstep")
     assert plant["clock_mode"] == clock_mode and plant["control_rate"] == controller["control_rate"] == 1000
-    # a preview point every control period: the node spaces preview.points - 1 intervals over the horizon
-    assert reference["preview.horizon"] / (reference["preview.points"] - 1) == pytest.approx(1e-3, rel=1e-12)
+    # lock-step: a preview point every control period (the node spaces preview.points - 1 intervals over the
+    # horizon), so that the controller reads computed steps; real time: every 10 ms
+    spacing = 1e-3 if clock_mode == "lockstep" else 1e-2
+    assert reference["preview.horizon"] / (reference["preview.points"] - 1) == pytest.approx(spacing, rel=1e-12)
     topics = {spec.name: spec.default for spec in controller_node._TOPICS}
     assert resolve(topics["reference_topic"], namespace, "crane_controller") == resolve(
         messages.REFERENCE_PREVIEW_TOPIC, namespace, messages.NODE_NAME)

@@ -14,7 +14,8 @@ hold command on a timeout); the parameters are :mod:`.plant_parameters`.
   its rigid chord in the first boom element's link), stamped with the end of the period.
 * ``clock_mode`` realtime: a period every period of the steady clock (a thread of its own paces them; a period
   that starts more than a period late counts as late, and the next is due a period after it), stamped with
-  the node's clock;
+  the node's clock; the plant's time (and its column drive's program) starts with the first command, until
+  which its held start is published every period;
   lockstep: the node publishes /clock (``clock_start`` plus the plant's time) and advances one period per
   command received, so nodes with ``use_sim_time`` run in step with it, deterministically; while no command
   comes, it publishes /clock and the state again every :data:`HEARTBEAT` s of wall time (for nodes that
@@ -171,7 +172,8 @@ class CranePlantNode(LifecycleNode):
         return self._steady.now().nanoseconds / NANOSECONDS
 
     def _run_periods(self) -> None:
-        """The real-time periods (a thread): each waits until due, then advances and publishes."""
+        """The real-time periods (a thread): each waits until due, then advances and publishes; until the first
+        command the plant is held at its start (its time stands still) and its state is published each period."""
         period = self._server.settings.period
         due = self._seconds() + period
         while self._running.is_set():
@@ -182,7 +184,12 @@ class CranePlantNode(LifecycleNode):
             if -wait > period:
                 self._late += 1
                 due = self._seconds()
-            self._advance(self._seconds())
+            if self._server.accepted:
+                self._advance(self._seconds())
+            else:
+                with self._lock:
+                    state = self._server.state()
+                self._publish(state)
             due += period
 
     def _on_command(self, msg: Float64MultiArray) -> None:
