@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from crane_reference.control.controller import JointGains
+from crane_reference.control.controller import JointController, JointGains
 from crane_reference.control.plant import Plant, held_start
 from crane_reference.control.plant_server import CommandRefusedError, PlantServer, PlantSettings
 from crane_reference.control.preview_tracking import Preview, PreviewTracker
@@ -178,14 +178,24 @@ def test_the_preview_is_sampled_exactly_on_cubic_motion():
 
 
 def test_the_tracker_waits_for_a_preview_and_answers_a_stamp_once():
-    gains = [JointGains(100.0, 10.0)] * 3
-    tracker = PreviewTracker(ACTUATED_JOINTS, gains, 1e-3)
-    zeros = np.zeros(3)
+    """A state waits for a preview that spans it; the same stamp again (a lock-step plant repeating a state its
+    command did not reach) gets the same command, and the integral advances once per period: the commands are
+    those of a JointController ticked once per stamp."""
+    gains = [JointGains(100.0, 10.0, 1000.0)] * 3
+    tracker, alone = PreviewTracker(ACTUATED_JOINTS, gains, 1e-3), JointController(gains, 1e-3)
+    zeros, q_ref = np.zeros(3), np.array([1.0, 2.0, 3.0])
     assert tracker.take_state(1_000_000_000, zeros, zeros) is None  # no preview yet: waits
-    preview = Preview(np.array([1_000_000_000, 2_000_000_000], dtype=np.int64), np.array([[1.0, 2.0, 3.0]] * 2),
+    preview = Preview(np.array([1_000_000_000, 2_000_000_000], dtype=np.int64), np.array([q_ref] * 2),
                       np.zeros((2, 3)), np.zeros((2, 3)))
-    u = tracker.take_preview(preview)  # the waiting state is answered: u = kp (q_ref - q) + kd qd_ref
-    assert u == pytest.approx([100.0, 200.0, 300.0])
-    assert tracker.take_state(1_000_000_000, zeros, zeros) is None  # the same stamp again: answered already
-    assert tracker.take_state(1_001_000_000, zeros, zeros) == pytest.approx([100.0, 200.0, 300.0])
+    first = alone(q_ref, zeros, zeros, zeros)
+    assert tracker.take_preview(preview) == pytest.approx(first)  # the waiting state is answered
+    assert tracker.take_state(1_000_000_000, zeros, zeros) == pytest.approx(first)  # repeated: the same answer
+    assert tracker.take_state(999_000_000, zeros, zeros) is None  # older than the last answered
+    assert tracker.take_state(1_001_000_000, zeros, zeros) == pytest.approx(alone(q_ref, zeros, zeros, zeros))
     assert tracker.take_state(3_000_000_000, zeros, zeros) is None  # beyond the preview: waits
+    with pytest.raises(ValueError, match="plant state: position and velocity must be finite"):
+        tracker.take_state(1_002_000_000, np.array([0.0, np.nan, 0.0]), zeros)
+    with pytest.raises(ValueError, match="must increase strictly"):
+        Preview(np.array([5, 5], dtype=np.int64), np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="velocities must be finite"):
+        Preview(np.array([5, 6], dtype=np.int64), np.zeros((2, 3)), np.full((2, 3), np.inf), np.zeros((2, 3)))

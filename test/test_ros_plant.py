@@ -45,6 +45,7 @@ from crane_reference.motion.simulation import Scenario
 from crane_reference.motion.steps import ONLINE_STEP
 from crane_reference.ros.controller_node import CraneControllerNode
 from crane_reference.ros.node import CraneReferenceNode
+from crane_reference.ros.parameters import ParameterError
 from crane_reference.ros.plant_node import NODE_NAME, CranePlantNode
 
 NS = 10**9
@@ -318,3 +319,17 @@ def test_crane_reference_loop_writes_tracks_summary(params, tmp_path):
     over_ros.pop("real_time_factor")
     assert over_ros == track
     assert (tmp_path / "tracking.png").stat().st_size > 0
+
+
+def test_the_controller_refuses_unknown_and_bad_parameters():
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        with pytest.raises(ParameterError, match=r"unknown parameter.*gains.knuckle.q"):
+            CraneControllerNode(context=context, parameter_overrides=[Parameter("gains.knuckle.q", value=1.0)])
+        with pytest.raises(ParameterError, match=r"gains.boom_luff.p = -1.0: must be a number in \[0, 1e\+12\]"):
+            CraneControllerNode(context=context, parameter_overrides=[Parameter("gains.boom_luff.p", value=-1.0)])
+        with pytest.raises(ParameterError, match=r"joints = .*must name each of"):
+            CraneControllerNode(context=context, parameter_overrides=[Parameter("joints", value=["knuckle"])])
+    finally:
+        context.try_shutdown()

@@ -37,6 +37,19 @@ class Preview:
     velocities: np.ndarray
     accelerations: np.ndarray
 
+    def __post_init__(self) -> None:
+        """ValueError naming the field for a preview that cannot be sampled: times not strictly increasing, or
+        values that are not finite or not one row per point."""
+        times = np.asarray(self.times_ns)
+        if times.ndim != 1 or times.size == 0 or np.any(np.diff(times) <= 0):
+            raise ValueError("reference preview: the points' times (stamp + time_from_start) must increase strictly")
+        for name in ("positions", "velocities", "accelerations"):
+            values = np.asarray(getattr(self, name), dtype=float)
+            if values.ndim != 2 or values.shape[0] != times.size:
+                raise ValueError(f"reference preview: {name} must give every joint at every point")
+            if not np.all(np.isfinite(values)):
+                raise ValueError(f"reference preview: {name} must be finite")
+
     def spans(self, t_ns: int) -> bool:
         return bool(self.times_ns[0] <= t_ns <= self.times_ns[-1])
 
@@ -57,6 +70,7 @@ class PreviewTracker:
         self.preview: Preview | None = None
         self._pending: tuple[int, np.ndarray, np.ndarray] | None = None
         self._answered = -1  # the stamp [ns] of the last state answered
+        self._command: np.ndarray | None = None  # the answer to it
 
     def take_preview(self, preview: Preview) -> np.ndarray | None:
         """A new preview; the command for a waiting state if it spans that state's time, else None."""
@@ -65,11 +79,17 @@ class PreviewTracker:
 
     def take_state(self, t_ns: int, q: np.ndarray, qd: np.ndarray) -> np.ndarray | None:
         """The plant's state stamped t_ns [ns] (q, qd of ``joints``): the command u [N m] for its next period, or None
-        while no preview spans t (the state then waits for one) and for a state not after the last answered (a
-        repetition: one command per period)."""
-        if t_ns <= self._answered:
+        while no preview spans t (the state then waits for one) and for a state before the last answered.  The
+        last answered state again (a lock-step plant repeats a state its command did not reach) gets the same
+        command again: the integral advances once per period.  ValueError for q or qd that are not finite."""
+        q, qd = np.asarray(q, dtype=float), np.asarray(qd, dtype=float)
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+            raise ValueError("plant state: position and velocity must be finite")
+        if t_ns == self._answered:
+            return self._command
+        if t_ns < self._answered:
             return None
-        self._pending = (t_ns, np.asarray(q, dtype=float), np.asarray(qd, dtype=float))
+        self._pending = (t_ns, q, qd)
         return self._tick()
 
     def _tick(self) -> np.ndarray | None:
@@ -78,4 +98,5 @@ class PreviewTracker:
             return None
         self._pending, self._answered = None, t_ns
         q_ref, qd_ref = self.preview.at(t_ns)
-        return self.controller(q_ref - q, qd_ref, qd, np.zeros(len(self.joints)))
+        self._command = self.controller(q_ref - q, qd_ref, qd, np.zeros(len(self.joints)))
+        return self._command

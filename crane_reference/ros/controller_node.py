@@ -21,7 +21,6 @@ import sys
 
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
@@ -33,7 +32,18 @@ from ..model.chain import ACTUATED_JOINTS, VARIANTS
 from ..model.config import load_config
 from ..model.units import NANOSECONDS
 from ..motion.simulation import Scenario
-from .parameters import DOUBLE, INTEGER, STRING, STRING_ARRAY, ParameterError, ParameterSpec, declare
+from .parameters import (
+    DOUBLE,
+    INTEGER,
+    STRING,
+    STRING_ARRAY,
+    ParameterError,
+    ParameterSpec,
+    declare,
+    parameter_names,
+    unknown_overrides,
+)
+from .publishing import OVERRIDABLE
 from .running import run_node
 
 NODE_NAME = "crane_controller"
@@ -49,6 +59,13 @@ _TOPICS = (
 )
 
 
+def _columns_of(rows, columns: list[int], what: str) -> np.ndarray:
+    """The ``columns`` of each of ``rows`` (sequences of numbers); ValueError naming ``what`` if one is short."""
+    if any(len(row) <= max(columns) for row in rows):
+        raise ValueError(f"{what}: one value per joint name is needed")
+    return np.array([[row[c] for c in columns] for row in rows], dtype=float)
+
+
 def _stamp_ns(msg) -> int:
     return msg.header.stamp.sec * NANOSECONDS + msg.header.stamp.nanosec
 
@@ -57,7 +74,7 @@ class CraneControllerNode(Node):
     """Tracks the reference preview on the plant; see the module documentation."""
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs) -> None:
-        super().__init__(node_name, **kwargs)
+        super().__init__(node_name, **{"automatically_declare_parameters_from_overrides": True, **kwargs})
         config_file = declare(self, ParameterSpec("config_file", STRING, "", "Crane description YAML; '' loads the "
                                                   "packaged default", empty_allowed=True, read_only=True))
         model = declare(self, ParameterSpec("model", STRING, "flexible", "Crane model variant (for the default "
@@ -79,10 +96,16 @@ class CraneControllerNode(Node):
                                                        ("i", 0.0, "Integral gain", "N m/(rad s)")))
             gains.append(JointGains(p, d, i))
         reference, state, command = (declare(self, spec) for spec in _TOPICS)
+        known = ["config_file", "model", "joints", "control_rate", *(spec.name for spec in _TOPICS),
+                 *(f"gains.{joint}.{name}" for joint in joints for name in "pdi")]
+        unknown = unknown_overrides(self, known)
+        if unknown:
+            raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
+                                 f"{parameter_names(self)}")
         self.tracker = PreviewTracker(joints, gains, 1.0 / rate)
         self._commands = self.create_publisher(Float64MultiArray, command, DEPTH)
         self.create_subscription(JointTrajectory, reference, self._on_preview, DEPTH,
-                                 qos_overriding_options=QoSOverridingOptions.with_default_policies())
+                                 qos_overriding_options=OVERRIDABLE)
         self.create_subscription(JointState, state, self._on_state, DEPTH)
         self.get_logger().info(f"tracking {reference} on {state}, commanding {command} ({', '.join(joints)})")
 
@@ -98,17 +121,29 @@ class CraneControllerNode(Node):
         if columns is None or not msg.points:
             return
         start = _stamp_ns(msg)
-        times = np.array([start + p.time_from_start.sec * NANOSECONDS + p.time_from_start.nanosec
-                          for p in msg.points], dtype=np.int64)
-        fields = (np.array([[getattr(p, name)[c] for c in columns] for p in msg.points], dtype=float)
-                  for name in ("positions", "velocities", "accelerations"))
-        self._send(self.tracker.take_preview(Preview(times, *fields)))
+        try:
+            times = np.array([start + p.time_from_start.sec * NANOSECONDS + p.time_from_start.nanosec
+                              for p in msg.points], dtype=np.int64)
+            fields = [_columns_of([getattr(p, name) for p in msg.points], columns, f"reference preview {name}")
+                      for name in ("positions", "velocities", "accelerations")]
+            command = self.tracker.take_preview(Preview(times, *fields))
+        except ValueError as error:
+            self.get_logger().error(f"dropped: {error}", throttle_duration_sec=1.0)
+            return
+        self._send(command)
 
     def _on_state(self, msg: JointState) -> None:
         columns = self._columns(list(msg.name), "the plant's joint states")
-        if columns is not None:
-            self._send(self.tracker.take_state(_stamp_ns(msg), [msg.position[c] for c in columns],
-                                               [msg.velocity[c] for c in columns]))
+        if columns is None:
+            return
+        try:
+            q, qd = (_columns_of([values], columns, f"plant state {name}")[0]
+                     for values, name in ((msg.position, "position"), (msg.velocity, "velocity")))
+            command = self.tracker.take_state(_stamp_ns(msg), q, qd)
+        except ValueError as error:
+            self.get_logger().error(f"dropped: {error}", throttle_duration_sec=1.0)
+            return
+        self._send(command)
 
     def _send(self, command) -> None:
         if command is not None:

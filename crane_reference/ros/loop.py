@@ -53,46 +53,52 @@ def run_loop(duration: float, clock_mode: str = "lockstep", control_rate: int = 
 
 @contextmanager
 def closed_loop_processes(parameters: dict[str, dict[str, object]]) -> Iterator[dict[str, subprocess.Popen]]:
-    """The three nodes as processes with ``parameters`` by node name; on leaving, SIGINT to each, and
-    :class:`LoopError` if one did not exit with code 0 (with the end of its stderr)."""
+    """The three nodes as processes with ``parameters`` by node name, their output to files (a pipe nobody reads
+    would block a node once full); on leaving, SIGINT to each, and :class:`LoopError` if one did not exit with
+    code 0, or for a :class:`LoopError` inside, with the end of each one's output."""
     with tempfile.TemporaryDirectory(prefix="crane_loop_") as directory:
         params_file = Path(directory) / "loop.yaml"
         params_file.write_text(yaml.safe_dump({name: {"ros__parameters": values}
                                                for name, values in parameters.items()}))
-        processes = {name: subprocess.Popen([sys.executable, "-m", MODULES[name], "--ros-args", "-r",
-                                             f"__node:={name}", "--params-file", str(params_file)], env=os.environ,
-                                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-                     for name in parameters}
+        logs = {name: Path(directory) / f"{name}.log" for name in parameters}
+        processes = {}
+        for name in parameters:
+            with logs[name].open("w") as log:
+                processes[name] = subprocess.Popen([sys.executable, "-m", MODULES[name], "--ros-args", "-r",
+                                                    f"__node:={name}", "--params-file", str(params_file)],
+                                                   env=os.environ, stdout=log, stderr=subprocess.STDOUT)
         try:
             yield processes
         except LoopError as error:
-            outputs = _end(processes)
-            raise LoopError(f"{error}; " + "; ".join(f"{name} (exit code {code}) said: {text[-1500:]}"
-                                                     for name, (code, text) in outputs.items())) from None
+            codes = _end(processes)
+            raise LoopError(f"{error}; " + "; ".join(f"{name} (exit code {code}) said: {_tail(logs[name])}"
+                                                     for name, code in codes.items())) from None
         except BaseException:
             _end(processes)
             raise
-        outputs = _end(processes)
-    failed = {name: output for name, (code, output) in outputs.items() if code != 0}
-    if failed:
-        raise LoopError("; ".join(f"{name} exited with {outputs[name][0]}: {text[-2000:]}"
-                                  for name, text in failed.items()))
+        codes = _end(processes)
+        failed = [name for name, code in codes.items() if code != 0]
+        if failed:
+            raise LoopError("; ".join(f"{name} exited with {codes[name]}: {_tail(logs[name])}" for name in failed))
 
 
-def _end(processes: dict[str, subprocess.Popen]) -> dict[str, tuple[int, str]]:
-    """SIGINT to each process still running; their exit codes and stderr."""
+def _tail(log: Path, characters: int = 2000) -> str:
+    return log.read_text(errors="replace")[-characters:]
+
+
+def _end(processes: dict[str, subprocess.Popen]) -> dict[str, int]:
+    """SIGINT to each process still running; their exit codes."""
     for process in processes.values():
         if process.poll() is None:
             process.send_signal(signal.SIGINT)
-    outputs = {}
+    codes = {}
     for name, process in processes.items():
         try:
-            _, stderr = process.communicate(timeout=EXIT_TIMEOUT)
+            codes[name] = process.wait(timeout=EXIT_TIMEOUT)
         except subprocess.TimeoutExpired:
             process.kill()
-            _, stderr = process.communicate()
-        outputs[name] = (process.returncode, stderr)
-    return outputs
+            codes[name] = process.wait()
+    return codes
 
 
 def _record(duration: float, processes: dict[str, subprocess.Popen],
@@ -148,9 +154,13 @@ def _record(duration: float, processes: dict[str, subprocess.Popen],
         node.destroy_node()
     finally:
         context.try_shutdown()
+    if not references:
+        raise LoopError("no sample of the reference node was recorded")
     end = first + round(duration * NANOSECONDS)
-    stamps = np.array(sorted(k for k in states if k <= end and k in poses and k in deflections), dtype=np.int64)
     reference_stamps = np.array(sorted(references), dtype=np.int64)
+    inside = range(reference_stamps[0], reference_stamps[-1] + 1)  # the reference is interpolated, never held
+    stamps = np.array(sorted(k for k in states if k <= end and k in inside and k in poses and k in deflections),
+                      dtype=np.int64)
     columns = [reference_names[0].index(name) for name in names[0]]  # the plant's order
     reference = [np.array([references[k][i] for k in reference_stamps])[:, columns] for i in (0, 1)]
     seconds = (stamps - first) / NANOSECONDS

@@ -119,13 +119,18 @@ class CranePlantNode(LifecycleNode):
             self._outputs["clock"] = self.create_lifecycle_publisher(ClockMessage, CLOCK_TOPIC, depth)
         self._made = {}
         self._failure = ""
+        self._late = self._late_reported = 0
         self._doing = "inactive: configured; activate to run"
         self.get_logger().info(f"configured: the {v.model} crane as a plant, {v.control_rate} Hz {v.clock_mode}, "
                                f"commands for {', '.join(v.joints)}")
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Run: publish the state now; in real time start the periods, in lock-step wait for commands."""
+        """Run: publish the state now; in real time start the periods, in lock-step wait for commands.  A plant
+        whose integration failed does not run again (cleanup and configure make a new one)."""
+        if self._failure:
+            self.get_logger().error(f"not activated: the plant stopped ({self._failure}); cleanup and configure")
+            return TransitionCallbackReturn.FAILURE
         result = super().on_activate(state)
         self._doing = f"active ({self._params.clock_mode})"
         self._publish(self._server.state())
@@ -160,7 +165,7 @@ class CranePlantNode(LifecycleNode):
     def _release(self) -> None:
         self._stop_periods()
         for publisher in self._outputs.values():
-            self.destroy_publisher(publisher)
+            self.destroy_lifecycle_publisher(publisher)
         self._outputs, self._made, self._server = {}, {}, None
 
     def _active(self) -> bool:
@@ -184,12 +189,18 @@ class CranePlantNode(LifecycleNode):
             if -wait > period:
                 self._late += 1
                 due = self._seconds()
-            if self._server.accepted:
-                self._advance(self._seconds())
-            else:
-                with self._lock:
-                    state = self._server.state()
-                self._publish(state)
+            try:
+                if self._server.accepted:
+                    self._advance(self._seconds())
+                else:
+                    with self._lock:
+                        state = self._server.state()
+                    self._publish(state)
+            except Exception as error:  # anything else that goes wrong stops the plant, at ERROR
+                if not self.context.ok():
+                    return
+                self._fail(f"{type(error).__name__}: {error}")
+                return
             due += period
 
     def _on_command(self, msg: Float64MultiArray) -> None:
@@ -216,34 +227,40 @@ class CranePlantNode(LifecycleNode):
             with self._lock:
                 state = server.tick(now)
         except (IntegrationError, ProjectionError) as error:
-            self._failure = str(error)
-            self._stop_periods()
-            self.get_logger().error(f"the plant stopped: {error}")
+            self._fail(str(error))
             return
         if server.timeouts > timeouts:
             self.get_logger().warn(f"no command for {server.settings.command_timeout:g} s: applying the hold command "
                                    "(the efforts that hold the configuration where the timeout began)")
         self._publish(state)
 
+    def _fail(self, reason: str) -> None:
+        """The plant stops (its periods end); /diagnostics reports ``reason`` at ERROR."""
+        self._failure = reason
+        self._running.clear()
+        self.get_logger().error(f"the plant stopped: {reason}")
+
     def _publish(self, state: PlantState) -> None:
         """The state's messages, serialized once and then filled in place
         (:mod:`~crane_reference.interface.serialized`), after /clock in lock-step."""
         v, types = self._params, self._types
         if v.clock_mode == "lockstep":
-            stamp_ns = round((v.clock_start + state.t) * NANOSECONDS)
+            # integer nanoseconds: clock_start + ticks periods, never drifting off the reference's samples
+            stamp_ns = (round(v.clock_start * NANOSECONDS)
+                        + self._server.ticks * round(self._server.settings.period * NANOSECONDS))
             self._outputs["clock"].publish(ClockMessage(clock=messages.time_msg(types, stamp_ns)))
         else:
             stamp_ns = self.get_clock().now().nanoseconds
-        if not self._made:  # the writers of this configuration and these frames
+        made = self._made  # one read: a parameter change may replace it meanwhile
+        if not made:  # the writers of this configuration and these frames
             prefix = v.frame_prefix
-            self._made = {
+            made = self._made = {
                 "joints": SerializedJointState(serialize_message(messages.joint_state(
                     types, 0, self._server.published, state))),
                 "pose": SerializedPose(serialize_message(messages.end_effector_pose(
                     types, 0, prefix + v.frame_id, state))),
                 "deflection": SerializedVector3(serialize_message(messages.tip_deflection(
                     types, 0, prefix + self._server.deflection_frame, state.deflection)))}
-        made = self._made
         self._outputs["joints"].publish(made["joints"].fill(stamp_ns, state))
         self._outputs["pose"].publish(made["pose"].fill(stamp_ns, state))
         self._outputs["deflection"].publish(made["deflection"].fill(stamp_ns, state.deflection))

@@ -23,7 +23,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from rclpy.lifecycle import LifecycleNode
-from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSPolicyKind, QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
@@ -37,6 +37,10 @@ from ..model.units import NANOSECONDS
 from ..stream.health import Level, serving_health, startup_health
 from ..stream.server import Outgoing, ReferenceServer
 
+OVERRIDABLE = QoSOverridingOptions([QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH, QoSPolicyKind.RELIABILITY,
+                                    QoSPolicyKind.DURABILITY])
+"""The QoS policies a reference topic's ``qos_overrides`` parameters may set (rclpy's defaults and durability:
+a transient-local preview reaches a controller that starts late)."""
 MAX_WAIT = 0.1  # [s] of wall time the publisher sleeps at most before reading the clock again
 MARKER_RATE = 10.0  # [Hz]
 TRAIL_RATE = 50.0  # [Hz] of points added to E's trail
@@ -78,7 +82,7 @@ class SamplePublisher:
         self._ellipse: tuple[tuple[float, ...], list[Any]] = ((), [])  # (a, b, z) and its Point messages
         self._joint_writer: SerializedJointState | None = None
         self._pose_writer: SerializedPose | None = None
-        depth, overridable = messages.PUBLISHER_DEPTH, QoSOverridingOptions.with_default_policies()
+        depth, overridable = messages.PUBLISHER_DEPTH, OVERRIDABLE
         self._managed = [node.create_lifecycle_publisher(message_type, topic, depth, qos_overriding_options=overridable)
                          for message_type, topic in ((JointState, messages.JOINT_STATES_TOPIC),
                                                      (PoseStamped, messages.END_EFFECTOR_POSE_TOPIC),

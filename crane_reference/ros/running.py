@@ -31,18 +31,19 @@ def run_node(make: Callable[[], Node], name: str, args: list[str] | None = None)
     for number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(number, lambda *_: stop.set())
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
     try:
-        node = make()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while not stop.is_set():
-            executor.spin_once(timeout_sec=SPIN_PERIOD)
-    except (StartupError, ConfigError, ParameterError, ValueError) as error:
-        rclpy.logging.get_logger(name).fatal(f"{CANNOT} start: {error}")
-        return 1
-    finally:
-        if node is not None:
+        try:
+            node = make()
+        except (StartupError, ConfigError, ParameterError, ValueError) as error:
+            rclpy.logging.get_logger(name).fatal(f"{CANNOT} start: {error}")
+            return 1
+        try:
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+            while not stop.is_set():
+                executor.spin_once(timeout_sec=SPIN_PERIOD)
+        finally:
             node.destroy_node()
+    finally:
         rclpy.try_shutdown()
     return 0
