@@ -65,12 +65,17 @@ BANDWIDTH = 2.0
 DAMPING_RATIO = 0.7
 
 
-def default_gains(scenario: Scenario, joints: Sequence[str]) -> list[JointGains]:
-    """PD gains per joint of ``joints`` for :data:`BANDWIDTH` and :data:`DAMPING_RATIO` with J the diagonal of M
-    at the held start (:func:`~.controller.bandwidth_gains`, as ``crane-reference track``)."""
+def held_inertia(scenario: Scenario, joints: Sequence[str]) -> np.ndarray:
+    """J per joint of ``joints``: the diagonal of M at the held start (:func:`held_start`) [kg m^2]."""
     q = held_start(scenario).q
     inertia = scenario.dynamics.terms(0.0, q, np.zeros_like(q)).M
-    return [bandwidth_gains(inertia[j, j], BANDWIDTH, DAMPING_RATIO) for j in map(scenario.model.index, joints)]
+    return np.array([inertia[j, j] for j in map(scenario.model.index, joints)])
+
+
+def default_gains(scenario: Scenario, joints: Sequence[str]) -> list[JointGains]:
+    """PD gains per joint of ``joints`` for :data:`BANDWIDTH` and :data:`DAMPING_RATIO` with J of
+    :func:`held_inertia` (:func:`~.controller.bandwidth_gains`, as ``crane-reference track``)."""
+    return [bandwidth_gains(J, BANDWIDTH, DAMPING_RATIO) for J in held_inertia(scenario, joints)]
 
 
 class Plant:

@@ -8,11 +8,12 @@ reference node's ``~/reference_preview`` (trajectory_msgs/JointTrajectory) and t
 joint_trajectory_controller samples its trajectory, then a PD/PID tick).
 
 Parameters: ``joints``; the gains per joint ``gains.<joint>.p`` [N m/rad], ``.d`` [N m s/rad] and ``.i``
-[N m/(rad s)] (ros2_control's names; defaults: a 2 Hz, 0.7-damped loop on the crane of ``config_file`` and
-``model``, as ``crane-reference track``); ``.d`` is the D action the plant's drives apply, so it must equal
-the plant's ``drive_damping.<joint>`` (the defaults agree); ``control_rate`` [Hz], the plant's, for the
-integral; the three topics.  The preview's subscription takes rclpy's ``qos_overrides`` (closed_loop.launch.py
-makes it transient-local on both ends, so that a controller started late still gets the last preview).
+[N m/(rad s)] (ros2_control's names; defaults: :func:`~crane_reference.control.plant.default_gains` of the
+crane of ``config_file`` and ``model``, as ``crane-reference track``); ``.d`` is the D action the plant's
+drives apply, so it must equal the plant's ``drive_damping.<joint>`` (the defaults agree); ``control_rate``
+[Hz], the plant's, for the integral; the three topics.  The preview's subscription takes rclpy's
+``qos_overrides`` (closed_loop.launch.py makes it transient-local on both ends, so that a controller started
+late still gets the last preview).
 """
 
 from __future__ import annotations

@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 
 from rclpy.node import Node
 
+from ..control.plant import BANDWIDTH, DAMPING_RATIO
 from ..control.plant_server import PlantSettings, default_drive_damping
 from ..model.chain import ACTUATED_JOINTS, VARIANTS
 from ..model.config import load_config
@@ -46,7 +47,8 @@ PLANT_PARAMETERS: tuple[ParameterSpec, ...] = (
                   "permutation of the actuated joints), as a forward command controller's joints", read_only=True),
     *(ParameterSpec(f"drive_damping.{joint}", DOUBLE, 0.0, f"Damping kd of the {joint} drive's velocity loop: "
                     "the drive applies the commanded effort minus kd times the joint's velocity; default: the D "
-                    "gain of a 2 Hz, 0.7-damped joint loop on the crane (as `crane-reference track`)",
+                    f"gain of a {BANDWIDTH:g} Hz, {DAMPING_RATIO:g}-damped joint loop on the crane (as "
+                    "`crane-reference track`)",
                     "N m s/rad", (0.0, 1e9), read_only=True) for joint in ACTUATED_JOINTS),
     ParameterSpec("command_timeout", DOUBLE, 0.1, "With no command accepted for this long (real time), the plant "
                   "applies the hold command (the efforts that hold the configuration where the timeout began) and "

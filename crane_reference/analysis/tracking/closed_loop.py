@@ -1,13 +1,15 @@
-"""A closed-loop run: the actuated crane (:mod:`.plant`) made to follow the reference by joint-space feedback
-(:mod:`.controller`) with optional feedforward (:mod:`.feedforward`).
+"""A closed-loop run: the actuated crane (:mod:`crane_reference.control.plant`) made to follow the reference by
+joint-space feedback (:mod:`crane_reference.control.controller`) with optional feedforward
+(:mod:`crane_reference.control.feedforward`).
 
 The reference is the programmed motion the node publishes (ideal constraints; or realised by the luff
 and knuckle torques, ``realisation="servo"``) of the same crane, integrated with the same step; the
 controller reads it as a downstream controller does, one sample per tick: q_ref, qd_ref of the actuated
 joints at t_k.  Its command holds over the period (zero-order hold; the D action acts in the joint
-drives, see :mod:`.controller`), the feedforward runs linearly from its value at t_k to that at t_k+1
-(the reference is known ahead, as a joint_trajectory_controller interpolates its points).  The plant
-starts at rest, held by its actuators with E on the task's start point (:func:`.plant.held_start`).
+drives, see :mod:`crane_reference.control.controller`), the feedforward runs linearly from its value at t_k
+to that at t_k+1 (the reference is known ahead, as a joint_trajectory_controller interpolates its points).
+The plant starts at rest, held by its actuators with E on the task's start point
+(:func:`crane_reference.control.plant.held_start`).
 
 Results (:class:`TrackingRun`): E's deviation from the programmed path (its distance to the ellipse in
 XY and its height error, the task's holonomic constraints in that order, first order in their residuals:
@@ -29,7 +31,7 @@ from scipy.spatial.transform import Rotation
 
 from ...control.controller import CONTROLLERS, JointController, JointGains, bandwidth_gains
 from ...control.feedforward import FEEDFORWARDS, RigidInverseDynamics
-from ...control.plant import Plant, held_start, servo_motion
+from ...control.plant import BANDWIDTH, DAMPING_RATIO, Plant, held_inertia, held_start, servo_motion
 from ...dynamics.deflection import boom_tip_deflection
 from ...interface.bringup import LoopRecording
 from ...model.chain import ACTUATED_JOINTS, VARIANTS
@@ -54,8 +56,8 @@ class TrackingSpec:
     variant: str = "flexible"
     realisation: str = "ideal"
     controller: str = "pd"
-    bandwidth: float = 2.0
-    damping_ratio: float = 0.7
+    bandwidth: float = BANDWIDTH
+    damping_ratio: float = DAMPING_RATIO
     joint_bandwidths: dict[str, float] = field(default_factory=dict)
     gains: dict[str, JointGains] = field(default_factory=dict)
     feedforward: str = "rigid"
@@ -184,8 +186,7 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
     scenario = Scenario(params, spec.variant)
     start = held_start(scenario)
     reference, reference_motion = _reference(scenario, spec, task)
-    inertia = scenario.dynamics.terms(0.0, start.q, np.zeros_like(start.q)).M
-    gains = spec.joint_gains(np.array([inertia[j, j] for j in map(scenario.model.index, ACTUATED_JOINTS)]))
+    gains = spec.joint_gains(held_inertia(scenario, ACTUATED_JOINTS))
     controller = JointController(gains, 1.0 / spec.rate)
     plant = Plant(params, spec.variant, start, spec.step, controller.damping)
     actuated = plant.actuated
@@ -241,9 +242,7 @@ def recorded_run(params: CraneParameters, spec: TrackingSpec, recording: LoopRec
                            Rotation.from_matrix(rotations).as_quat())
     actuated = [model.index(name) for name in ACTUATED_JOINTS]
     constraints = ConstraintSet(tuple(c for c in scenario.motion.constraints.constraints if c.order == 0))
-    start = held_start(scenario).q
-    inertia = dynamics.terms(0.0, start, np.zeros_like(start)).M
-    gains = spec.joint_gains(np.array([inertia[j, j] for j in actuated]))
+    gains = spec.joint_gains(held_inertia(scenario, ACTUATED_JOINTS))
     reference_deflection = (boom_tip_deflection(model, dynamics.chain, recording.reference_q)
                             if spec.variant == "flexible" else np.zeros((N, 3)))
     path_error = constraints.surface_offsets(t, recording.ee_position)
