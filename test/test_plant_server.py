@@ -178,18 +178,16 @@ def test_the_preview_is_sampled_exactly_on_cubic_motion():
 
 
 def test_the_tracker_waits_for_a_preview_and_answers_a_stamp_once():
-    """A state waits for a preview that spans it; the same stamp again (a lock-step plant repeating a state its
-    command did not reach) gets the same command, and the integral advances once per period: the commands are
-    those of a JointController ticked once per stamp."""
+    """A state waits for a preview that spans it; a stamp is answered once (a lock-step plant repeats a state until
+    a command comes), and the commands are those of a JointController ticked once per stamp."""
     gains = [JointGains(100.0, 10.0, 1000.0)] * 3
     tracker, alone = PreviewTracker(ACTUATED_JOINTS, gains, 1e-3), JointController(gains, 1e-3)
     zeros, q_ref = np.zeros(3), np.array([1.0, 2.0, 3.0])
     assert tracker.take_state(1_000_000_000, zeros, zeros) is None  # no preview yet: waits
     preview = Preview(np.array([1_000_000_000, 2_000_000_000], dtype=np.int64), np.array([q_ref] * 2),
                       np.zeros((2, 3)), np.zeros((2, 3)))
-    first = alone(q_ref, zeros, zeros, zeros)
-    assert tracker.take_preview(preview) == pytest.approx(first)  # the waiting state is answered
-    assert tracker.take_state(1_000_000_000, zeros, zeros) == pytest.approx(first)  # repeated: the same answer
+    assert tracker.take_preview(preview) == pytest.approx(alone(q_ref, zeros, zeros, zeros))  # answered now
+    assert tracker.take_state(1_000_000_000, zeros, zeros) is None  # the same stamp again: answered already
     assert tracker.take_state(999_000_000, zeros, zeros) is None  # older than the last answered
     assert tracker.take_state(1_001_000_000, zeros, zeros) == pytest.approx(alone(q_ref, zeros, zeros, zeros))
     assert tracker.take_state(3_000_000_000, zeros, zeros) is None  # beyond the preview: waits

@@ -70,7 +70,6 @@ class PreviewTracker:
         self.preview: Preview | None = None
         self._pending: tuple[int, np.ndarray, np.ndarray] | None = None
         self._answered = -1  # the stamp [ns] of the last state answered
-        self._command: np.ndarray | None = None  # the answer to it
 
     def take_preview(self, preview: Preview) -> np.ndarray | None:
         """A new preview; the command for a waiting state if it spans that state's time, else None."""
@@ -79,15 +78,13 @@ class PreviewTracker:
 
     def take_state(self, t_ns: int, q: np.ndarray, qd: np.ndarray) -> np.ndarray | None:
         """The plant's state stamped t_ns [ns] (q, qd of ``joints``): the command u [N m] for its next period, or None
-        while no preview spans t (the state then waits for one) and for a state before the last answered.  The
-        last answered state again (a lock-step plant repeats a state its command did not reach) gets the same
-        command again: the integral advances once per period.  ValueError for q or qd that are not finite."""
+        while no preview spans t (the state then waits for one) and for a state not after the last answered (a
+        lock-step plant repeats a state until a command comes: one command per period, so that the loop stays
+        deterministic).  ValueError for q or qd that are not finite."""
         q, qd = np.asarray(q, dtype=float), np.asarray(qd, dtype=float)
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
             raise ValueError("plant state: position and velocity must be finite")
-        if t_ns == self._answered:
-            return self._command
-        if t_ns < self._answered:
+        if t_ns <= self._answered:
             return None
         self._pending = (t_ns, q, qd)
         return self._tick()
@@ -98,5 +95,4 @@ class PreviewTracker:
             return None
         self._pending, self._answered = None, t_ns
         q_ref, qd_ref = self.preview.at(t_ns)
-        self._command = self.controller(q_ref - q, qd_ref, qd, np.zeros(len(self.joints)))
-        return self._command
+        return self.controller(q_ref - q, qd_ref, qd, np.zeros(len(self.joints)))

@@ -127,15 +127,23 @@ class CraneControllerNode(Node):
                               for p in msg.points], dtype=np.int64)
             fields = [_columns_of([getattr(p, name) for p in msg.points], columns, f"reference preview {name}")
                       for name in ("positions", "velocities", "accelerations")]
-            command = self.tracker.take_preview(Preview(times, *fields))
+            preview = Preview(times, *fields)
         except ValueError as error:
             self.get_logger().error(f"dropped: {error}", throttle_duration_sec=1.0)
             return
-        self._send(command)
+        if not self._plant_listens():
+            self.tracker.preview = preview
+            return
+        self._send(self.tracker.take_preview(preview))
+
+    def _plant_listens(self) -> bool:
+        """Whether a subscriber of the commands is matched: until then no state is answered (a command sent
+        before would be lost, and a lock-step plant would wait for ever; it repeats its state meanwhile)."""
+        return self._commands.get_subscription_count() > 0
 
     def _on_state(self, msg: JointState) -> None:
         columns = self._columns(list(msg.name), "the plant's joint states")
-        if columns is None:
+        if columns is None or not self._plant_listens():
             return
         try:
             q, qd = (_columns_of([values], columns, f"plant state {name}")[0]
