@@ -218,9 +218,11 @@ def loop_command(args: argparse.Namespace) -> int:
 
 
 def compile_command(args: argparse.Namespace) -> int:
+    from .control.plant_server import warm_up_plant
     from .stream.warmup import warm_up
 
-    print(f"{warm_up().describe()}; cache {os.environ['NUMBA_CACHE_DIR']}")
+    print(f"reference: {warm_up().describe()}; plant: {warm_up_plant().describe()}; "
+          f"cache {os.environ['NUMBA_CACHE_DIR']}")
     return 0
 
 

@@ -29,15 +29,18 @@ point, at rest) with the efforts that hold it there.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..dynamics.cache import WarmUp, cache_counts
 from ..dynamics.deflection import boom_tip_deflection
 from ..dynamics.kernels import imbalance_rows
 from ..dynamics.kinematics import quaternion
 from ..model.chain import ACTUATED_JOINTS, VARIANTS
+from ..model.config import load_config
 from ..model.parameters import CraneParameters
 from ..motion.simulation import Scenario
 from ..motion.steps import PLANT_STEP
@@ -121,12 +124,13 @@ class PlantServer:
         self.settings = settings
         scenario = Scenario(params, settings.variant)
         start = held_start(scenario)
-        self._order = np.array([ACTUATED_JOINTS.index(name) for name in settings.joints], dtype=np.int64)
+        self.order = np.array([ACTUATED_JOINTS.index(name) for name in settings.joints], dtype=np.int64)
+        """Where each of the settings' ``joints`` is in ACTUATED_JOINTS."""
         damping = settings.drive_damping or default_drive_damping(scenario, settings.joints)
         self.drive_damping = np.asarray(damping, dtype=float)
         """kd per joint of the settings' ``joints`` [N m s/rad]."""
         actuated_damping = np.empty(len(ACTUATED_JOINTS))
-        actuated_damping[self._order] = self.drive_damping
+        actuated_damping[self.order] = self.drive_damping
         self.plant = Plant(params, settings.variant, start, settings.step, actuated_damping, keep=False)
         model = self.plant.model
         self.published = model.joint_names if settings.all_coordinates else settings.joints
@@ -164,7 +168,7 @@ class PlantServer:
             self.last_refusal, self.refused_last = reason, True
             raise CommandRefusedError(reason)
         self._command = np.empty(len(ACTUATED_JOINTS))
-        self._command[self._order] = u
+        self._command[self.order] = u
         self._last_command = now
         self._held = None
         self.accepted += 1
@@ -249,3 +253,15 @@ def plant_health(server: PlantServer, doing: str, failure: str, late_ticks: int,
         return PlantHealth(1, f"{doing}: {newly_late} periods started late (the machine is too slow for the "
                               "control rate)", values)
     return PlantHealth(0, doing, values)
+
+
+def warm_up_plant() -> WarmUp:
+    """Call every kernel the plant node uses (a period under its start efforts and one under the hold command,
+    on the packaged flexible crane: the kernels depend on the array types only), for ``crane-reference compile``."""
+    start = time.perf_counter()
+    compiled, loaded = cache_counts()
+    server = PlantServer(load_config(), PlantSettings())
+    server.command(server.hold_efforts(server.plant.q)[server.order], 0.0)
+    server.tick(0.0)
+    now_compiled, now_loaded = cache_counts()
+    return WarmUp(time.perf_counter() - start, now_compiled - compiled, now_loaded - loaded)

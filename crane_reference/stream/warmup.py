@@ -9,13 +9,12 @@ Afterwards each process only loads the cached code.
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Iterable
-from dataclasses import dataclass
 
 import numpy as np
 
+from ..dynamics.cache import WarmUp, cache_counts
 from ..model.chain import VARIANTS
 from ..model.config import load_config
 from ..motion.simulation import Scenario, simulate
@@ -25,41 +24,12 @@ from .reference_stream import ReferenceStream
 WARM_UP_STEPS = 3
 
 
-@dataclass(frozen=True)
-class WarmUp:
-    """What making the kernels ready took: wall time [s], kernel versions compiled (absent from the cache)
-    and loaded from the cache."""
-
-    seconds: float
-    compiled: int
-    loaded: int
-
-    def describe(self) -> str:
-        how = (f"compiled {self.compiled} and loaded {self.loaded} from the cache" if self.compiled
-               else f"loaded {self.loaded} from the cache")
-        return f"kernels ready in {self.seconds:.1f} s ({how})"
-
-
-def _cache_counts() -> tuple[int, int]:
-    """Kernel versions compiled (cache misses) and loaded (cache hits) so far in this process, over the
-    package's compiled functions."""
-    compiled = loaded = 0
-    for name, module in list(sys.modules.items()):
-        if name.startswith("crane_reference."):
-            for value in vars(module).values():
-                stats = getattr(value, "stats", None)  # a compiled kernel (numba dispatcher) defined here
-                if hasattr(stats, "cache_misses") and getattr(value, "__module__", None) == name:
-                    compiled += sum(stats.cache_misses.values())
-                    loaded += sum(stats.cache_hits.values())
-    return compiled, loaded
-
-
 def warm_up(variants: Iterable[str] = VARIANTS) -> WarmUp:
     """Call every kernel the simulation, the stream and the node use for the model ``variants`` (a few steps
     offline and streamed, one evaluation, a target check and a re-target, on the packaged crane: the
     kernels depend on the array types only)."""
     start = time.perf_counter()
-    compiled, loaded = _cache_counts()
+    compiled, loaded = cache_counts()
     params = load_config()
     for variant in variants:
         scenario = Scenario(params, variant)
@@ -71,5 +41,5 @@ def warm_up(variants: Iterable[str] = VARIANTS) -> WarmUp:
         stream.sample(0.5 * ONLINE_STEP)  # between two computed steps: interpolated (E's poses from q)
         stream.check_targets(params.task)
         stream.retarget(1e-3, params.task, checked=True)
-    now_compiled, now_loaded = _cache_counts()
+    now_compiled, now_loaded = cache_counts()
     return WarmUp(time.perf_counter() - start, now_compiled - compiled, now_loaded - loaded)
