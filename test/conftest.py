@@ -11,11 +11,16 @@ localhost only.
 
 from __future__ import annotations
 
+import importlib
 import os
+import pkgutil
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from numba.core.registry import CPUDispatcher
 
+import crane_reference.dynamics as dynamics_package
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import CraneParameters
 from crane_reference.motion.simulation import Scenario
@@ -58,3 +63,16 @@ def flexible(params: CraneParameters) -> Scenario:
 def rigid(params: CraneParameters) -> Scenario:
     """The paper's scenario on the rigid-boom crane."""
     return Scenario(params, "rigid")
+
+
+@pytest.fixture
+def kernel_signatures() -> Callable[[], int]:
+    """How many compiled versions the package's kernels have in this process (numba's own registry): a
+    warm-up test checks that using what it warmed adds none."""
+    def count() -> int:
+        total = 0
+        for module_info in pkgutil.iter_modules(dynamics_package.__path__):
+            module = importlib.import_module(f"crane_reference.dynamics.{module_info.name}")
+            total += sum(len(f.signatures) for f in vars(module).values() if isinstance(f, CPUDispatcher))
+        return total
+    return count

@@ -16,18 +16,14 @@
 
 from __future__ import annotations
 
-import importlib
 import math
-import pkgutil
 from contextlib import suppress
 from dataclasses import replace
 
 import numpy as np
 import pytest
-from numba.core.registry import CPUDispatcher
 from scipy.spatial.transform import Rotation
 
-from crane_reference import dynamics as dynamics_package
 from crane_reference.control.controller import JointController, JointGains
 from crane_reference.control.plant import Plant, held_start
 from crane_reference.control.plant_server import CommandRefusedError, PlantServer, PlantSettings, warm_up_plant
@@ -203,12 +199,12 @@ def test_the_tracker_waits_for_a_preview_and_answers_a_stamp_once():
         Preview(np.array([5, 6], dtype=np.int64), np.zeros((2, 3)), np.full((2, 3), np.inf), np.zeros((2, 3)))
 
 
-def test_warm_up_makes_every_kernel_the_plant_uses_ready(still):
+def test_warm_up_makes_every_kernel_the_plant_uses_ready(still, kernel_signatures):
     """After ``warm_up_plant`` a plant (another crane of the same model, permuted joints, every coordinate
     published, commands, a refusal, a timeout's hold command) makes no kernel version the warm-up did not make:
     the plant node never compiles, or loads from the cache, in a period."""
     warm_up_plant()
-    before = _kernel_signatures()
+    before = kernel_signatures()
     server = PlantServer(still, PlantSettings(joints=("knuckle", "boom_luff", "column_slew"), command_timeout=0.002,
                                               all_coordinates=True))
     server.command([0.0, 1e4, 0.0], 0.0)
@@ -217,13 +213,4 @@ def test_warm_up_makes_every_kernel_the_plant_uses_ready(still):
     for k in range(5):
         server.tick(k * 1e-3)
     assert server.holding
-    assert _kernel_signatures() == before
-
-
-def _kernel_signatures() -> int:
-    """How many compiled versions the package's kernels have in this process (numba's own registry)."""
-    count = 0
-    for module_info in pkgutil.iter_modules(dynamics_package.__path__):
-        module = importlib.import_module(f"crane_reference.dynamics.{module_info.name}")
-        count += sum(len(f.signatures) for f in vars(module).values() if isinstance(f, CPUDispatcher))
-    return count
+    assert kernel_signatures() == before

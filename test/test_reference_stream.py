@@ -9,14 +9,9 @@ falls inside a run.
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
-
 import numpy as np
 import pytest
-from numba.core.registry import CPUDispatcher
 
-import crane_reference.dynamics as dynamics_package
 from crane_reference.dynamics.kinematics import forward_kinematics
 from crane_reference.model.chain import build_model
 from crane_reference.model.config import load_config
@@ -156,21 +151,12 @@ def test_reach_is_the_arms_geometric_reach(params):
         assert near <= low <= near + 5e-3 and far - 5e-3 <= high <= far
 
 
-def _kernel_signatures() -> int:
-    """How many compiled versions the package's kernels have in this process (numba's own registry)."""
-    count = 0
-    for module_info in pkgutil.iter_modules(dynamics_package.__path__):
-        module = importlib.import_module(f"crane_reference.dynamics.{module_info.name}")
-        count += sum(len(f.signatures) for f in vars(module).values() if isinstance(f, CPUDispatcher))
-    return count
-
-
-def test_warm_up_makes_every_kernel_the_stream_uses_ready():
+def test_warm_up_makes_every_kernel_the_stream_uses_ready(kernel_signatures):
     """After ``warm_up`` a stream at its default step (computing, sampling on and between its steps, under a
     speed ramp, previews, a target check and a re-target) makes no kernel version the warm-up did not make:
     a node never compiles, or loads from the cache, while it publishes."""
     warm_up(("rigid",))
-    before = _kernel_signatures()
+    before = kernel_signatures()
     params = load_config()
     stream = ReferenceStream(params, "rigid")
     stream.compute(0.3)
@@ -183,7 +169,7 @@ def test_warm_up_makes_every_kernel_the_stream_uses_ready():
     stream.retarget(0.15, Task(ellipse_a=3.2, ellipse_b=2.1, z_increment=0.1, rise_time=5.0), checked=True)
     stream.compute(0.5)
     stream.samples([0.41, 0.4123])
-    assert _kernel_signatures() == before
+    assert kernel_signatures() == before
 
 
 def test_history_compaction_keeps_every_sample(monkeypatch):
