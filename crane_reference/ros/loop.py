@@ -47,8 +47,7 @@ def run_loop(duration: float, clock_mode: str = "lockstep", control_rate: int = 
              config_file: str = "", progress: Callable[[float], None] | None = None) -> LoopRecording:
     """Run the loop for ``duration`` s of the plant's time and return what it recorded (``progress`` gets the
     plant's time)."""
-    with closed_loop_processes(closed_loop_parameters(clock_mode, control_rate, model, config_file)) as processes:
-        return _record(duration, processes, progress)
+    return _record(duration, closed_loop_parameters(clock_mode, control_rate, model, config_file), progress)
 
 
 @contextmanager
@@ -101,8 +100,10 @@ def _end(processes: dict[str, subprocess.Popen]) -> dict[str, int]:
     return codes
 
 
-def _record(duration: float, processes: dict[str, subprocess.Popen],
+def _record(duration: float, parameters: dict[str, dict[str, object]],
             progress: Callable[[float], None] | None) -> LoopRecording:
+    """The recorder's subscriptions first, then the nodes (:func:`closed_loop_processes`): it hears them from
+    their first messages on."""
     context = rclpy.Context()
     rclpy.init(context=context)
     states, poses, deflections, references = {}, {}, {}, {}
@@ -128,29 +129,30 @@ def _record(duration: float, processes: dict[str, subprocess.Popen],
         node.create_subscription(JointState, f"/{NODE_NAME}/joint_states", on_reference, 100000)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        started = deadline = None
-        first = last = None
-        start_by = time.monotonic() + START_TIMEOUT
-        while last is None or last - first < round(duration * NANOSECONDS):  # then exactly duration is kept
-            executor.spin_once(timeout_sec=0.05)
-            ended = [name for name, process in processes.items() if process.poll() is not None]
-            if ended:
-                raise LoopError(f"{', '.join(ended)} ended before the loop did")
-            if states:
-                first, last = min(states), max(states)
-                if started is None:
-                    started = time.monotonic()
-                    deadline = started + 100.0 * duration + 60.0
-                if progress is not None:
-                    progress((last - first) / NANOSECONDS)
-                if time.monotonic() > deadline:
-                    raise LoopError(f"the loop ran {(last - first) / NANOSECONDS:.3f} s of {duration:g} s in "
-                                    f"{time.monotonic() - started:.0f} s of wall time")
-            elif time.monotonic() > start_by:
-                raise LoopError(f"no state of the plant within {START_TIMEOUT:g} s")
-        wall = time.monotonic() - started
-        for _ in range(20):  # the last pose, deflection and reference samples in flight
-            executor.spin_once(timeout_sec=0.01)
+        with closed_loop_processes(parameters) as processes:
+            started = deadline = None
+            first = last = None
+            start_by = time.monotonic() + START_TIMEOUT
+            while last is None or last - first < round(duration * NANOSECONDS):  # then exactly duration is kept
+                executor.spin_once(timeout_sec=0.05)
+                ended = [name for name, process in processes.items() if process.poll() is not None]
+                if ended:
+                    raise LoopError(f"{', '.join(ended)} ended before the loop did")
+                if states:
+                    first, last = min(states), max(states)
+                    if started is None:
+                        started = time.monotonic()
+                        deadline = started + 100.0 * duration + 60.0
+                    if progress is not None:
+                        progress((last - first) / NANOSECONDS)
+                    if time.monotonic() > deadline:
+                        raise LoopError(f"the loop ran {(last - first) / NANOSECONDS:.3f} s of {duration:g} s in "
+                                        f"{time.monotonic() - started:.0f} s of wall time")
+                elif time.monotonic() > start_by:
+                    raise LoopError(f"no state of the plant within {START_TIMEOUT:g} s")
+            wall = time.monotonic() - started
+            for _ in range(20):  # the last pose, deflection and reference samples in flight
+                executor.spin_once(timeout_sec=0.01)
         node.destroy_node()
     finally:
         context.try_shutdown()
