@@ -7,13 +7,13 @@ For the flexible crane at the node's default step (``ONLINE_STEP``), in one proc
 * ``ReferenceStream.compute``: CPU milliseconds per second of motion (solver plus bookkeeping; the full
   evaluation of a step is left to the reads);
 * ``ReferenceStream.samples``: microseconds per sample, one at a time and in batches of 20 (the node's
-  FRAME_BATCH), at the computed steps and between them (interpolated);
+  refill at 100 Hz), at the computed steps and between them (interpolated);
 * a re-target: the reachability check (``check_targets``, run in the node's parameter callback before
   the change is accepted), ``retarget`` itself (restart at the computed step, blend), then the motion of
   20 samples after it;
 * E's reach from the column's axis (the node's ranges of ellipse.a and ellipse.b, found at configure);
 * the solver side of the node's reference server (``StreamSolver.frames`` asked as the server asks it:
-  batches of 20 frames, a 5 ms compute slice, previews at 10 Hz) at 1000 and 100 Hz: CPU seconds per
+  batches of REFILL seconds of frames, its compute slice, previews at 10 Hz) at 1000 and 100 Hz: CPU seconds per
   second of stream, and the part that pickling and unpickling the batches (the pipe to the solver
   process) takes of it.
 
@@ -36,7 +36,7 @@ from crane_reference.motion.steps import ONLINE_STEP
 from crane_reference.stream.reference_stream import ReferenceStream
 from crane_reference.stream.sample import quaternions
 from crane_reference.stream.schedule import FrameSchedule
-from crane_reference.stream.server import COMPUTE_SLICE, FRAME_BATCH, LOOKAHEAD, RELEASE_KEEP
+from crane_reference.stream.server import COMPUTE_SLICE, LOOKAHEAD, REFILL, RELEASE_KEEP
 from crane_reference.stream.solver import StreamSolver, StreamSpec
 from crane_reference.stream.targets import reach
 
@@ -109,8 +109,9 @@ def main() -> None:
             pickling, end = 0.0, schedule.made_k + round(seconds * rate)
             while schedule.made_k < end:
                 plan = schedule.plan()
-                batch = solver.frames(schedule.request(plan, FRAME_BATCH, 1.0, 10, max(1, rate // 10), COMPUTE_SLICE),
-                                      RELEASE_KEEP + LOOKAHEAD)
+                request = schedule.request(plan, max(1, round(REFILL * rate)), 1.0, 10, max(1, rate // 10),
+                                           COMPUTE_SLICE)
+                batch = solver.frames(request, RELEASE_KEEP + LOOKAHEAD)
                 start = time.perf_counter()
                 pickle.loads(pickle.dumps(batch))
                 pickling += time.perf_counter() - start

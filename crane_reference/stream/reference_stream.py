@@ -173,8 +173,9 @@ class ReferenceStream:
                 interrupted: Callable[[], bool] | None = None) -> None:
         """Advance the solver until samples up to publish time ``until`` are available, or until
         ``wall_budget`` seconds of wall time are spent, or ``interrupted()`` turns true (both checked
-        between compiled runs of CHUNK_STEPS steps).  Failures switch to ERROR and hold."""
-        if self.state != RUNNING:
+        between compiled runs of CHUNK_STEPS steps); also while PAUSED, along the ramp to rest.  Failures switch
+        to ERROR and hold."""
+        if self.state == ERROR:
             return
         deadline = None if wall_budget is None else time.perf_counter() + wall_budget
         target = self.motion_time(until)

@@ -134,11 +134,11 @@ def make_frames(stream: ReferenceStream, request: FrameRequest,
     ahead = tau + count * dt + horizon + COMPUTE_MARGIN
     frames_until = tau + (count - 1) * dt + 2 * TIME_TOLERANCE
     before = stream.computed_until
+    target = frames_until if plan.k < request.urgent_until else ahead  # urgent: the frames' own motion only
     wall = motion = 0.0
-    if before < ahead:
+    if before < target:
         start = time.perf_counter()
-        urgent = plan.k < request.urgent_until and before < frames_until
-        stream.compute(frames_until if urgent else ahead, request.compute_budget, interrupted)
+        stream.compute(target, request.compute_budget, interrupted)
         if math.isfinite(stream.computed_until):
             wall, motion = time.perf_counter() - start, stream.computed_until - before
     last = request.last_valid  # the last sample of the frames made so far (finite)

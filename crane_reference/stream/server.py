@@ -15,11 +15,13 @@ Publishing
     (:meth:`~.schedule.FrameSchedule.anchored`); :meth:`ReferenceServer.status` reports both.
 
 Computing ahead
-    The worker asks the solver for frames in batches of :data:`FRAME_BATCH` (a quarter of the look-ahead
-    if fewer; :data:`URGENT_BATCH` seconds of stream close to publishing, as after a command, so the first
-    frames come back soon), each after at most :data:`COMPUTE_SLICE` s of computing while publishing
-    (unbounded before), and forgets motion older than :data:`RELEASE_KEEP` s before them.  The publisher
-    never waits for the solver: the schedule's lock is held only to move frames.
+    The worker asks the solver for frames in batches of :data:`REFILL` seconds of stream, once that much room
+    is free (a quarter of the look-ahead if less; :data:`URGENT_BATCH` seconds close to publishing, as after a
+    command, made as soon as their own motion is computed, so the first frames come back soon), each after at
+    most :data:`COMPUTE_SLICE` s of computing while publishing (unbounded before; any other request cuts it
+    short at the next compiled run), and forgets motion older than :data:`RELEASE_KEEP` s before them.  Few
+    large requests: the solver computes in long runs (the kernels' data stay in the cache) and answers few
+    round trips.  The publisher never waits for the solver: the schedule's lock is held only to move frames.
 
 Commands
     :meth:`ReferenceServer.command` applies a stream command (``pause``, ``resume``,
@@ -55,8 +57,8 @@ from .schedule import Frame, FrameBatch, FrameRequest, FrameSchedule, Plan, stam
 from .solver import STREAM_COMMANDS, SolverClient, SolverStoppedError, StreamStatus
 
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
-COMPUTE_SLICE = 0.005  # [s] of wall time the solver computes per request while publishing
-FRAME_BATCH = 20  # frames made per request, and the room the worker waits for to ask again
+COMPUTE_SLICE = 0.05  # [s] of wall time the solver computes per request while publishing (a command cuts it short)
+REFILL = 0.2  # [s] of frames made per request, and the room the worker waits for to ask again
 URGENT_BATCH = 0.005  # [s] of stream (at least one frame) made per request close to publishing (after a command)
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to make (for commands)
 MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, the stamps leap (re-anchored)
@@ -161,7 +163,7 @@ class ReferenceServer:
         self.schedule = FrameSchedule(rate, max(2, math.ceil(LOOKAHEAD * rate)), lead, MAX_CATCH_UP,
                                       self.info.start)
         self._urgent_batch = max(1, round(URGENT_BATCH * rate))
-        self._refill = min(FRAME_BATCH, max(1, self.schedule.lookahead // 4))
+        self._refill = min(max(1, round(REFILL * rate)), max(1, self.schedule.lookahead // 4))
         self._clock_seen = (0, 0)  # the last clock reading [ns] of due() and the monotonic time [ns] of it
         self._lock = threading.Condition()  # the schedule and the counters here (never held while solving)
         self._solver_lock = threading.Lock()  # one request at a time, and commands against frame requests
@@ -220,7 +222,7 @@ class ReferenceServer:
                     # in batches, but up to the whole look-ahead before publishing starts
                     refill = plan.room >= self._refill or not self.publishing
                     urgent = self.publishing and schedule.is_urgent(plan)
-                    request = self._frame_request(plan, (self._urgent_batch if urgent else FRAME_BATCH) * refill)
+                    request = self._frame_request(plan, (self._urgent_batch if urgent else self._refill) * refill)
                 with self._solver_lock:
                     if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
                         continue
@@ -354,7 +356,6 @@ class ReferenceServer:
             plan = self.schedule.plan()
             frames = self._frame_request(plan, self._urgent_batch)
         batch = None
-        self.solver.interrupt()  # the worker's request in progress stops computing ahead at its next run
         try:
             answer, batch = self._request(self.solver.command, name, tau, args, frames, RELEASE_KEEP + LOOKAHEAD)
         finally:
@@ -388,6 +389,7 @@ class ReferenceServer:
         """The answer to ``request(*args)`` (a method of the solver client), one request at a time;
         :class:`CommandRefusedError` if the solver has stopped."""
         self.check_computing()
+        self.solver.interrupt()  # the worker's request in progress stops computing ahead at its next run
         with self._solver_lock:
             try:
                 return request(*args)
