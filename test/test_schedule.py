@@ -120,8 +120,9 @@ def test_a_non_finite_frame_is_replaced_by_the_last_valid_sample_held(stream_fac
 
 def test_after_a_command_samples_come_first_then_previews_on_their_cadence(stream_factory):
     """After a re-target the frames within a quarter of the look-ahead from publishing are made before their
-    preview horizon is computed (their previews pass on); from there on a frame due a preview waits for it,
-    so previews keep their cadence (with a compute budget, as in the node)."""
+    preview horizon is computed (without their previews); from there on a frame due a preview waits for it.
+    Previews keep the cadence from the command's frame and resume by the end of that window (with a compute
+    budget, as in the node)."""
     stream = stream_factory()
     decimation, lookahead = 10, 100
     schedule = FrameSchedule(RATE, lookahead, 0.1, 1.0, stream.sample(0.0))
@@ -143,7 +144,7 @@ def test_after_a_command_samples_come_first_then_previews_on_their_cadence(strea
     window_end = schedule.next_k + lookahead // 4
     previews = fill(0.005)
     assert k == round(0.6 * RATE) and k < window_end  # the last sample stamped within the 0.1 s lead
-    assert previews[:4] == [window_end + i * decimation for i in range(4)]
+    assert previews[0] % decimation == k % decimation and k <= previews[0] <= window_end + decimation
     assert all(b - a == decimation for a, b in itertools.pairwise(previews))
 
 

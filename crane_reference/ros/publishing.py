@@ -23,6 +23,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from rclpy.lifecycle import LifecycleNode
+from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSPolicyKind, QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.serialization import serialize_message
@@ -45,6 +46,12 @@ MAX_WAIT = 0.1  # [s] of wall time the publisher sleeps at most before reading t
 MARKER_RATE = 10.0  # [Hz]
 TRAIL_RATE = 50.0  # [Hz] of points added to E's trail
 TRAIL_POINTS = 500
+
+
+publish = Publisher.publish
+"""How the publisher thread publishes a sample's bytes on a lifecycle publisher: rclpy's Publisher.publish, without
+the lifecycle wrapper's check that the publisher is enabled (microseconds a message): the thread runs only while
+the node is active (started by activate, joined by deactivate), when every lifecycle publisher is enabled."""
 
 
 def run_until_shutdown(node: LifecycleNode, loop: Callable[[], None]) -> Callable[[], None]:
@@ -130,7 +137,7 @@ class SamplePublisher:
         first /clock with use_sim_time).  It sleeps in wall time for the time left on the node clock and checks
         that clock again (at least every MAX_WAIT), so it follows ROS time and stops at once when stopped.  The
         node clock is read once a wake-up (an rclpy call that costs microseconds); the time the publishing
-        took is added from the monotonic clock.
+        took is added from the monotonic clock.  Stopping takes effect within MAX_WAIT.
         """
         clock, server, rate = self.node.get_clock(), self.server, self.server.rate
         while not self._quiet.is_set() and (not server.ready() or clock.now().nanoseconds == 0):
@@ -140,14 +147,15 @@ class SamplePublisher:
         if self._quiet.is_set():  # stopped before publishing began: nothing to begin
             return
         server.begin(clock.now().nanoseconds)
-        while not self._quiet.is_set():
+        quiet, send = self._quiet, self.send
+        while not quiet.is_set():
             now, read_at = clock.now().nanoseconds, time.monotonic_ns()
             due = server.due(now)
             for outgoing in due.outgoing:
-                self.send(outgoing)
+                send(outgoing)
             left = due.next_stamp_ns - now - (time.monotonic_ns() - read_at)
             if left > 0:
-                self._quiet.wait(min(left / NANOSECONDS, MAX_WAIT))
+                time.sleep(min(left / NANOSECONDS, MAX_WAIT))  # one system call (an Event's wait takes a lock too)
 
     def send(self, outgoing: Outgoing) -> None:
         """Publish one sample: joint states and E's pose (serialized once, then filled in place and published
@@ -160,8 +168,8 @@ class SamplePublisher:
         if self._pose_writer is None or self._pose_writer.frame_id != settings.frame_id:
             self._pose_writer = SerializedPose(serialize_message(
                 messages.end_effector_pose(self.types, stamp, settings.frame_id, sample)))
-        self._joints.publish(self._joint_writer.fill(stamp, sample))
-        self._poses.publish(self._pose_writer.fill(stamp, sample))
+        publish(self._joints, self._joint_writer.fill(stamp, sample))
+        publish(self._poses, self._pose_writer.fill(stamp, sample))
         if frame.preview is not None:
             indices = list(settings.preview_indices)
             self._previews.publish(messages.reference_preview(

@@ -125,9 +125,9 @@ def make_frames(stream: ReferenceStream, request: FrameRequest,
     """The frames of ``request`` as far as the motion is computed, after computing ahead far enough for
     them and for their previews (or until ``interrupted()``: a command is waiting for the solver).  A
     frame due a preview waits until its horizon is computed, so previews keep their cadence; an urgent
-    frame (just after a command) is made as soon as its own motion is computed, and passes a preview due
-    to the first frame after the urgent window.  A frame that is not finite is replaced by the last valid
-    sample held (:func:`checked`)."""
+    frame (just after a command) is made as soon as its own motion is computed, without the preview due to
+    it if its horizon is not computed yet (the next one is due a decimation later: the cadence stays).  A
+    frame that is not finite is replaced by the last valid sample held (:func:`checked`)."""
     plan, count, horizon = request.plan, request.count, request.horizon
     dt = 1.0 / request.rate
     tau, next_preview_k = plan.tau, plan.next_preview_k
@@ -161,6 +161,8 @@ def make_frames(stream: ReferenceStream, request: FrameRequest,
                 next_preview_k = k + request.decimation
             elif k >= request.urgent_until:
                 break  # this frame's preview is not computed yet: make it on a later call
+            else:
+                next_preview_k = k + request.decimation  # urgent: it goes without, the cadence stays
         frame = Frame(k, t, sample, preview, horizon)
         if not (finite[i] and preview_finite):
             frame, why = checked(frame, last)
@@ -232,9 +234,14 @@ class FrameSchedule:
         """Frames the buffer lacks to the look-ahead."""
         return self.lookahead - (max(self.made_k, self.next_k) - self.next_k)
 
+    @property
+    def urgent_until(self) -> int:
+        """The first frame beyond 1 / URGENT_PART of the look-ahead from publishing."""
+        return self.next_k + self.lookahead // URGENT_PART
+
     def is_urgent(self, plan: Plan) -> bool:
         """Whether the frames of ``plan`` are within 1 / URGENT_PART of the look-ahead from publishing."""
-        return plan.k < self.next_k + self.lookahead // URGENT_PART
+        return plan.k < self.urgent_until
 
     def request(self, plan: Plan, count: int, horizon: float, points: int, decimation: int,
                 compute_budget: float | None) -> FrameRequest:
@@ -242,7 +249,7 @@ class FrameSchedule:
         ``horizon``-second preview of ``points`` points every ``decimation`` frames, after computing ahead for
         at most ``compute_budget`` s of wall time (None: unbounded); with a budget, frames within 1 /
         URGENT_PART of the look-ahead from publishing are urgent."""
-        urgent_until = self.next_k + self.lookahead // URGENT_PART if compute_budget is not None else plan.k
+        urgent_until = self.urgent_until if compute_budget is not None else plan.k
         return FrameRequest(plan, count, self.rate, horizon, points, decimation, compute_budget, urgent_until,
                             self.last_valid)
 

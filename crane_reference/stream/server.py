@@ -16,12 +16,14 @@ Publishing
 
 Computing ahead
     The worker asks the solver for frames in batches of :data:`REFILL` seconds of stream, once that much room
-    is free (a quarter of the look-ahead if less; :data:`URGENT_BATCH` seconds close to publishing, as after a
-    command, made as soon as their own motion is computed, so the first frames come back soon), each after at
-    most :data:`COMPUTE_SLICE` s of computing while publishing (unbounded before; any other request cuts it
-    short at the next compiled run), and forgets motion older than :data:`RELEASE_KEEP` s before them.  Few
-    large requests: the solver computes in long runs (the kernels' data stay in the cache) and answers few
-    round trips.  The publisher never waits for the solver: the schedule's lock is held only to move frames.
+    is free (a quarter of the look-ahead if less), each after at most :data:`COMPUTE_SLICE` s of computing while
+    publishing (unbounded before; any other request cuts it short at the next compiled run).  Frames close to
+    publishing (within a quarter of the look-ahead, as after a command) are urgent: made as soon as their own
+    motion is computed, as many as :data:`URGENT_SLICE` s of computing give (a command's own request:
+    :data:`URGENT_BATCH` seconds of them), so the first frames come back soon.  The worker forgets motion
+    older than :data:`RELEASE_KEEP` s before the frames it asks for.  Few large requests: the solver computes
+    in long runs (the kernels' data stay in the cache) and answers few round trips.  The publisher never
+    waits for the solver: the schedule's lock is held only to move frames.
 
 Commands
     :meth:`ReferenceServer.command` applies a stream command (``pause``, ``resume``,
@@ -58,6 +60,7 @@ from .solver import STREAM_COMMANDS, SolverClient, SolverStoppedError, StreamSta
 
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
 COMPUTE_SLICE = 0.05  # [s] of wall time the solver computes per request while publishing (a command cuts it short)
+URGENT_SLICE = 0.005  # [s] of wall time per request for frames close to publishing (after a command)
 REFILL = 0.2  # [s] of frames made per request, and the room the worker waits for to ask again
 URGENT_BATCH = 0.005  # [s] of stream (at least one frame) made per request close to publishing (after a command)
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to make (for commands)
@@ -79,8 +82,7 @@ class Preview:
     decimation: int
 
 
-@dataclass(frozen=True)
-class Outgoing:
+class Outgoing(NamedTuple):
     """Sample k to publish, stamped ``stamp_ns``: a frame made by the solver or the last one held."""
 
     k: int
@@ -221,8 +223,10 @@ class ReferenceServer:
                     plan = schedule.plan()
                     # in batches, but up to the whole look-ahead before publishing starts
                     refill = plan.room >= self._refill or not self.publishing
-                    urgent = self.publishing and schedule.is_urgent(plan)
-                    request = self._frame_request(plan, (self._urgent_batch if urgent else self._refill) * refill)
+                    if self.publishing and schedule.is_urgent(plan):  # as many as computed in a short slice
+                        request = self._frame_request(plan, schedule.urgent_until - plan.k, URGENT_SLICE)
+                    else:
+                        request = self._frame_request(plan, self._refill * refill, COMPUTE_SLICE)
                 with self._solver_lock:
                     if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
                         continue
@@ -238,13 +242,13 @@ class ReferenceServer:
             with self._lock:
                 schedule.fault = f"solver thread stopped: {type(error).__name__}: {error}"
 
-    def _frame_request(self, plan: Plan, count: int) -> FrameRequest:
-        """The solver's next request for ``plan`` (the server's lock held): up to ``count`` frames, with one
-        slice of computing ahead while publishing (all the look-ahead before)."""
+    def _frame_request(self, plan: Plan, count: int, budget: float) -> FrameRequest:
+        """The solver's next request for ``plan`` (the server's lock held): up to ``count`` frames, after at most
+        ``budget`` seconds of computing while publishing (unbounded before)."""
         preview = self.preview
         return self.schedule.request(plan, min(plan.room, count), preview.horizon,
                                      preview.points, preview.decimation,
-                                     COMPUTE_SLICE if self.publishing else None)
+                                     budget if self.publishing else None)
 
     def _accept(self, batch: FrameBatch, plan: Plan) -> bool:
         """Take the frames of ``batch`` made for ``plan`` (the server's lock held; False if a command replaced
@@ -354,7 +358,7 @@ class ReferenceServer:
                 self._awaiting[name] = k
             self._commands_pending += 1
             plan = self.schedule.plan()
-            frames = self._frame_request(plan, self._urgent_batch)
+            frames = self._frame_request(plan, self._urgent_batch, URGENT_SLICE)
         batch = None
         try:
             answer, batch = self._request(self.solver.command, name, tau, args, frames, RELEASE_KEEP + LOOKAHEAD)
