@@ -208,15 +208,20 @@ def test_an_interrupt_stops_computing_ahead_after_the_compiled_run_under_way() -
     assert solver.stream.computed_until == pytest.approx(CHUNK_STEPS * STEP, abs=1e-12)
 
 
-def test_the_solver_process_clears_an_interrupt_at_each_request_and_obeys_one_that_comes_during_it() -> None:
-    """An interrupt sent before a request does not cut it (each request starts with it cleared); one sent
-    while a request computes a minute of motion ahead ends that request early (busy), and the process goes on
-    answering."""
+def test_the_solver_process_obeys_an_interrupt_that_comes_before_or_during_a_frame_request_once() -> None:
+    """An interrupt sent before a frame request (raced with it: the request was on its way) ends it early
+    (busy) and is cleared with it, so the next one runs whole; one sent before another request is cleared
+    before it (a command's own frames are made whole); one sent while a request computes a minute of motion
+    ahead ends that request early, and the process goes on answering."""
     process = SolverProcess(spec())
     try:
         schedule = FrameSchedule(RATE, RATE, LEAD, 1.0, process.info.start)
         process.interrupt()
+        assert process.frames(schedule.request(schedule.plan(), 10, 60.0, 4, 10, None), 4.0).busy
         assert not process.frames(schedule.request(schedule.plan(), 10, 1.0, 4, 10, None), 4.0).busy
+        process.interrupt()
+        process.refresh_status()
+        assert not process.frames(schedule.request(schedule.plan(), 10, 2.0, 4, 10, None), 4.0).busy
         replies = []
         long = schedule.request(schedule.plan(), 10, 60.0, 4, 10, None)
         worker = threading.Thread(target=lambda: replies.append(process.frames(long, 4.0)))

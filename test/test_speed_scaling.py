@@ -78,21 +78,22 @@ def test_pause_resume_override_and_retarget_keep_velocity_and_acceleration_conti
     assert speed > 100 * dv[normal].max()
 
 
-def test_a_pause_computes_the_ramp_to_rest_beyond_the_motion_computed_before(params):
+@pytest.mark.parametrize("ramp", [RAMP, 1.0])  # 1.0: the motion comes to rest on a step of the integrator
+def test_a_pause_computes_the_ramp_to_rest_beyond_the_motion_computed_before(params, ramp):
     """A pause asked for where little motion is computed ahead (as just after a re-target): the motion along the
     ramp to rest is still computed, so the whole ramp is published, and it is the motion of a stream that was
     never paused, at the motion time where the ramp comes to rest (the integral of the rate: quadrature)."""
-    paused, running = ReferenceStream(params, "rigid", step=1e-3, ramp_time=RAMP), ReferenceStream(params, "rigid",
+    paused, running = ReferenceStream(params, "rigid", step=1e-3, ramp_time=ramp), ReferenceStream(params, "rigid",
                                                                                                    step=1e-3)
     paused.compute(0.1)
     paused.pause(paused.computed_until)
     start = paused.computed_until
-    paused.compute(start + RAMP + 0.5)
+    paused.compute(start + ramp + 0.5)
     assert paused.computed_until == np.inf  # at rest: every later sample is available
-    rest = paused.sample(start + RAMP + 0.5)
-    warp = TimeWarp(RAMP, 1.0)
+    rest = paused.sample(start + ramp + 0.5)
+    warp = TimeWarp(ramp, 1.0)
     warp.set_rate(start, 0.0)
-    t_rest = start + quad(lambda tau: warp.at(tau)[1], start, start + RAMP, epsabs=1e-13)[0]
+    t_rest = start + quad(lambda tau: warp.at(tau)[1], start, start + ramp, epsabs=1e-13)[0]
     assert rest.t == pytest.approx(t_rest, abs=1e-9) and np.all(rest.qd == 0.0)
     running.compute(t_rest + 0.01)
     np.testing.assert_allclose(rest.q, running.sample(t_rest).q, atol=1e-9)

@@ -149,10 +149,11 @@ class CraneReferenceNode(LifecycleNode):
         if self._server.stream.state == PAUSED and self._resume_on_activate and self._server.computing:
             self._server.command("resume", accepted_ns=self._now())
         self._resume_on_activate = False
+        result = super().on_activate(state)  # the lifecycle publishers enabled before the thread publishes
         self._publisher.start()
         self.get_logger().info(f"publishing the {self._params.model} crane's reference at "
                                f"{self._params.publish_rate} Hz")
-        return super().on_activate(state)
+        return result
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Bring a moving reference to rest along a speed ramp, publish it to the first sample at rest, then

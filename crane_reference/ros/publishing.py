@@ -43,6 +43,7 @@ OVERRIDABLE = QoSOverridingOptions([QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH, 
 """The QoS policies a reference topic's ``qos_overrides`` parameters may set (rclpy's defaults and durability:
 a transient-local preview reaches a controller that starts late)."""
 MAX_WAIT = 0.1  # [s] of wall time the publisher sleeps at most before reading the clock again
+SLEEP_LIMIT = 2_000_000  # [ns]: the publisher sleeps shorter waits without a wake-up on stop
 MARKER_RATE = 10.0  # [Hz]
 TRAIL_RATE = 50.0  # [Hz] of points added to E's trail
 TRAIL_POINTS = 500
@@ -137,7 +138,7 @@ class SamplePublisher:
         first /clock with use_sim_time).  It sleeps in wall time for the time left on the node clock and checks
         that clock again (at least every MAX_WAIT), so it follows ROS time and stops at once when stopped.  The
         node clock is read once a wake-up (an rclpy call that costs microseconds); the time the publishing
-        took is added from the monotonic clock.  Stopping takes effect within MAX_WAIT.
+        took is added from the monotonic clock.  A wait of up to SLEEP_LIMIT is a plain sleep.
         """
         clock, server, rate = self.node.get_clock(), self.server, self.server.rate
         while not self._quiet.is_set() and (not server.ready() or clock.now().nanoseconds == 0):
@@ -154,8 +155,10 @@ class SamplePublisher:
             for outgoing in due.outgoing:
                 send(outgoing)
             left = due.next_stamp_ns - now - (time.monotonic_ns() - read_at)
-            if left > 0:
-                time.sleep(min(left / NANOSECONDS, MAX_WAIT))  # one system call (an Event's wait takes a lock too)
+            if left > SLEEP_LIMIT:  # long (a slow rate, a stalled or reset clock): stopping wakes it
+                quiet.wait(min(left / NANOSECONDS, MAX_WAIT))
+            elif left > 0:  # within a period at a high rate: one system call (an Event's wait takes locks too)
+                time.sleep(left / NANOSECONDS)
 
     def send(self, outgoing: Outgoing) -> None:
         """Publish one sample: joint states and E's pose (serialized once, then filled in place and published

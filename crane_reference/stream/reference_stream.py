@@ -140,7 +140,10 @@ class ReferenceStream:
         of the computed motion)."""
         if self._hold is not None:
             return math.inf
-        return self._warp.publish_time(self._history.end_time)
+        end = self._history.end_time
+        if self._warp.target == 0.0 and end >= self.motion_time(self.settled_at()):  # the ramp to rest is computed
+            return math.inf
+        return self._warp.publish_time(end)
 
     def set_blend_time(self, seconds: float) -> None:
         if not (math.isfinite(seconds) and seconds > 0.0):

@@ -15,7 +15,9 @@ a request names the solver's method itself, which pickles by reference, never a 
 Both clients have :meth:`interrupt`: a caller with a command waiting for the solver cuts the request in
 progress short, so the command waits at most one compiled run of computing ahead, not a whole slice
 (:func:`~.schedule.make_frames` returns the frames computed so far).  A third pipe carries it to the
-process; each request starts with it cleared.  The child runs in a session of
+process.  Pending interrupts are cleared before any request but a frame request (so a command's own frames
+are made whole), and after a frame request (an interrupt that came while the request was on its way ended
+it, and it is not lost: the caller's request comes next).  The child runs in a session of
   its own and ignores SIGINT (a Ctrl-C is the caller's to handle), and exits when its request pipe closes,
   also if the caller dies.  It runs at a lower scheduling priority (:data:`SOLVER_NICENESS`): it computes
   a second of frames ahead and can wait, the caller's publisher cannot.
@@ -254,11 +256,16 @@ class LocalSolver(SolverClient):
         self._interrupt.set()
 
     def _call(self, method: Callable[..., Any], *args: Any) -> Any:
-        """``method(solver, *args)``; :attr:`status` is the stream's after it (also if it raised)."""
-        self._interrupt.clear()
+        """``method(solver, *args)``; :attr:`status` is the stream's after it (also if it raised); interrupts
+        cleared as the module says."""
+        frames = method is StreamSolver.frames
+        if not frames:
+            self._interrupt.clear()
         try:
             return method(self.solver, *args)
         finally:
+            if frames:
+                self._interrupt.clear()
             self.status = self.solver.status()
             self.solver.after_reply()
 
@@ -266,10 +273,16 @@ class LocalSolver(SolverClient):
         pass
 
 
+def _clear(interrupts: Connection) -> None:
+    """Read every interrupt pending on the pipe."""
+    while interrupts.poll():
+        interrupts.recv_bytes()
+
+
 def _serve(requests: Connection, replies: Connection, interrupts: Connection) -> None:
     """The solver process: read the :class:`StreamSpec`, build the solver, then answer (method, args)
-    requests until the pipe closes or None comes, each with the interrupts that came before it cleared.
-    Replies are (ok, result or exception, status)."""
+    requests until the pipe closes or None comes, clearing interrupts as the module says.  Replies are (ok,
+    result or exception, status)."""
     try:
         spec = requests.recv()
         solver = StreamSolver(spec, interrupts.poll)
@@ -287,13 +300,15 @@ def _serve(requests: Connection, replies: Connection, interrupts: Connection) ->
             return
         if request is None:
             return
-        while interrupts.poll():
-            interrupts.recv_bytes()
         method, args = request
+        if method is not StreamSolver.frames:
+            _clear(interrupts)
         try:
             reply = (True, method(solver, *args))
         except Exception as error:  # reported to the caller, which raises it
             reply = (False, _portable(error))
+        if method is StreamSolver.frames:
+            _clear(interrupts)
         replies.send((*reply, solver.status()))
         del reply
         solver.after_reply()
