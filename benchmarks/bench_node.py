@@ -34,6 +34,9 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
   ``cpu_over_floor``), and its parts: the node's process over the publish-only process
   (``node_over_publish_floor``) and the solver's process over the steps alone (``solver_over_steps``); the
   targets are printed under the table;
+* the CPU share of each thread of the node's and the solver's processes over the measured seconds, by the names
+  the node gives its threads (``[threads]``: ``ref_publisher``, ``ref_frames``, ``ref_diagnostics``, rclpy's
+  executor in the main thread, Fast DDS's ``dds.*`` threads);
 * the time from SIGINT (sent while active) to the node's exit (``exit_after_sigint_s``);
 * first (``--message-costs``), in this process: what the node's publisher spends per sample to fill and
   publish ~/joint_states and ~/end_effector_pose (serialized and filled in place, as the node does, and as
@@ -118,6 +121,26 @@ def descendants(pid: int) -> list[int]:
             for child in children.read().split():
                 found += descendants(int(child))
     return found
+
+
+def thread_seconds(pid: int) -> dict[str, float]:
+    """User + system CPU time [s] of each thread of the process ``pid`` and its descendants, by process and thread
+    name (``node/ref_publisher``, ``solver/python``; the node names its threads for the operating system), summed
+    over threads of one name (threads that ended are not counted)."""
+    tick = os.sysconf("SC_CLK_TCK")
+    seconds: dict[str, float] = {}
+    for number, process in enumerate(descendants(pid)):
+        for task in os.listdir(f"/proc/{process}/task"):
+            try:
+                with open(f"/proc/{process}/task/{task}/comm", encoding="utf-8") as comm:
+                    name = comm.read().strip()
+                with open(f"/proc/{process}/task/{task}/stat", encoding="ascii") as stat:
+                    fields = stat.read().rsplit(")", 1)[1].split()
+            except FileNotFoundError:  # the thread ended meanwhile
+                continue
+            key = f"{'node' if number == 0 else 'solver'}/{name}"
+            seconds[key] = seconds.get(key, 0.0) + (int(fields[11]) + int(fields[12])) / tick
+    return seconds
 
 
 def cpu_seconds(pid: int) -> tuple[float, float]:
@@ -262,10 +285,16 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         if not spin_until(executor, lambda: recorder.stamps, 60.0):
             raise RuntimeError(f"no joint_states within 60 s: {node.stderr.read() if node.poll() is not None else ''}")
         spin_for(executor, WARM_UP)
-        first, cpu0, t0 = len(recorder.stamps), cpu_seconds(node.pid), time.monotonic()
+        first, cpu0, threads0 = len(recorder.stamps), cpu_seconds(node.pid), thread_seconds(node.pid)
+        t0 = time.monotonic()
         before = {k: float(recorder.diagnostics.get(k, 0)) for k in ("held_late", "stamp_leaps")}
         spin_for(executor, duration)
         wall, cpu = time.monotonic() - t0, np.subtract(cpu_seconds(node.pid), cpu0)
+        threads = {name: 100.0 * (seconds - threads0.get(name, 0.0)) / wall
+                   for name, seconds in thread_seconds(node.pid).items()}
+        busiest = sorted(threads.items(), key=lambda item: -item[1])
+        print(f"[threads] {rate} Hz, % of a core: " + ", ".join(f"{name} {share:.1f}" for name, share in busiest
+                                                                if share >= 0.05))
         last = len(recorder.stamps)
         spin_until(executor, lambda: float(recorder.diagnostics.get("published", 0)) > 0, 2.0)
         late = {k: float(recorder.diagnostics.get(k, 0)) - before[k] for k in before}

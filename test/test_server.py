@@ -282,3 +282,10 @@ def test_a_restart_takes_the_shortest_way_on_whole_turn_coordinates() -> None:
     stream.compute(tau + 1.0)
     fresh.compute(1.0)
     np.testing.assert_allclose(stream.sample(tau + 1.0).q, fresh.sample(1.0).q + shift, rtol=0, atol=1e-9)
+
+
+def test_the_worker_thread_is_named_for_the_operating_system(server: ReferenceServer) -> None:
+    """The kernel's record of the thread (/proc, what top -H and bench_node read) has the name."""
+    worker = next(thread for thread in threading.enumerate() if thread.name == "ref_frames")
+    with open(f"/proc/self/task/{worker.native_id}/comm", encoding="utf-8") as comm:
+        assert comm.read().strip() == "ref_frames"

@@ -48,6 +48,7 @@ from ..model.units import NANOSECONDS
 from ..motion.integration import IntegrationError
 from ..motion.programmed_motion import ProjectionError
 from ..stream.health import CANNOT
+from ..stream.threads import start_named
 from .message_types import rclpy_types
 from .parameters import check, pre_set_callback
 from .plant_parameters import PLANT_SPECS, declare_plant
@@ -136,9 +137,7 @@ class CranePlantNode(LifecycleNode):
         self._publish(self._server.state())
         if self._params.clock_mode == "realtime":
             self._running.set()
-            self._thread = threading.Thread(target=run_until_shutdown(self, self._run_periods), daemon=True,
-                                            name="plant periods")
-            self._thread.start()
+            self._thread = start_named(run_until_shutdown(self, self._run_periods), "plant_periods")
         return result
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:

@@ -37,6 +37,7 @@ from ..interface.serialized import SerializedJointState, SerializedPose
 from ..model.units import NANOSECONDS
 from ..stream.health import Level, serving_health, startup_health
 from ..stream.server import Outgoing, ReferenceServer
+from ..stream.threads import start_named
 
 OVERRIDABLE = QoSOverridingOptions([QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH, QoSPolicyKind.RELIABILITY,
                                     QoSPolicyKind.DURABILITY])
@@ -112,9 +113,7 @@ class SamplePublisher:
     def start(self) -> None:
         """Start the publisher thread (activate)."""
         self._quiet.clear()
-        self._thread = threading.Thread(target=run_until_shutdown(self.node, self._loop),
-                                        name="crane_reference_publisher", daemon=True)
-        self._thread.start()
+        self._thread = start_named(run_until_shutdown(self.node, self._loop), "ref_publisher")
 
     def stop(self) -> None:
         """Stop the publisher thread (deactivate, shutdown); the server ends publishing."""
@@ -207,9 +206,7 @@ class DiagnosticsPublisher:
         self._publisher = node.create_publisher(DiagnosticArray, messages.DIAGNOSTICS_TOPIC, messages.PUBLISHER_DEPTH)
         self._held_reported = 0
         self.achieved_rate = 0.0
-        self._thread = threading.Thread(target=run_until_shutdown(node, self._loop), name="crane_reference_diagnostics",
-                                        daemon=True)
-        self._thread.start()
+        self._thread = start_named(run_until_shutdown(node, self._loop), "ref_diagnostics")
 
     def log_status(self) -> None:
         """One-line status in the node's log (a timer): stream time, E, residual, achieved rate, state."""

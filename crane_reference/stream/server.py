@@ -57,6 +57,7 @@ from .reference_stream import ERROR, PAUSED, RUNNING
 from .sample import ReferenceSample
 from .schedule import Frame, FrameBatch, FrameRequest, FrameSchedule, Plan, stamp_at
 from .solver import STREAM_COMMANDS, SolverClient, SolverStoppedError, StreamStatus
+from .threads import start_named
 
 LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
 COMPUTE_SLICE = 0.05  # [s] of wall time the solver computes per request while publishing (a command cuts it short)
@@ -179,8 +180,7 @@ class ReferenceServer:
         self._awaiting: dict[str, int] = {}  # command -> its first frame, until made
         self._unstamped: dict[str, int] = {}  # command made while not publishing -> its frame, stamped at begin
         self._rates_reference = (0, 0.0, 0.0, 0)
-        self._worker = threading.Thread(target=self._work, name="crane_reference_frames", daemon=True)
-        self._worker.start()
+        self._worker = start_named(self._work, "ref_frames")
 
     @property
     def stream(self) -> StreamStatus:

@@ -410,6 +410,9 @@ if __name__ == "__main__":
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the caller decides when the solver ends (see the module)
     os.nice(SOLVER_NICENESS)
     from crane_reference.stream import solver  # the classes under their importable names (pickled replies)
+    from crane_reference.stream.threads import name_this_thread
+
+    name_this_thread("ref_solver")
 
     solver._serve(Connection(int(sys.argv[1]), writable=False), Connection(int(sys.argv[2]), readable=False),
                   Connection(int(sys.argv[3]), writable=False))
