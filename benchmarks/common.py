@@ -59,10 +59,12 @@ def aba_time(scenario: Scenario, repeat: int = 20000) -> float:
     return best
 
 
-def run_times(scenario: Scenario, step: float, duration: float, every_row: bool, chunk: float = 0.25) -> float:
+def run_times(scenario: Scenario, step: float, duration: float, every_row: bool, chunk: float = 0.25,
+              paced: bool = False) -> float:
     """Wall time [s] of ``duration`` seconds of motion from rest in compiled runs of ``chunk`` seconds: the
     steps alone (only each run's last row evaluated, what a caller that reads the motion needs) or with
-    every row's full evaluation (reactions, residuals, energy accounts: what ``simulate`` records)."""
+    every row's full evaluation (reactions, residuals, energy accounts: what ``simulate`` records); ``paced``:
+    each run waits until its motion's end is reached in wall time (as a real-time solver runs them)."""
     motion = scenario.motion
     integrator = ExactFrequencyTrapezoidal(motion)
     state = integrator.start(0.0, scenario.equilibrium.q, np.zeros_like(scenario.equilibrium.q))
@@ -77,6 +79,8 @@ def run_times(scenario: Scenario, step: float, duration: float, every_row: bool,
                                       np.full(times.size, every_row))
         state = StepState(times[-1], run.last.q, run.last.qd, motion.solution_from_evaluation(run.last.evaluation),
                           run.last.correction, run.last.earlier)
+        if paced:
+            time.sleep(max(0.0, start + times[-1] - time.perf_counter()))
     return time.perf_counter() - start
 
 
