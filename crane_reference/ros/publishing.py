@@ -1,5 +1,5 @@
-"""What the node publishes and when: the samples at their stamps (a thread), ~/markers (a timer) and
-/diagnostics (a thread, every second of wall time from the node's creation on).
+"""What the node publishes and when: the samples at their stamps (a thread), ~/markers (a thread, while active)
+and /diagnostics (a thread, every second of wall time from the node's creation on).
 
 Sample k is stamped ``start + k / publish_rate`` (integer nanoseconds) by the
 :class:`~crane_reference.stream.server.ReferenceServer`; the publisher thread sleeps until the next stamp on
@@ -101,9 +101,9 @@ class SamplePublisher:
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._description = node.create_publisher(String, messages.ROBOT_DESCRIPTION_TOPIC, latched)
         self._description.publish(messages.robot_description(types, server.info.urdf))
-        self._marker_timer = node.create_timer(1.0 / MARKER_RATE, self.publish_markers)
         self._quiet = threading.Event()
         self._thread: threading.Thread | None = None
+        self._marker_thread: threading.Thread | None = None
         self.waiting_for_clock = False
 
     @property
@@ -111,24 +111,31 @@ class SamplePublisher:
         return self._thread is not None
 
     def start(self) -> None:
-        """Start the publisher thread (activate)."""
+        """Start the publisher thread and the markers' (activate)."""
         self._quiet.clear()
         self._thread = start_named(run_until_shutdown(self.node, self._loop), "ref_publisher")
+        self._marker_thread = start_named(run_until_shutdown(self.node, self._markers_loop), "ref_markers")
 
     def stop(self) -> None:
-        """Stop the publisher thread (deactivate, shutdown); the server ends publishing."""
+        """Stop the publisher thread and the markers' (deactivate, shutdown); the server ends publishing."""
         self._quiet.set()
-        thread, self._thread = self._thread, None
-        if thread is not None and thread is not threading.current_thread():
-            thread.join()
+        threads, self._thread, self._marker_thread = (self._thread, self._marker_thread), None, None
+        for thread in threads:
+            if thread is not None and thread is not threading.current_thread():
+                thread.join()
         self.server.end()
 
     def destroy(self) -> None:
-        """Destroy the publishers and the timer (cleanup)."""
+        """Destroy the publishers (cleanup)."""
         for publisher in self._managed:
             self.node.destroy_lifecycle_publisher(publisher)
         self.node.destroy_publisher(self._description)
-        self.node.destroy_timer(self._marker_timer)
+
+    def _markers_loop(self) -> None:
+        """:meth:`publish_markers` at MARKER_RATE while active (a thread of its own: a timer would wake the
+        executor, which costs more than the check)."""
+        while not self._quiet.wait(1.0 / MARKER_RATE):
+            self.publish_markers()
 
     def _loop(self) -> None:
         """Wake at each sample's stamp on the node clock to publish it.
@@ -182,7 +189,7 @@ class SamplePublisher:
             self.trail.append(messages.point(self.types, sample.ee_position))
 
     def publish_markers(self) -> None:
-        """~/markers (timer): the target ellipse at the final height and E's trail, stamped like the last sample;
+        """~/markers: the target ellipse at the final height and E's trail, stamped like the last sample;
         built and published only while something subscribes (RViz; the trail is kept meanwhile)."""
         sample, stamp = self.server.last_sample()
         if sample is None or self._markers.get_subscription_count() == 0:  # nobody looks: nothing to build
