@@ -35,6 +35,15 @@ def test_motion_time_is_the_integral_of_the_rate():
     assert warp.publish_time(warp.at(1.8)[0] + 1e-6) == pytest.approx(2.0, abs=0.05)  # resumes after the rest
 
 
+def test_the_warp_at_many_times_is_the_warp_at_each():
+    """The vectorised path (after the last ramp) and the one-by-one path give the scalar values exactly."""
+    warp = TimeWarp(RAMP, 1.0)
+    warp.set_rate(0.5, 0.3)
+    for taus in (np.linspace(0.0, 1.2, 97), np.linspace(1.0, 3.0, 41)):  # through the ramp; after it
+        t, r, dr = warp.at_times(taus)
+        np.testing.assert_array_equal(np.column_stack((t, r, dr)), [warp.at(tau) for tau in taus])
+
+
 def published(stream: ReferenceStream, taus: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     samples = []
     for tau in taus:

@@ -220,7 +220,7 @@ class ReferenceStream:
         steps themselves, or interpolated between two of them (:func:`~.sample.between`, all at once)."""
         if self._hold is not None:
             return Samples.repeated(self._hold, len(taus))
-        t, rate, rate_change = np.array([self._warp.at(tau) for tau in taus], dtype=float).reshape(-1, 3).T
+        t, rate, rate_change = self._warp.at_times(taus)
         history = self._history
         end = history.end_time
         if t.size and t.max() > end + 1e-12:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 from scipy.optimize import brentq
 
 from ..model.profiles import quintic_step
@@ -84,6 +85,17 @@ class TimeWarp:
         """Motion time t, rate r and dr/dtau at publish time tau."""
         ramp = self._ramp(tau)
         return ramp.at(max(tau, ramp.tau0))
+
+    def at_times(self, taus: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`at` of each publish time of ``taus`` (N,): arrays t, r and dr/dtau; at once where the last
+        ramp has ended (a constant rate), one by one elsewhere."""
+        taus = np.asarray(taus, dtype=float)
+        last = self._ramps[-1]
+        if taus.size and taus.min() >= last.end:
+            t_end = last.at(last.end)[0]
+            return t_end + last.r1 * (taus - last.end), np.full(taus.size, last.r1), np.zeros(taus.size)
+        t, r, dr = np.array([self.at(tau) for tau in taus.tolist()], dtype=float).reshape(-1, 3).T
+        return t, r, dr
 
     def set_rate(self, tau: float, rate: float) -> float:
         """Move to ``rate`` from publish time tau, or from the end of a ramp under way; returns when the
