@@ -13,7 +13,8 @@ import pytest
 from crane_reference.model.parameters import Task
 from crane_reference.model.units import NANOSECONDS
 from crane_reference.stream.reference_stream import ReferenceStream
-from crane_reference.stream.schedule import Frame, FrameBatch, FrameSchedule, checked, make_frames
+from crane_reference.stream.sample import Samples
+from crane_reference.stream.schedule import FrameBatch, Frames, FrameSchedule, checked, make_frames
 
 RATE = 100  # [Hz]
 LEAD = 0.25  # [s]
@@ -24,10 +25,20 @@ def stream_factory(params):
     return lambda: ReferenceStream(params, "rigid", step=1e-3)
 
 
+def frames_of(sample, k: int, count: int) -> Frames:
+    """Frames k .. k + count - 1 at their stream times, each ``sample``."""
+    return Frames(k, np.arange(k, k + count) / RATE, Samples.repeated(sample, count))
+
+
+def ks(schedule: FrameSchedule) -> list[int]:
+    """The frames in the schedule's buffer."""
+    return [k for frames in schedule.frames for k in range(frames.k, frames.end)]
+
+
 def schedule_with(sample, frames: int = 0, lookahead: int = 100) -> FrameSchedule:
     schedule = FrameSchedule(RATE, lookahead, LEAD, 1.0, sample)
     plan = schedule.plan()
-    schedule.accept(FrameBatch([Frame(k, k / RATE, sample) for k in range(frames)], 0, False), plan)
+    schedule.accept(FrameBatch(frames_of(sample, 0, frames), 0, False), plan)
     return schedule
 
 
@@ -36,21 +47,21 @@ def test_due_samples_are_consecutive_and_the_stamps_leap_with_a_clock_jump(strea
     schedule = schedule_with(sample, frames=300, lookahead=300)
     # at 25 ms after the start samples 0, 1, 2 are due (stamps 0, 10, 20 ms)
     assert schedule.anchored(25_000_000, 0) == 0
-    assert [k for k, _ in schedule.due(25_000_000, 0)] == [0, 1, 2]
-    assert [k for k, _ in schedule.due(25_000_000, 0)] == []
+    assert [k for k, *_ in schedule.due(25_000_000, 0)] == [0, 1, 2]
+    assert [k for k, *_ in schedule.due(25_000_000, 0)] == []
     # within the catch-up limit (1 s) a late publisher catches up: every sample, none skipped
     assert schedule.anchored(1_025_000_000, 0) == 0
-    assert [k for k, _ in schedule.due(1_025_000_000, 0)] == list(range(3, 103))
+    assert [k for k, *_ in schedule.due(1_025_000_000, 0)] == list(range(3, 103))
     # the clock jumps 60 s ahead: sample 103 is stamped now, the motion goes on from frame 103
     now = 61_025_000_000
     start = schedule.anchored(now, 0)
     assert start + 103 * NANOSECONDS // RATE == now and schedule.counters.stamp_leaps == 1
     batch = schedule.due(now, start)
-    assert [(k, frame.k) for k, frame in batch] == [(103, 103)]
+    assert [(k, frames.k + row) for k, frames, row in batch] == [(103, 103)]
     # the clock goes back 120 s: the start stays (stamps never go back) and nothing is due until it returns
     assert schedule.anchored(now - 120 * NANOSECONDS, start) == start
     assert schedule.due(now - 120 * NANOSECONDS, start) == []
-    assert [k for k, _ in schedule.due(now + 10_000_000, start)] == [104]
+    assert [k for k, *_ in schedule.due(now + 10_000_000, start)] == [104]
     assert schedule.counters.stamp_leaps == 1
 
 
@@ -60,11 +71,13 @@ def test_a_missing_frame_holds_the_last_published_sample(stream_factory):
     moving = stream.sample(0.3)
     assert np.max(np.abs(moving.qd)) > 0.0
     schedule = schedule_with(moving)
-    assert schedule.outgoing(0, None) is None  # nothing published yet: nothing to hold
-    assert schedule.outgoing(0, Frame(0, 0.3, moving)).sample is moving
-    held = schedule.outgoing(1, None)
-    np.testing.assert_array_equal(held.sample.q, moving.q)
-    assert held.sample.held and np.all(held.sample.qd == 0.0) and np.all(held.sample.qdd == 0.0)
+    assert schedule.outgoing(0, None, -1) is None  # nothing published yet: nothing to hold
+    made = frames_of(moving, 0, 1)
+    assert schedule.outgoing(0, made, 0) == (made, 0)
+    frames, row = schedule.outgoing(1, None, -1)
+    held = frames.samples.row(row)
+    np.testing.assert_array_equal(held.q, moving.q)
+    assert held.held and np.all(held.qd == 0.0) and np.all(held.qdd == 0.0)
     assert schedule.counters.published == 2 and schedule.counters.held_late == 1
 
 
@@ -81,9 +94,9 @@ def test_commands_take_effect_within_the_lead_and_replace_the_frames(stream_fact
     assert schedule.command_point()[0] == 6  # nothing published: the next frame
     plan = schedule.plan()  # a plan made before the command
     schedule.after_command(k, tau)
-    assert [f.k for f in schedule.frames] == list(range(6, k))
+    assert ks(schedule) == list(range(0, k)) and schedule.ready == k - 6  # 0..5 published
     assert schedule.plan().k == k and schedule.plan().tau == tau
-    assert not schedule.accept(FrameBatch([Frame(80, 0.8, sample)], 0, False), plan)  # made for the old buffer: dropped
+    assert not schedule.accept(FrameBatch(frames_of(sample, 80, 1), 0, False), plan)  # made for the old buffer: dropped
     # with fewer frames made than the lead, the command applies at the next frame to make
     short = schedule_with(sample, frames=10)
     assert short.command_point(0, 0) == (10, pytest.approx(0.1))
@@ -94,7 +107,7 @@ def test_frames_are_the_stream_sampled_at_the_rate_with_decimated_previews(strea
     schedule = FrameSchedule(RATE, 100, LEAD, 1.0, stream.sample(0.0))
     plan = schedule.plan()
     batch = make_frames(stream, schedule.request(plan, 20, 0.2, 5, 4, None))
-    frames = batch.frames
+    frames = [batch.frames.frame(row) for row in range(len(batch.frames))]
     assert not batch.busy and [f.k for f in frames] == list(range(20))
     assert [f.k for f in frames if f.preview is not None] == [0, 4, 8, 12, 16] and batch.next_preview_k == 20
     truth.compute(0.5)
@@ -107,15 +120,30 @@ def test_frames_are_the_stream_sampled_at_the_rate_with_decimated_previews(strea
 
 
 def test_a_non_finite_frame_is_replaced_by_the_last_valid_sample_held(stream_factory):
-    valid = stream_factory().sample(0.0)
+    """Frames 0..4: a valid one, one with NaN in q, one with inf in qd (both become frame 0 held: the last valid
+    before them), a valid one whose preview has NaN (dropped), and one that starts with NaN (the request's last
+    valid sample held)."""
+    stream = stream_factory()
+    stream.compute(0.5)
+    valid, later, before = stream.sample(0.3), stream.sample(0.31), stream.sample(0.29)
+    nan_q = dataclasses.replace(valid, q=np.full_like(valid.q, np.nan))
+    inf_qd = dataclasses.replace(valid, qd=np.full_like(valid.qd, np.inf))
+    samples = Samples.stack([valid, nan_q, inf_qd, later])
+    previews = {1: Samples.stack([valid]), 3: Samples.stack([nan_q]), 0: Samples.stack([later])}
+    frames, non_finite, fault = checked(Frames(0, np.arange(4) / RATE, samples, previews), before)
+    rows = [frames.samples.row(i) for i in range(4)]
+    assert non_finite == 2 and "non-finite" in fault and set(frames.previews) == {0}
+    for row in rows[1:3]:
+        np.testing.assert_array_equal(row.q, valid.q)
+        np.testing.assert_array_equal(row.effort, valid.effort)
+        assert row.held and np.all(row.qd == 0.0) and np.all(row.qdd == 0.0)
+    np.testing.assert_array_equal(rows[3].qd, later.qd)
+    assert not rows[0].held and not rows[3].held
+    first, count, _ = checked(Frames(0, np.zeros(1), Samples.stack([nan_q])), before)
+    assert count == 1 and first.samples.row(0).held
+    np.testing.assert_array_equal(first.samples.row(0).q, before.q)
     schedule = schedule_with(valid)
-    for field in ("q", "qd"):
-        broken = dataclasses.replace(valid, **{field: np.full_like(valid.qd, np.nan if field == "q" else np.inf)})
-        frame, fault = checked(Frame(3, 0.03, broken, [broken]), valid)
-        assert frame.k == 3 and frame.preview is None and frame.sample.held and "non-finite" in fault
-        np.testing.assert_array_equal(frame.sample.q, valid.q)
-        assert np.all(frame.sample.qd == 0.0)
-        schedule.accept(FrameBatch([frame], 1, False, non_finite=1, fault=fault), schedule.plan())
+    schedule.accept(FrameBatch(frames, 4, False, non_finite=non_finite, fault=fault), schedule.plan())
     assert schedule.counters.held_non_finite == 2 and "non-finite" in schedule.fault
 
 
@@ -134,7 +162,7 @@ def test_after_a_command_samples_come_first_then_previews_on_their_cadence(strea
             plan = schedule.plan()
             batch = make_frames(stream, schedule.request(plan, min(plan.room, 20), 1.0, 5, decimation, budget))
             schedule.accept(batch, plan)
-            with_preview += [f.k for f in batch.frames if f.preview is not None]
+            with_preview += sorted(batch.frames.k + row for row in batch.frames.previews)
         return with_preview
 
     fill(None)
@@ -150,28 +178,27 @@ def test_after_a_command_samples_come_first_then_previews_on_their_cadence(strea
 
 
 def test_a_frame_batch_crosses_a_pipe_unchanged(stream_factory):
-    """A batch pickled (as it crosses to the node's process, its fields stacked) and read back equals the
+    """A batch pickled (as it crosses to the node's process: its arrays as they are) and read back equals the
     batch made: every field of every sample, the previews, held samples and the batch's accounts."""
     import pickle
 
     stream = stream_factory()
     schedule = FrameSchedule(RATE, 100, LEAD, 1.0, stream.sample(0.0))
     made = make_frames(stream, schedule.request(schedule.plan(), 12, 0.2, 5, 4, None))
-    held = Frame(12, 0.12, made.frames[-1].sample.hold())
-    batch = dataclasses.replace(made, frames=[*made.frames, held], compute_wall=0.25, non_finite=1, fault="why")
+    held = Frames.held(12, [0.12], made.frames.samples.row(11))
+    frames = Frames(0, np.concatenate((made.frames.tau, held.tau)),
+                    Samples(*(np.concatenate((a, b)) for a, b in zip(made.frames.samples, held.samples, strict=True))),
+                    made.frames.previews, made.frames.horizon)
+    batch = dataclasses.replace(made, frames=frames, compute_wall=0.25, non_finite=1, fault="why")
     read = pickle.loads(pickle.dumps(batch))
-
-    def same(a, b) -> None:
-        for name in (f.name for f in dataclasses.fields(a)):
-            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
-            assert type(getattr(a, name)) is type(getattr(b, name)), name
-
-    assert [f.preview is None for f in read.frames] == [f.preview is None for f in batch.frames]
-    assert sum(f.preview is not None for f in batch.frames) == 3 and read.frames[-1].sample.held
-    for mine, theirs in zip(batch.frames, read.frames, strict=True):
-        assert (mine.k, mine.tau, mine.horizon) == (theirs.k, theirs.tau, theirs.horizon)
-        same(mine.sample, theirs.sample)
-        for p, r in zip(mine.preview or [], theirs.preview or [], strict=True):
-            same(p, r)
+    assert len(batch.frames.previews) == 3 and read.frames.samples.row(12).held
+    for row in range(13):
+        mine, theirs = batch.frames.frame(row), read.frames.frame(row)
+        assert (mine.k, mine.tau, mine.horizon, mine.preview is None) == (theirs.k, theirs.tau, theirs.horizon,
+                                                                          theirs.preview is None)
+        for a, b in [(mine.sample, theirs.sample), *zip(mine.preview or [], theirs.preview or [], strict=True)]:
+            for name in (f.name for f in dataclasses.fields(a)):
+                np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+                assert type(getattr(a, name)) is type(getattr(b, name)), name
     assert (read.next_preview_k, read.busy, read.compute_wall, read.compute_motion, read.non_finite, read.fault) == (
         batch.next_preview_k, batch.busy, batch.compute_wall, batch.compute_motion, batch.non_finite, batch.fault)

@@ -125,3 +125,40 @@ def test_vectors_filled_in_place_equal_rosbags_serialization(little_endian):
             expected = TYPESTORE.serialize_cdr(messages.tip_deflection(types, stamp, frame_id, vector), VECTOR,
                                                little_endian=little_endian)
             assert data == bytes(expected)
+
+
+@pytest.mark.parametrize("rate", [1000, 100])
+def test_a_batch_of_frames_is_published_as_rclpy_and_rosbags_serialize_each_sample(params, rate):
+    """The rows of a batch of frames made by the stream at the node's rates, written into the messages as the
+    publisher writes them (:meth:`fill_row`), are rclpy's serialization of each sample's message objects, read
+    back field by field, and rosbags' bytes in both byte orders."""
+    from crane_reference.stream.reference_stream import ReferenceStream
+    from crane_reference.stream.schedule import FrameSchedule, make_frames
+
+    stream = ReferenceStream(params, "rigid", step=1e-3)
+    schedule = FrameSchedule(rate, rate, 0.1, 1.0, stream.sample(0.0))
+    frames = make_frames(stream, schedule.request(schedule.plan(), 20, 0.2, 5, 10, None)).frames
+    names, rclpy_message_types = list(stream.joint_names), rclpy_types()
+    rosbags_message_types = messages.rosbags_types(TYPESTORE)
+    start = frames.samples.row(0)
+    joints = SerializedJointState(serialize_message(messages.joint_state(rclpy_message_types, 0, names, start)))
+    poses = SerializedPose(serialize_message(messages.end_effector_pose(rclpy_message_types, 0, "world", start)))
+    ordered = {little: (SerializedJointState(bytes(TYPESTORE.serialize_cdr(
+                            messages.joint_state(rosbags_message_types, 0, names, start), JOINT_STATE,
+                            little_endian=little))),
+                        SerializedPose(bytes(TYPESTORE.serialize_cdr(
+                            messages.end_effector_pose(rosbags_message_types, 0, "world", start), POSE,
+                            little_endian=little))))
+               for little in (True, False)}
+    assert len(frames) == 20
+    for row in range(len(frames)):
+        stamp, sample = 1_700_000_000_000_000_000 + (frames.k + row) * 10**9 // rate, frames.samples.row(row)
+        assert deserialize_message(joints.fill_row(stamp, frames.samples, row), JointState) == messages.joint_state(
+            rclpy_message_types, stamp, names, sample)
+        assert deserialize_message(poses.fill_row(stamp, frames.samples, row), PoseStamped) == \
+            messages.end_effector_pose(rclpy_message_types, stamp, "world", sample)
+        for little, (joint_writer, pose_writer) in ordered.items():
+            assert joint_writer.fill_row(stamp, frames.samples, row) == bytes(TYPESTORE.serialize_cdr(
+                messages.joint_state(rosbags_message_types, stamp, names, sample), JOINT_STATE, little_endian=little))
+            assert pose_writer.fill_row(stamp, frames.samples, row) == bytes(TYPESTORE.serialize_cdr(
+                messages.end_effector_pose(rosbags_message_types, stamp, "world", sample), POSE, little_endian=little))

@@ -24,7 +24,7 @@ import numpy as np
 from ..model.units import NANOSECONDS
 
 if TYPE_CHECKING:
-    from ..stream.sample import ReferenceSample
+    from ..stream.sample import ReferenceSample, Samples
 
 ENCAPSULATION = 4
 """[bytes] before the body."""
@@ -105,9 +105,16 @@ class SerializedJointState(_SerializedMessage):
 
     def fill(self, stamp_ns: int, sample: ReferenceSample) -> bytes:
         """The serialized JointState of ``sample`` stamped ``stamp_ns``."""
-        self._position[:] = sample.q
-        self._velocity[:] = sample.qd
-        self._effort[:] = sample.effort
+        return self._filled(stamp_ns, sample.q, sample.qd, sample.effort)
+
+    def fill_row(self, stamp_ns: int, samples: Samples, row: int) -> bytes:
+        """The serialized JointState of row ``row`` of stacked ``samples`` stamped ``stamp_ns``."""
+        return self._filled(stamp_ns, samples.q[row], samples.qd[row], samples.effort[row])
+
+    def _filled(self, stamp_ns: int, position: np.ndarray, velocity: np.ndarray, effort: np.ndarray) -> bytes:
+        self._position[:] = position
+        self._velocity[:] = velocity
+        self._effort[:] = effort
         return self._stamped(stamp_ns)
 
 
@@ -124,8 +131,15 @@ class SerializedPose(_SerializedMessage):
 
     def fill(self, stamp_ns: int, sample: ReferenceSample) -> bytes:
         """The serialized PoseStamped of E in ``sample`` stamped ``stamp_ns``."""
-        self._pose[:3] = sample.ee_position
-        self._pose[3:] = sample.ee_quaternion
+        return self._filled(stamp_ns, sample.ee_position, sample.ee_quaternion)
+
+    def fill_row(self, stamp_ns: int, samples: Samples, row: int) -> bytes:
+        """The serialized PoseStamped of E in row ``row`` of stacked ``samples`` stamped ``stamp_ns``."""
+        return self._filled(stamp_ns, samples.ee_position[row], samples.ee_quaternion[row])
+
+    def _filled(self, stamp_ns: int, position: np.ndarray, quaternion: np.ndarray) -> bytes:
+        self._pose[:3] = position
+        self._pose[3:] = quaternion
         return self._stamped(stamp_ns)
 
 

@@ -167,26 +167,27 @@ class SamplePublisher:
                 time.sleep(left / NANOSECONDS)
 
     def send(self, outgoing: Outgoing) -> None:
-        """Publish one sample: joint states and E's pose (serialized once, then filled in place and published
-        as bytes), the preview if the frame has one; E's trail."""
-        frame, stamp, settings = outgoing.frame, outgoing.stamp_ns, self.settings
-        sample = frame.sample
+        """Publish one sample, a row of the stacked frames: joint states and E's pose (serialized once, then
+        filled in place from the row and published as bytes), the preview if the row has one; E's trail."""
+        frames, row, stamp, settings = outgoing.frames, outgoing.row, outgoing.stamp_ns, self.settings
+        samples = frames.samples
         if self._joint_writer is None:
             self._joint_writer = SerializedJointState(serialize_message(
-                messages.joint_state(self.types, stamp, self.joint_names, sample)))
+                messages.joint_state(self.types, stamp, self.joint_names, samples.row(row))))
         if self._pose_writer is None or self._pose_writer.frame_id != settings.frame_id:
             self._pose_writer = SerializedPose(serialize_message(
-                messages.end_effector_pose(self.types, stamp, settings.frame_id, sample)))
-        publish(self._joints, self._joint_writer.fill(stamp, sample))
-        publish(self._poses, self._pose_writer.fill(stamp, sample))
-        if frame.preview is not None:
+                messages.end_effector_pose(self.types, stamp, settings.frame_id, samples.row(row))))
+        publish(self._joints, self._joint_writer.fill_row(stamp, samples, row))
+        publish(self._poses, self._pose_writer.fill_row(stamp, samples, row))
+        preview = frames.previews.get(row)
+        if preview is not None:
             indices = list(settings.preview_indices)
             self._previews.publish(messages.reference_preview(
                 self.types, stamp, settings.frame_id, [self.joint_names[i] for i in indices], indices,
-                messages.preview_offsets(frame.horizon, len(frame.preview)), [sample, *frame.preview],
+                messages.preview_offsets(frames.horizon, len(preview)), [samples.row(row), *preview.rows()],
                 settings.preview_effort))
         if outgoing.k % self._trail_stride == 0:
-            self.trail.append(messages.point(self.types, sample.ee_position))
+            self.trail.append(messages.point(self.types, samples.ee_position[row]))
 
     def publish_markers(self) -> None:
         """~/markers: the target ellipse at the final height and E's trail, stamped like the last sample;

@@ -72,6 +72,12 @@ class Samples(NamedTuple):
         """The rows ``index``."""
         return Samples(*(field[index] for field in self))
 
+    def row(self, i: int) -> ReferenceSample:
+        """Row i as a :class:`ReferenceSample` (its arrays are rows of the stacked ones)."""
+        return ReferenceSample(float(self.t[i]), self.q[i], self.qd[i], self.qdd[i], self.effort[i],
+                               self.ee_position[i], self.ee_quaternion[i], float(self.residual_distance[i]),
+                               bool(self.held[i]))
+
     def rows(self) -> list[ReferenceSample]:
         """One :class:`ReferenceSample` per row (its arrays are rows of the stacked ones)."""
         return [ReferenceSample(*row) for row in zip(self.t.tolist(), self.q, self.qd, self.qdd, self.effort,

@@ -4,7 +4,9 @@ Sample k of a stream published at ``rate`` Hz is stamped ``start + k / rate``
 (:func:`stamp_at`) and shows the stream at publish time tau_k.
 :class:`FrameSchedule` keeps the buffer of frames [next to publish ... made], made ahead of publishing
 by a worker and taken by a publisher; it has no threads or locks of its own (the reference server holds them)
-and no ROS types, so every rule here is tested without rclpy:
+and no ROS types, so every rule here is tested without rclpy.  Frames stay stacked (:class:`Frames`, a few
+arrays a batch) from the solver to the publisher, which writes a row's numbers into the serialized messages:
+no object is made per sample on the way.
 
 * making frames (:meth:`FrameSchedule.plan`, :meth:`FrameSchedule.request`, :func:`make_frames` on the
   solver's side, :meth:`FrameSchedule.accept`): up to the look-ahead, after one slice of computing ahead,
@@ -45,8 +47,8 @@ def stamp_at(start_ns: int, k: int, rate: int) -> int:
 
 @dataclass(frozen=True)
 class Frame:
-    """Sample k of the reference, at stream publish time ``tau``, with its preview (or None) over
-    ``horizon`` seconds."""
+    """Sample k of the reference, at stream publish time ``tau``, with its preview (or None) over ``horizon``
+    seconds: one row of :class:`Frames`, made as an object only where one is asked for (tests, tools)."""
 
     k: int
     tau: float
@@ -54,6 +56,47 @@ class Frame:
     preview: list[ReferenceSample] | None = None
     horizon: float = 0.0
 
+
+@dataclass(frozen=True)
+class Frames:
+    """Frames k .. k + N - 1 of the reference, stacked: their stream publish times ``tau`` (N,) [s], their samples
+    (:class:`~.sample.Samples`, a row each) and the previews of some of them (row -> the preview's samples) over
+    ``horizon`` seconds.  The solver makes them, the pipe carries them and the publisher reads them in this form:
+    a few arrays a batch, no object a sample."""
+
+    k: int
+    tau: np.ndarray
+    samples: Samples
+    previews: dict[int, Samples] = field(default_factory=dict)
+    horizon: float = 0.0
+
+    def __len__(self) -> int:
+        return self.tau.size
+
+    @property
+    def end(self) -> int:
+        """The frame after the last."""
+        return self.k + self.tau.size
+
+    @classmethod
+    def held(cls, k: int, taus: np.ndarray, sample: ReferenceSample) -> Frames:
+        """Frames k, ... at ``taus``, each ``sample`` held."""
+        return cls(k, np.asarray(taus, dtype=float), Samples.repeated(sample.hold(), len(taus)))
+
+    def frame(self, row: int) -> Frame:
+        """Row ``row`` as a :class:`Frame`."""
+        preview = self.previews.get(row)
+        return Frame(self.k + row, float(self.tau[row]), self.samples.row(row),
+                     None if preview is None else preview.rows(), self.horizon)
+
+    def head(self, count: int) -> Frames:
+        """The first ``count`` frames."""
+        return Frames(self.k, self.tau[:count], self.samples.take(slice(0, count)),
+                      {i: p for i, p in self.previews.items() if i < count}, self.horizon)
+
+    def renumbered(self, k: int) -> Frames:
+        """The same frames as frames k, ..."""
+        return replace(self, k=k)
 
 @dataclass(frozen=True)
 class Plan:
@@ -92,7 +135,7 @@ class FrameBatch:
     the motion is still short of the preview horizon (``busy``), the wall time spent computing and the
     motion computed in it [s], frames replaced because they were not finite and the fault that says why."""
 
-    frames: list[Frame]
+    frames: Frames
     next_preview_k: int
     busy: bool
     compute_wall: float = 0.0
@@ -100,34 +143,16 @@ class FrameBatch:
     non_finite: int = 0
     fault: str = ""
 
-    def __reduce__(self):
-        """Pickled with the frames' fields stacked (:class:`~.sample.Samples`): the batch crosses from the
-        solver's process to the node's many times a second."""
-        frames = self.frames
-        previews = [(i, Samples.stack(f.preview)) for i, f in enumerate(frames) if f.preview is not None]
-        packed = (np.array([f.k for f in frames], dtype=np.int64), np.array([f.tau for f in frames]),
-                  np.array([f.horizon for f in frames]), Samples.stack([f.sample for f in frames]), previews)
-        return _unpacked_batch, (packed, self.next_preview_k, self.busy, self.compute_wall, self.compute_motion,
-                                 self.non_finite, self.fault)
-
-
-def _unpacked_batch(packed, *rest) -> FrameBatch:
-    """The :class:`FrameBatch` that :meth:`FrameBatch.__reduce__` packed."""
-    ks, taus, horizons, samples, previews = packed
-    preview_of = {i: stacked.rows() for i, stacked in previews}
-    frames = [Frame(k, tau, sample, preview_of.get(i), horizon) for i, (k, tau, horizon, sample) in
-              enumerate(zip(ks.tolist(), taus.tolist(), horizons.tolist(), samples.rows(), strict=True))]
-    return FrameBatch(frames, *rest)
-
 
 def make_frames(stream: ReferenceStream, request: FrameRequest,
                 interrupted: Callable[[], bool] | None = None) -> FrameBatch:
     """The frames of ``request`` as far as the motion is computed, after computing ahead far enough for
-    them and for their previews (or until ``interrupted()``: a command is waiting for the solver).  A
-    frame due a preview waits until its horizon is computed, so previews keep their cadence; an urgent
-    frame (just after a command) is made as soon as its own motion is computed, without the preview due to
-    it if its horizon is not computed yet (the next one is due a decimation later: the cadence stays).  A
-    frame that is not finite is replaced by the last valid sample held (:func:`checked`)."""
+    them and for their previews (or until ``interrupted()``: a command is waiting for the solver; then no
+    frames are made, only the motion computed so far is kept).  A frame due a preview waits until its
+    horizon is computed, so previews keep their cadence; an urgent frame (just after a command) is made as
+    soon as its own motion is computed, without the preview due to it if its horizon is not computed yet
+    (the next one is due a decimation later: the cadence stays).  A frame that is not finite is replaced by
+    the last valid sample held (:func:`checked`)."""
     plan, count, horizon = request.plan, request.count, request.horizon
     dt = 1.0 / request.rate
     tau, next_preview_k = plan.tau, plan.next_preview_k
@@ -141,47 +166,47 @@ def make_frames(stream: ReferenceStream, request: FrameRequest,
         stream.compute(target, request.compute_budget, interrupted)
         if math.isfinite(stream.computed_until):
             wall, motion = time.perf_counter() - start, stream.computed_until - before
-    last = request.last_valid  # the last sample of the frames made so far (finite)
+    times = tau + dt * np.arange(count)
     if stream.state == ERROR:  # hold the last sample made, not the stream's (computed further ahead)
-        return FrameBatch([Frame(plan.k + i, tau + i * dt, last.hold()) for i in range(count)], next_preview_k,
-                          False, wall, motion)
+        return FrameBatch(Frames.held(plan.k, times, request.last_valid), next_preview_k, False, wall, motion)
     computed_until = stream.computed_until
-    times = [tau + i * dt for i in range(count)]
-    times = [t for t in times if t <= computed_until - TIME_TOLERANCE]
-    frames: list[Frame] = []
-    non_finite, fault = 0, ""
-    samples = stream.samples(times)
-    finite = samples.finite()
-    for i, (t, sample) in enumerate(zip(times, samples.rows(), strict=True)):
-        k, preview, preview_finite = plan.k + i, None, True
-        if k >= next_preview_k:
-            if computed_until >= t + horizon:
-                stacked = stream.preview(t, horizon, request.points)
-                preview, preview_finite = stacked.rows(), bool(np.all(stacked.finite()))
-                next_preview_k = k + request.decimation
-            elif k >= request.urgent_until:
-                break  # this frame's preview is not computed yet: make it on a later call
-            else:
-                next_preview_k = k + request.decimation  # urgent: it goes without, the cadence stays
-        frame = Frame(k, t, sample, preview, horizon)
-        if not (finite[i] and preview_finite):
-            frame, why = checked(frame, last)
-            if why:
-                non_finite, fault = non_finite + 1, why
-        frames.append(frame)
-        last = frame.sample
+    made = int(np.count_nonzero(times <= computed_until - TIME_TOLERANCE))
+    if interrupted is not None and interrupted():
+        made = 0  # a request waits: it comes first (it may drop these frames), they are made on the next call
+    previews: dict[int, Samples] = {}
+    row = max(0, next_preview_k - plan.k)
+    while row < made:  # the frames due a preview, in turn
+        t = float(times[row])
+        if computed_until >= t + horizon:
+            previews[row] = stream.preview(t, horizon, request.points)
+        elif plan.k + row >= request.urgent_until:
+            made = row  # this frame's preview is not computed yet: make it on a later call
+            break
+        next_preview_k = plan.k + row + request.decimation  # (urgent, not computed: it goes without)
+        row += request.decimation
+    frames, non_finite, fault = checked(Frames(plan.k, times[:made], stream.samples(times[:made]), previews, horizon),
+                                        request.last_valid)
     return FrameBatch(frames, next_preview_k, computed_until < ahead, wall, motion, non_finite, fault)
 
 
-def checked(frame: Frame, last_valid: ReferenceSample) -> tuple[Frame, str]:
-    """``frame`` if finite (a non-finite preview dropped), else ``last_valid`` held, with the fault that says
-    why ("" if none): NaN is never published."""
-    if frame.sample.is_finite():
-        if frame.preview is None or all(sample.is_finite() for sample in frame.preview):
-            return frame, ""
-        return replace(frame, preview=None), ""
-    return (Frame(frame.k, frame.tau, last_valid.hold()),
-            f"non-finite sample at stream time {frame.tau:.3f} s: holding the last valid one")
+def checked(frames: Frames, last_valid: ReferenceSample) -> tuple[Frames, int, str]:
+    """``frames`` with each frame that is not finite replaced by the last valid sample before it (or
+    ``last_valid``) held, and previews that are not finite dropped; how many were replaced and the fault that
+    says why ("" if none): NaN is never published."""
+    samples = frames.samples
+    previews = {row: p for row, p in frames.previews.items() if np.all(p.finite())}
+    bad = np.flatnonzero(~samples.finite())
+    if not bad.size:
+        return (frames if len(previews) == len(frames.previews) else replace(frames, previews=previews)), 0, ""
+    samples = Samples(*(field.copy() for field in samples))
+    for row in bad.tolist():
+        held = (samples.row(row - 1) if row else last_valid).hold()
+        for name, values in zip(Samples._fields, samples, strict=True):
+            values[row] = getattr(held, name)
+        previews.pop(row, None)
+    tau = float(frames.tau[bad[-1]])
+    return (replace(frames, samples=samples, previews=previews), int(bad.size),
+            f"non-finite sample at stream time {tau:.3f} s: holding the last valid one")
 
 
 @dataclass
@@ -210,14 +235,14 @@ class FrameSchedule:
     lead: float
     max_catch_up: float
     last_valid: ReferenceSample
-    frames: deque[Frame] = field(default_factory=deque)
+    frames: deque[Frames] = field(default_factory=deque)
     next_k: int = 0
     made_k: int = 0
     made_tau: float = 0.0
     generation: int = 0
     next_preview_k: int = 0
     counters: Counters = field(default_factory=Counters)
-    last: ReferenceSample | None = None
+    published: tuple[Frames, int] | None = None  # the last frames published from and the row
     fault: str = ""
     compute_wall: float = 0.0
     compute_motion: float = 0.0
@@ -264,13 +289,13 @@ class FrameSchedule:
         if plan.generation != self.generation:
             return False
         frames = batch.frames
-        if frames and frames[0].k < self.next_k:  # publishing held meanwhile: continue after it
-            frames = [replace(f, k=f.k + self.next_k - frames[0].k) for f in frames]
-        if frames:
-            self.frames.extend(frames)
-            self.made_k, self.made_tau = frames[-1].k + 1, frames[-1].tau + 1.0 / self.rate
+        if len(frames):
+            if frames.k < self.next_k:  # publishing held meanwhile: continue after it
+                frames = frames.renumbered(self.next_k)
+            self.frames.append(frames)
+            self.made_k, self.made_tau = frames.end, float(frames.tau[-1]) + 1.0 / self.rate
             self.next_preview_k = batch.next_preview_k
-            self.last_valid = frames[-1].sample
+            self.last_valid = frames.samples.row(len(frames) - 1)
         return True
 
     # -- commands -------------------------------------------------------------------------------------
@@ -287,12 +312,12 @@ class FrameSchedule:
         else:
             within_lead = (accepted_ns + round(self.lead * NANOSECONDS) - start_ns) * self.rate // NANOSECONDS
             k = min(max(self.next_k + 1, within_lead), free)
-        tau = self.made_tau if k == free else next(f.tau for f in self.frames if f.k == k)
+        tau = self.made_tau if k == free else next(float(f.tau[k - f.k]) for f in self.frames if f.k <= k < f.end)
         return k, tau
 
     def after_command(self, k: int, tau: float) -> None:
         """Drop the frames from k on: the worker makes them again from stream time tau."""
-        self.frames = deque(f for f in self.frames if f.k < k)
+        self.frames = deque(f if f.end <= k else f.head(k - f.k) for f in self.frames if f.k < k)
         self.made_k, self.made_tau = k, tau
         self.generation += 1
         self.next_preview_k = k
@@ -318,28 +343,44 @@ class FrameSchedule:
         self.counters.clock_resets += 1
         return now_ns - self.next_k * NANOSECONDS // self.rate
 
-    def due(self, now_ns: int, start_ns: int) -> list[tuple[int, Frame | None]]:
-        """Every sample due by ``now_ns`` with its frame (None: not ready), the oldest first (at most the
-        catch-up limit of them with ``start_ns`` from :meth:`anchored`)."""
+    def due(self, now_ns: int, start_ns: int) -> list[tuple[int, Frames | None, int]]:
+        """Every sample due by ``now_ns`` with the frames it is a row of and the row (None, -1: not ready), the
+        oldest first (at most the catch-up limit of them with ``start_ns`` from :meth:`anchored`)."""
         due = (now_ns - start_ns) * self.rate // NANOSECONDS
-        batch: list[tuple[int, Frame | None]] = []
+        batch: list[tuple[int, Frames | None, int]] = []
+        frames = self.frames
         while self.next_k <= due:
-            while self.frames and self.frames[0].k < self.next_k:
-                self.frames.popleft()
-            ready = self.frames and self.frames[0].k == self.next_k
-            batch.append((self.next_k, self.frames.popleft() if ready else None))
-            self.next_k += 1
+            k = self.next_k
+            while frames and frames[0].end <= k:
+                frames.popleft()
+            if frames and frames[0].k <= k:
+                batch.append((k, frames[0], k - frames[0].k))
+            else:
+                batch.append((k, None, -1))
+            self.next_k = k + 1
         return batch
 
-    def outgoing(self, k: int, frame: Frame | None) -> Frame | None:
-        """The frame to publish as sample k: ``frame``, or the last sample published, held, if the frame
-        was not ready (None before anything was published).  Counts it as published."""
-        if frame is None:
-            if self.last is None:
+    def outgoing(self, k: int, frames: Frames | None, row: int) -> tuple[Frames, int] | None:
+        """The frames and row to publish as sample k: ``frames``' row, or the last sample published, held, if
+        the frame was not ready (None before anything was published).  Counts it as published."""
+        if frames is None:
+            if self.published is None:
                 return None
-            frame = Frame(k, math.nan, self.last.hold())
+            frames, row = Frames.held(k, [math.nan], self.last), 0
             self.counters.held_late += 1
-        self.last = frame.sample
+        self.published = frames, row
         self.counters.published += 1
-        return frame
+        return self.published
 
+    @property
+    def last(self) -> ReferenceSample | None:
+        """The last sample published (None before the first)."""
+        if self.published is None:
+            return None
+        frames, row = self.published
+        return frames.samples.row(row)
+
+    @property
+    def ready(self) -> int:
+        """Frames made from the next one to publish on."""
+        return sum(f.end - max(f.k, self.next_k) for f in self.frames if f.end > self.next_k)

@@ -55,7 +55,7 @@ from ..model.units import NANOSECONDS
 from ..motion.simulation import SOLVER_FAILURES
 from .reference_stream import ERROR, PAUSED, RUNNING
 from .sample import ReferenceSample
-from .schedule import Frame, FrameBatch, FrameRequest, FrameSchedule, Plan, stamp_at
+from .schedule import Frame, FrameBatch, FrameRequest, Frames, FrameSchedule, Plan, stamp_at
 from .solver import STREAM_COMMANDS, SolverClient, SolverStoppedError, StreamStatus
 from .threads import start_named
 
@@ -84,11 +84,18 @@ class Preview:
 
 
 class Outgoing(NamedTuple):
-    """Sample k to publish, stamped ``stamp_ns``: a frame made by the solver or the last one held."""
+    """Sample k to publish, stamped ``stamp_ns``: row ``row`` of ``frames`` (made by the solver, or the last one
+    published, held)."""
 
     k: int
     stamp_ns: int
-    frame: Frame
+    frames: Frames
+    row: int
+
+    @property
+    def frame(self) -> Frame:
+        """The sample as a :class:`~.schedule.Frame` object (for tests and tools; the publisher reads the rows)."""
+        return self.frames.frame(self.row)
 
 
 class Due(NamedTuple):
@@ -232,7 +239,7 @@ class ReferenceServer:
                         continue
                     batch = self.solver.frames(request, RELEASE_KEEP + LOOKAHEAD)
                 with self._lock:
-                    if self._accept(batch, plan) and not batch.frames and not batch.busy:
+                    if self._accept(batch, plan) and not len(batch.frames) and not batch.busy:
                         self._lock.wait(timeout=LOOKAHEAD)
         except SolverStoppedError as error:
             if not self._halt.is_set():
@@ -309,11 +316,11 @@ class ReferenceServer:
             if schedule.room >= self._refill:
                 self._lock.notify()
             out = []
-            for k, frame in batch:
-                frame = schedule.outgoing(k, frame)
-                if frame is not None:
+            for k, frames, row in batch:
+                sent = schedule.outgoing(k, frames, row)
+                if sent is not None:
                     self._last_stamp = stamp_at(start, k, self.rate)
-                    out.append(Outgoing(k, self._last_stamp, frame))
+                    out.append(Outgoing(k, self._last_stamp, *sent))
             return Due(out, stamp_at(start, schedule.next_k, self.rate))
 
     def clock_went_back(self, now_ns: int) -> None:
@@ -491,7 +498,7 @@ class ReferenceServer:
             note, self._clock_note = self._clock_note, ""
             return ServerStatus(
                 stream=self.stream, publishing=self.publishing, last=schedule.last,
-                counters=schedule.counters.as_dict(), fault=schedule.fault, frames_ready=len(schedule.frames),
+                counters=schedule.counters.as_dict(), fault=schedule.fault, frames_ready=schedule.ready,
                 commands=dict(self._commands), clock_behind=self._clock_behind / NANOSECONDS, clock_note=note,
                 achieved_rate=((published - last_published) * NANOSECONDS / (now_ns - last_now) if now_ns > last_now
                                else 0.0),
