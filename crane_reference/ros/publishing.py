@@ -184,7 +184,7 @@ class SamplePublisher:
             indices = list(settings.preview_indices)
             self._previews.publish(messages.reference_preview(
                 self.types, stamp, settings.frame_id, [self.joint_names[i] for i in indices], indices,
-                messages.preview_offsets(frames.horizon, len(preview)), [samples.row(row), *preview.rows()],
+                messages.preview_offsets(frames.horizon, preview.t.size), [samples.row(row), *preview.rows()],
                 settings.preview_effort))
         if outgoing.k % self._trail_stride == 0:
             self.trail.append(messages.point(self.types, samples.ee_position[row]))
