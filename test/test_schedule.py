@@ -202,3 +202,29 @@ def test_a_frame_batch_crosses_a_pipe_unchanged(stream_factory):
                 assert type(getattr(a, name)) is type(getattr(b, name)), name
     assert (read.next_preview_k, read.busy, read.compute_wall, read.compute_motion, read.non_finite, read.fault) == (
         batch.next_preview_k, batch.busy, batch.compute_wall, batch.compute_motion, batch.non_finite, batch.fault)
+
+
+def test_an_interrupted_request_makes_its_urgent_frames_only(stream_factory):
+    """With a request waiting (interrupted), frames close to publishing are still made from the motion computed;
+    frames further ahead are not (the batch is busy: the worker asks again), and the motion stays computed."""
+    stream = stream_factory()
+    stream.compute(1.5)
+    schedule = FrameSchedule(RATE, 100, LEAD, 1.0, stream.sample(0.0))
+    urgent = make_frames(stream, schedule.request(schedule.plan(), 10, 0.2, 5, 4, 0.005), lambda: True)
+    assert len(urgent.frames) == 10 and urgent.frames.k == 0
+    schedule.accept(urgent, schedule.plan())
+    schedule.made_k = schedule.urgent_until  # the next frames are beyond the urgent window
+    later = make_frames(stream, schedule.request(schedule.plan(), 10, 0.2, 5, 4, 0.005), lambda: True)
+    assert not len(later.frames) and later.busy and stream.computed_until >= 1.5
+
+
+def test_after_a_command_the_last_valid_sample_is_the_frame_before_it(stream_factory):
+    """A frame that is not finite after a command is replaced by the frame before the command point held, not by
+    the last of the frames the command dropped."""
+    stream = stream_factory()
+    schedule = FrameSchedule(RATE, 100, LEAD, 1.0, stream.sample(0.0))
+    made = make_frames(stream, schedule.request(schedule.plan(), 30, 0.2, 5, 4, None))
+    schedule.accept(made, schedule.plan())
+    schedule.after_command(10, float(made.frames.tau[10]))
+    np.testing.assert_array_equal(schedule.last_valid.q, made.frames.samples.q[9])
+    assert schedule.last_valid.t == made.frames.samples.t[9]

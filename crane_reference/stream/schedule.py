@@ -57,7 +57,7 @@ class Frame:
     horizon: float = 0.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Frames:
     """Frames k .. k + N - 1 of the reference, stacked: their stream publish times ``tau`` (N,) [s], their samples
     (:class:`~.sample.Samples`, a row each) and the previews of some of them (row -> the preview's samples) over
@@ -147,12 +147,12 @@ class FrameBatch:
 def make_frames(stream: ReferenceStream, request: FrameRequest,
                 interrupted: Callable[[], bool] | None = None) -> FrameBatch:
     """The frames of ``request`` as far as the motion is computed, after computing ahead far enough for
-    them and for their previews (or until ``interrupted()``: a command is waiting for the solver; then no
-    frames are made, only the motion computed so far is kept).  A frame due a preview waits until its
-    horizon is computed, so previews keep their cadence; an urgent frame (just after a command) is made as
-    soon as its own motion is computed, without the preview due to it if its horizon is not computed yet
-    (the next one is due a decimation later: the cadence stays).  A frame that is not finite is replaced by
-    the last valid sample held (:func:`checked`)."""
+    them and for their previews (or until ``interrupted()``: a request is waiting for the solver; then only
+    urgent frames are made, the motion computed so far is kept and the batch is busy).  A frame due a
+    preview waits until its horizon is computed, so previews keep their cadence; an urgent frame (just after
+    a command) is made as soon as its own motion is computed, without the preview due to it if its horizon
+    is not computed yet (the next one is due a decimation later: the cadence stays).  A frame that is not
+    finite is replaced by the last valid sample held (:func:`checked`)."""
     plan, count, horizon = request.plan, request.count, request.horizon
     dt = 1.0 / request.rate
     tau, next_preview_k = plan.tau, plan.next_preview_k
@@ -171,9 +171,11 @@ def make_frames(stream: ReferenceStream, request: FrameRequest,
         return FrameBatch(Frames.held(plan.k, times, request.last_valid), next_preview_k, False, wall, motion)
     computed_until = stream.computed_until
     made = int(np.count_nonzero(times <= computed_until - TIME_TOLERANCE))
-    if interrupted is not None and interrupted():
-        made = 0  # a request waits: it comes first (it may drop these frames), they are made on the next call
+    dropped = plan.k >= request.urgent_until and interrupted is not None and interrupted()
+    if dropped:  # a request waits: it comes first (a command may drop them); urgent frames are made still
+        made = 0
     previews: dict[int, Samples] = {}
+    decimation = max(1, request.decimation)
     row = max(0, next_preview_k - plan.k)
     while row < made:  # the frames due a preview, in turn
         t = float(times[row])
@@ -182,11 +184,11 @@ def make_frames(stream: ReferenceStream, request: FrameRequest,
         elif plan.k + row >= request.urgent_until:
             made = row  # this frame's preview is not computed yet: make it on a later call
             break
-        next_preview_k = plan.k + row + request.decimation  # (urgent, not computed: it goes without)
-        row += request.decimation
+        next_preview_k = plan.k + row + decimation  # (urgent, not computed: it goes without)
+        row += decimation
     frames, non_finite, fault = checked(Frames(plan.k, times[:made], stream.samples(times[:made]), previews, horizon),
                                         request.last_valid)
-    return FrameBatch(frames, next_preview_k, computed_until < ahead, wall, motion, non_finite, fault)
+    return FrameBatch(frames, next_preview_k, computed_until < ahead or dropped, wall, motion, non_finite, fault)
 
 
 def checked(frames: Frames, last_valid: ReferenceSample) -> tuple[Frames, int, str]:
@@ -290,11 +292,12 @@ class FrameSchedule:
             return False
         frames = batch.frames
         if len(frames):
-            if frames.k < self.next_k:  # publishing held meanwhile: continue after it
+            shift = max(0, self.next_k - frames.k)  # publishing held meanwhile: continue after it
+            if shift:
                 frames = frames.renumbered(self.next_k)
             self.frames.append(frames)
             self.made_k, self.made_tau = frames.end, float(frames.tau[-1]) + 1.0 / self.rate
-            self.next_preview_k = batch.next_preview_k
+            self.next_preview_k = batch.next_preview_k + shift
             self.last_valid = frames.samples.row(len(frames) - 1)
         return True
 
@@ -318,6 +321,10 @@ class FrameSchedule:
     def after_command(self, k: int, tau: float) -> None:
         """Drop the frames from k on: the worker makes them again from stream time tau."""
         self.frames = deque(f if f.end <= k else f.head(k - f.k) for f in self.frames if f.k < k)
+        if self.frames:  # the last valid sample before k, not of the frames dropped
+            self.last_valid = self.frames[-1].samples.row(len(self.frames[-1]) - 1)
+        elif self.published is not None:
+            self.last_valid = self.last
         self.made_k, self.made_tau = k, tau
         self.generation += 1
         self.next_preview_k = k
