@@ -333,3 +333,32 @@ def test_the_controller_refuses_unknown_and_bad_parameters():
             CraneControllerNode(context=context, parameter_overrides=[Parameter("joints", value=["knuckle"])])
     finally:
         context.try_shutdown()
+
+
+def test_a_message_rclpy_cannot_convert_is_lost_with_a_warning_and_other_errors_propagate():
+    """The spin loop's step (``ros.running.spin_once``) goes on after rclpy's conversion error of a taken message,
+    warning, and raises any other error."""
+    from crane_reference.ros.running import LOST_MESSAGE, spin_once
+
+    class Executor:
+        def __init__(self, error):
+            self.error, self.calls = error, 0
+
+        def spin_once(self, timeout_sec=None):
+            self.calls += 1
+            raise self.error
+
+    class Logger:
+        def __init__(self):
+            self.warnings = []
+
+        def warning(self, message, **_):
+            self.warnings.append(message)
+
+    logger = Logger()
+    node = type("Node", (), {"get_logger": lambda self: logger})()
+    lost = Executor(RuntimeError(f"{LOST_MESSAGE} '0' to Python object (#define PYBIND11_DETAILED_ERROR_MESSAGES)"))
+    spin_once(lost, node, 0.1)
+    assert lost.calls == 1 and len(logger.warnings) == 1 and "lost" in logger.warnings[0]
+    with pytest.raises(RuntimeError, match="something else"):
+        spin_once(Executor(RuntimeError("something else")), node)

@@ -22,17 +22,22 @@ import numpy as np
 import rclpy
 import yaml
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from lifecycle_msgs.msg import State, Transition
+from lifecycle_msgs.srv import ChangeState, GetState
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
 
 from ..interface.bringup import CONTROLLER_NODE, PLANT_NODE, LoopRecording, closed_loop_parameters
 from ..interface.messages import NODE_NAME
 from ..model.units import NANOSECONDS
+from .running import spin_once
 
 MODULES = {NODE_NAME: "crane_reference.ros.node", PLANT_NODE: "crane_reference.ros.plant_node",
            CONTROLLER_NODE: "crane_reference.ros.controller_node"}
 START_TIMEOUT = 600.0  # [s] of wall time for the three to start (a first start compiles the kernels)
 EXIT_TIMEOUT = 30.0  # [s] after SIGINT
+DISCOVERY_GRACE = 0.5  # [s] after the recorder sees the plant's publishers, before the plant is activated
+ANSWER_TIMEOUT = 10.0  # [s] for an answer of the plant's lifecycle services (then the state is asked)
 
 
 class LoopError(RuntimeError):
@@ -100,10 +105,61 @@ def _end(processes: dict[str, subprocess.Popen]) -> dict[str, int]:
     return codes
 
 
+def _start_plant(executor: SingleThreadedExecutor, node, processes: dict[str, subprocess.Popen],
+                 start_by: float) -> None:
+    """Configure the plant (started with ``autostart`` false) through its lifecycle service, wait until the
+    recorder ``node`` sees its publishers (so that it hears the first state: DDS discovery takes its time,
+    longer under load), then activate it."""
+    client = node.create_client(ChangeState, f"/{PLANT_NODE}/change_state")
+
+    def until(done: Callable[[], bool], what: str) -> None:
+        while not done():
+            spin_once(executor, node, 0.05)
+            ended = [name for name, process in processes.items() if process.poll() is not None]
+            if ended:
+                raise LoopError(f"{', '.join(ended)} ended before the loop started")
+            if time.monotonic() > start_by:
+                raise LoopError(f"{what} within {START_TIMEOUT:g} s")
+
+    def answered(request_client, request, answer=None):
+        """The answer to ``request`` (sent unless ``answer`` is its future already), or its future if none came
+        within ANSWER_TIMEOUT (a request or its answer can be lost while the service's discovery is under way)."""
+        until(request_client.service_is_ready, f"no lifecycle service of {PLANT_NODE}")
+        answer = answer or request_client.call_async(request)
+        wait = time.monotonic() + ANSWER_TIMEOUT
+        until(lambda: answer.done() or time.monotonic() > wait, f"{PLANT_NODE} did not answer")
+        return answer.result() if answer.done() else answer
+
+    def transition(number: int, before: int, reached: int) -> None:
+        """Take the plant from the state ``before`` to ``reached`` by the transition ``number``: asked again if
+        the plant is still in ``before`` without an answer (lost), waited for while it is on the way."""
+        request, answer = ChangeState.Request(transition=Transition(id=number)), None
+        while True:
+            answer = answered(client, request, answer)
+            if isinstance(answer, ChangeState.Response):
+                if not answer.success:
+                    raise LoopError(f"{PLANT_NODE} refused its lifecycle transition {number}")
+                return
+            state = answered(state_client, GetState.Request())
+            if isinstance(state, GetState.Response) and state.current_state.id in (before, reached):
+                if state.current_state.id == reached:
+                    return
+                answer = None  # still where it was: the request was lost
+
+    state_client = node.create_client(GetState, f"/{PLANT_NODE}/get_state")
+    transition(Transition.TRANSITION_CONFIGURE, State.PRIMARY_STATE_UNCONFIGURED, State.PRIMARY_STATE_INACTIVE)
+    until(lambda: all(node.count_publishers(f"/{PLANT_NODE}/{topic}") for topic in
+                      ("joint_states", "end_effector_pose", "tip_deflection")),
+          f"the recorder saw no publisher of {PLANT_NODE}")
+    grace = time.monotonic() + DISCOVERY_GRACE  # the plant's side of the discovery, which comes about as soon
+    until(lambda: time.monotonic() > grace, "")
+    transition(Transition.TRANSITION_ACTIVATE, State.PRIMARY_STATE_INACTIVE, State.PRIMARY_STATE_ACTIVE)
+
+
 def _record(duration: float, parameters: dict[str, dict[str, object]],
             progress: Callable[[float], None] | None) -> LoopRecording:
-    """The recorder's subscriptions first, then the nodes (:func:`closed_loop_processes`): it hears them from
-    their first messages on."""
+    """The recorder's subscriptions first, then the nodes (:func:`closed_loop_processes`), the plant activated
+    once the recorder sees it (:func:`_start_plant`): it hears them from their first messages on."""
     context = rclpy.Context()
     rclpy.init(context=context)
     states, poses, deflections, references = {}, {}, {}, {}
@@ -129,12 +185,14 @@ def _record(duration: float, parameters: dict[str, dict[str, object]],
         node.create_subscription(JointState, f"/{NODE_NAME}/joint_states", on_reference, 100000)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        with closed_loop_processes(parameters) as processes:
+        held_plant = {**parameters, PLANT_NODE: {**parameters[PLANT_NODE], "autostart": False}}
+        with closed_loop_processes(held_plant) as processes:
+            start_by = time.monotonic() + START_TIMEOUT
+            _start_plant(executor, node, processes, start_by)
             started = deadline = None
             first = last = None
-            start_by = time.monotonic() + START_TIMEOUT
             while last is None or last - first < round(duration * NANOSECONDS):  # then exactly duration is kept
-                executor.spin_once(timeout_sec=0.05)
+                spin_once(executor, node, 0.05)
                 ended = [name for name, process in processes.items() if process.poll() is not None]
                 if ended:
                     raise LoopError(f"{', '.join(ended)} ended before the loop did")
@@ -152,7 +210,7 @@ def _record(duration: float, parameters: dict[str, dict[str, object]],
                     raise LoopError(f"no state of the plant within {START_TIMEOUT:g} s")
             wall = time.monotonic() - started
             for _ in range(20):  # the last pose, deflection and reference samples in flight
-                executor.spin_once(timeout_sec=0.01)
+                spin_once(executor, node, 0.01)
         node.destroy_node()
     finally:
         context.try_shutdown()

@@ -22,7 +22,7 @@ import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import JumpThreshold, TimeJump
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
@@ -39,6 +39,7 @@ from . import settings
 from .message_types import rclpy_types
 from .parameters import SPECS, ParameterError, declare_all, pre_set_callback, reach_descriptor
 from .publishing import DiagnosticsPublisher, SamplePublisher
+from .running import spin_once
 from .settings import StartupError
 
 NODE_NAME = messages.NODE_NAME
@@ -282,7 +283,10 @@ def main(args: list[str] | None = None) -> int:
     try:
         node = CraneReferenceNode()
         gc.freeze()  # the start-up's objects (modules, kernels, the stream) out of the collector's full passes,
-        rclpy.spin(node)  # which would otherwise hold the GIL over all of them while samples are due
+        executor = SingleThreadedExecutor()  # which would otherwise hold the GIL over all of them while samples
+        executor.add_node(node)  # are due
+        while node.context.ok():
+            spin_once(executor, node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (StartupError, ConfigError, ParameterError) as error:
