@@ -151,7 +151,7 @@ def _start_plant(executor: SingleThreadedExecutor, node, processes: dict[str, su
     until(lambda: all(node.count_publishers(f"/{PLANT_NODE}/{topic}") for topic in
                       ("joint_states", "end_effector_pose", "tip_deflection")),
           f"the recorder saw no publisher of {PLANT_NODE}")
-    grace = time.monotonic() + DISCOVERY_GRACE  # the plant's side of the discovery, which comes about as soon
+    grace = time.monotonic() + DISCOVERY_GRACE  # for the plant's side of the discovery (near ours, not with it)
     until(lambda: time.monotonic() > grace, "")
     transition(Transition.TRANSITION_ACTIVATE, State.PRIMARY_STATE_INACTIVE, State.PRIMARY_STATE_ACTIVE)
 
