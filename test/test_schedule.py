@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+from typing import NamedTuple
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ import pytest
 from crane_reference.model.parameters import Task
 from crane_reference.model.units import NANOSECONDS
 from crane_reference.stream.reference_stream import ReferenceStream
-from crane_reference.stream.sample import Samples
+from crane_reference.stream.sample import ReferenceSample, Samples
 from crane_reference.stream.schedule import FrameBatch, Frames, FrameSchedule, checked, make_frames
 
 RATE = 100  # [Hz]
@@ -23,6 +24,22 @@ LEAD = 0.25  # [s]
 @pytest.fixture(scope="module")
 def stream_factory(params):
     return lambda: ReferenceStream(params, "rigid", step=1e-3)
+
+
+class Frame(NamedTuple):
+    """One row of stacked frames, as an object."""
+
+    k: int
+    tau: float
+    sample: ReferenceSample
+    preview: list[ReferenceSample] | None
+    horizon: float
+
+
+def frame_of(frames: Frames, row: int) -> Frame:
+    preview = frames.previews.get(row)
+    return Frame(frames.k + row, float(frames.tau[row]), frames.samples.row(row),
+                 None if preview is None else preview.rows(), frames.horizon)
 
 
 def frames_of(sample, k: int, count: int) -> Frames:
@@ -107,7 +124,7 @@ def test_frames_are_the_stream_sampled_at_the_rate_with_decimated_previews(strea
     schedule = FrameSchedule(RATE, 100, LEAD, 1.0, stream.sample(0.0))
     plan = schedule.plan()
     batch = make_frames(stream, schedule.request(plan, 20, 0.2, 5, 4, None))
-    frames = [batch.frames.frame(row) for row in range(len(batch.frames))]
+    frames = [frame_of(batch.frames, row) for row in range(len(batch.frames))]
     assert not batch.busy and [f.k for f in frames] == list(range(20))
     assert [f.k for f in frames if f.preview is not None] == [0, 4, 8, 12, 16] and batch.next_preview_k == 20
     truth.compute(0.5)
@@ -193,7 +210,7 @@ def test_a_frame_batch_crosses_a_pipe_unchanged(stream_factory):
     read = pickle.loads(pickle.dumps(batch))
     assert len(batch.frames.previews) == 3 and read.frames.samples.row(12).held
     for row in range(13):
-        mine, theirs = batch.frames.frame(row), read.frames.frame(row)
+        mine, theirs = frame_of(batch.frames, row), frame_of(read.frames, row)
         assert (mine.k, mine.tau, mine.horizon, mine.preview is None) == (theirs.k, theirs.tau, theirs.horizon,
                                                                           theirs.preview is None)
         for a, b in [(mine.sample, theirs.sample), *zip(mine.preview or [], theirs.preview or [], strict=True)]:

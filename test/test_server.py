@@ -37,6 +37,11 @@ def spec(**changes) -> StreamSpec:
                          "warm_up": False, "ramp_time": 0.3, **changes})
 
 
+def sample(outgoing):
+    """The sample an outgoing row carries."""
+    return outgoing.frames.samples.row(outgoing.row)
+
+
 def wait_ready(server: ReferenceServer, timeout: float = 30.0) -> None:
     deadline = time.monotonic() + timeout
     while not server.ready():
@@ -75,8 +80,8 @@ def test_served_samples_are_the_stream_at_consecutive_stamps(server: ReferenceSe
     assert [o.stamp_ns for o in out] == [start + k * PERIOD for k in range(150)]
     truth = ReferenceStream(load_config(), "rigid", STEP, blend_time=0.5, ramp_time=0.3)
     truth.compute(1.5)
-    np.testing.assert_array_equal([o.frame.sample.q for o in out], [truth.sample(k / RATE).q for k in range(150)])
-    previews = [o.k for o in out if o.frame.preview is not None]  # the look-ahead made before publishing has all;
+    np.testing.assert_array_equal([sample(o).q for o in out], [truth.sample(k / RATE).q for k in range(150)])
+    previews = [o.k for o in out if o.row in o.frames.previews]  # the look-ahead made before publishing has all;
     assert previews[:10] == list(range(0, 100, 10))  # urgent frames later (this publisher drains the buffer)
     assert all(k % 10 == 0 for k in previews)  # may pass theirs, the cadence stays
     status = server.status(start + 150 * PERIOD)
@@ -97,7 +102,7 @@ def test_a_command_takes_effect_at_the_last_sample_within_the_lead(server: Refer
     truth = ReferenceStream(load_config(), "rigid", STEP, blend_time=0.5, ramp_time=0.3)
     truth.retarget(k / RATE, targets)
     truth.compute(1.5)
-    np.testing.assert_array_equal([o.frame.sample.q for o in before + after],
+    np.testing.assert_array_equal([sample(o).q for o in before + after],
                                   [truth.sample(i / RATE).q for i in range(len(before + after))])
     assert server.stream.targets == targets
 
@@ -119,7 +124,7 @@ def test_restart_only_while_not_publishing_and_its_jump(server: ReferenceServer)
     assert "restart_stamp_s" not in server.commands  # not known before publishing begins again
     server.begin(NS + len(out) * PERIOD)
     resumed = publish(server, NS + len(out) * PERIOD, 0.2)
-    np.testing.assert_allclose(resumed[0].frame.sample.q, start, atol=1e-12)
+    np.testing.assert_allclose(sample(resumed[0]).q, start, atol=1e-12)
     assert resumed[0].stamp_ns > out[-1].stamp_ns
     assert server.commands["restart_stamp_s"] == f"{resumed[0].stamp_ns / NS:.6f}"  # absolute, as every stamp
 
@@ -140,14 +145,14 @@ def test_a_solver_failure_holds_the_last_sample_and_a_restart_recovers(server: R
     monkeypatch.setattr(MotionStepper, "advance_until", fail)
     after = publish(server, NS + len(before) * PERIOD, 2.0)  # beyond the look-ahead made before the failure
     out = before + after
-    held = np.array([o.frame.sample.held for o in out])
+    held = np.array([sample(o).held for o in out])
     moving = int(np.argmax(held))  # the first held sample: all before it moving, all after it held
     assert 0 < moving < len(out) and np.all(held[moving:]) and not np.any(held[:moving])
-    np.testing.assert_array_equal([o.frame.sample.q for o in out[:moving]],
+    np.testing.assert_array_equal([sample(o).q for o in out[:moving]],
                                   [truth.sample(k / RATE).q for k in range(moving)])
     for o in out[moving:]:
-        np.testing.assert_array_equal(o.frame.sample.q, out[moving - 1].frame.sample.q)
-        assert np.all(o.frame.sample.qd == 0.0) and np.all(np.isfinite(o.frame.sample.effort))
+        np.testing.assert_array_equal(sample(o).q, sample(out[moving - 1]).q)
+        assert np.all(sample(o).qd == 0.0) and np.all(np.isfinite(sample(o).effort))
     status = server.status(NS + len(out) * PERIOD)
     assert status.stream.state == ERROR and "injected by the test" in status.stream.last_error
     server.end()
@@ -156,7 +161,7 @@ def test_a_solver_failure_holds_the_last_sample_and_a_restart_recovers(server: R
     assert server.stream.state == RUNNING
     server.begin(NS + len(out) * PERIOD)
     resumed = publish(server, NS + len(out) * PERIOD, 0.1)
-    np.testing.assert_allclose(resumed[0].frame.sample.q, truth.sample(0.0).q, atol=1e-12)
+    np.testing.assert_allclose(sample(resumed[0]).q, truth.sample(0.0).q, atol=1e-12)
 
 
 def test_coming_to_rest_pauses_along_the_ramp(server: ReferenceServer) -> None:
@@ -181,8 +186,8 @@ def test_the_solver_process_serves_the_same_frames_and_raises_its_errors() -> No
         a, b = publish(here, NS, 1.2), publish(there, NS, 1.2)
         assert [o.k for o in a] == [o.k for o in b]
         for x, y in zip(a, b, strict=True):
-            np.testing.assert_array_equal(x.frame.sample.q, y.frame.sample.q)
-            np.testing.assert_array_equal(x.frame.sample.effort, y.frame.sample.effort)
+            np.testing.assert_array_equal(sample(x).q, sample(y).q)
+            np.testing.assert_array_equal(sample(x).effort, sample(y).effort)
         assert there.stream.targets == load_config().task
     finally:
         here.close()

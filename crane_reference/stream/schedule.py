@@ -45,18 +45,6 @@ def stamp_at(start_ns: int, k: int, rate: int) -> int:
     return start_ns + k * NANOSECONDS // rate
 
 
-@dataclass(frozen=True)
-class Frame:
-    """Sample k of the reference, at stream publish time ``tau``, with its preview (or None) over ``horizon``
-    seconds: one row of :class:`Frames`, made as an object only where one is asked for (tests, tools)."""
-
-    k: int
-    tau: float
-    sample: ReferenceSample
-    preview: list[ReferenceSample] | None = None
-    horizon: float = 0.0
-
-
 @dataclass(frozen=True, eq=False)
 class Frames:
     """Frames k .. k + N - 1 of the reference, stacked: their stream publish times ``tau`` (N,) [s], their samples
@@ -82,12 +70,6 @@ class Frames:
     def held(cls, k: int, taus: np.ndarray, sample: ReferenceSample) -> Frames:
         """Frames k, ... at ``taus``, each ``sample`` held."""
         return cls(k, np.asarray(taus, dtype=float), Samples.repeated(sample.hold(), len(taus)))
-
-    def frame(self, row: int) -> Frame:
-        """Row ``row`` as a :class:`Frame`."""
-        preview = self.previews.get(row)
-        return Frame(self.k + row, float(self.tau[row]), self.samples.row(row),
-                     None if preview is None else preview.rows(), self.horizon)
 
     def head(self, count: int) -> Frames:
         """The first ``count`` frames."""

@@ -55,7 +55,7 @@ from ..model.units import NANOSECONDS
 from ..motion.simulation import SOLVER_FAILURES
 from .reference_stream import ERROR, PAUSED, RUNNING
 from .sample import ReferenceSample
-from .schedule import Frame, FrameBatch, FrameRequest, Frames, FrameSchedule, Plan, stamp_at
+from .schedule import FrameBatch, FrameRequest, Frames, FrameSchedule, Plan, stamp_at
 from .solver import STREAM_COMMANDS, SolverClient, SolverStoppedError, StreamStatus
 from .threads import start_named
 
@@ -91,11 +91,6 @@ class Outgoing(NamedTuple):
     stamp_ns: int
     frames: Frames
     row: int
-
-    @property
-    def frame(self) -> Frame:
-        """The sample as a :class:`~.schedule.Frame` object (for tests and tools; the publisher reads the rows)."""
-        return self.frames.frame(self.row)
 
 
 class Due(NamedTuple):
