@@ -35,7 +35,7 @@ from crane_reference.dynamics.structures import Coefficients
 from crane_reference.dynamics.terms import chain_terms, end_effector_jacobian, position_terms
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import CraneParameters
-from crane_reference.motion.integration import REFRESH_INTERVAL, ExactFrequencyTrapezoidal
+from crane_reference.motion.integration import REFRESH_INTERVAL, ExactFrequencyTrapezoidal, stop_flag
 from crane_reference.motion.simulation import MotionStepper, Scenario, simulate
 from crane_reference.motion.steps import ONLINE_STEP
 
@@ -84,7 +84,7 @@ def step_times(scenario: Scenario, step: float, duration: float, after: float = 
         k_i = Coefficients(k.Q[i:i + 1], k.g[i:i + 1], k.c[i:i + 1], k.order)
         start = time.perf_counter()
         run = kernels.integration_run(q, qd, qdd, B, earlier, correction, t0, times[i:i + 1], k_i, drives[i:i + 1],
-                                      motion.partition, motion.dynamics.chain, settings, evaluated)
+                                      motion.partition, motion.dynamics.chain, settings, evaluated, stop_flag())
         walls[i] = time.perf_counter() - start
         last = run.last
         q, qd, qdd, earlier, correction, t0 = last.q, last.qd, run.rows.qdd[0], last.earlier, last.correction, times[i]

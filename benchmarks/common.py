@@ -12,7 +12,13 @@ import numpy as np
 
 from crane_reference.dynamics import kernels
 from crane_reference.model.urdf import model_to_urdf
-from crane_reference.motion.integration import EVALUATIONS, ONLINE_TOLERANCE, ExactFrequencyTrapezoidal, StepState
+from crane_reference.motion.integration import (
+    EVALUATIONS,
+    ONLINE_TOLERANCE,
+    ExactFrequencyTrapezoidal,
+    StepState,
+    stop_flag,
+)
 from crane_reference.motion.simulation import MotionStepper, Scenario
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
@@ -76,7 +82,7 @@ def run_times(scenario: Scenario, step: float, duration: float, every_row: bool,
         run = kernels.integration_run(state.q, state.qd, state.solution.qdd, state.solution.velocity_map,
                                       state.earlier, state.correction, state.t, times, k,
                                       drives, motion.partition, motion.dynamics.chain, integrator.settings,
-                                      np.full(times.size, every_row))
+                                      np.full(times.size, every_row), stop_flag())
         state = StepState(times[-1], run.last.q, run.last.qd, motion.solution_from_evaluation(run.last.evaluation),
                           run.last.correction, run.last.earlier)
         if paced:

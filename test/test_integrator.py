@@ -17,6 +17,8 @@
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 from scipy.linalg import eigh
@@ -24,7 +26,7 @@ from scipy.signal import butter, sosfiltfilt
 
 from crane_reference.dynamics import kernels
 from crane_reference.dynamics.structures import ACCOUNTS
-from crane_reference.motion.integration import CUTOFF, ExactFrequencyTrapezoidal
+from crane_reference.motion.integration import CUTOFF, ExactFrequencyTrapezoidal, stop_flag
 from crane_reference.motion.simulation import MotionStepper, Scenario
 
 STEP = 1e-3  # [s]
@@ -100,7 +102,7 @@ def test_evaluated_rows_do_not_change_the_motion_and_hold_the_kkt_reactions(scen
         return kernels.integration_run(state.q, state.qd, state.solution.qdd, state.solution.velocity_map,
                                        state.earlier, state.correction, state.t, times,
                                        coefficients, drives, motion.partition, motion.dynamics.chain, settings,
-                                       evaluated)
+                                       evaluated, stop_flag())
 
     every = run(np.ones(times.size, dtype=bool)).rows
     sparse_mask = np.arange(times.size) % 7 == 3
@@ -159,6 +161,23 @@ def test_a_run_does_not_depend_on_how_it_is_cut_into_calls(scenario):
         state, rows = integrator.run(state, chunk)
         parts.append(rows.q)
     np.testing.assert_array_equal(np.concatenate(parts), whole)
+
+
+def test_a_run_stopped_by_its_flag_from_another_thread_goes_on_bit_for_bit(scenario):
+    """A stop flag set by another thread while compiled runs are under way ends them after the step in
+    progress: fewer steps than asked; continuing from there gives the uncut motion, on the same time grid, bit
+    for bit (the stepper's grid index follows the steps taken)."""
+    q0 = scenario.equilibrium.q
+    whole = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), STEP).advance_until(4.0)
+    stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), STEP)
+    stop = stop_flag()
+    threading.Timer(0.05, stop.__setitem__, (0, 1)).start()
+    first = stepper.advance_until(4.0, stop)
+    stop[0] = 0
+    rest = stepper.advance_until(4.0, stop)
+    assert 0 < first["t"].size < whole["t"].size
+    for name in ("t", "q", "qd", "qdd"):
+        np.testing.assert_array_equal(np.concatenate((first[name], rest[name])), whole[name])
 
 
 def test_newton_matrix_is_the_jacobian_of_the_step_residual(scenario):

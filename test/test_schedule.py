@@ -227,11 +227,12 @@ def test_an_interrupted_request_makes_its_urgent_frames_only(stream_factory):
     stream = stream_factory()
     stream.compute(1.5)
     schedule = FrameSchedule(RATE, 100, LEAD, 1.0, stream.sample(0.0))
-    urgent = make_frames(stream, schedule.request(schedule.plan(), 10, 0.2, 5, 4, 0.005), lambda: True)
+    waiting = np.ones(1, dtype=np.uint8)  # a set stop flag
+    urgent = make_frames(stream, schedule.request(schedule.plan(), 10, 0.2, 5, 4, 0.005), waiting)
     assert len(urgent.frames) == 10 and urgent.frames.k == 0
     schedule.accept(urgent, schedule.plan())
     schedule.made_k = schedule.urgent_until  # the next frames are beyond the urgent window
-    later = make_frames(stream, schedule.request(schedule.plan(), 10, 0.2, 5, 4, 0.005), lambda: True)
+    later = make_frames(stream, schedule.request(schedule.plan(), 10, 0.2, 5, 4, 0.005), waiting)
     assert not len(later.frames) and later.busy and stream.computed_until >= 1.5
 
 

@@ -18,7 +18,7 @@ from crane_reference.model.parameters import Task
 from crane_reference.motion.programmed_motion import ConstraintSingularityError
 from crane_reference.motion.simulation import MotionStepper
 from crane_reference.stream.health import Health, Level, serving_health, startup_health
-from crane_reference.stream.reference_stream import CHUNK_STEPS, ERROR, PAUSED, RUNNING, ReferenceStream
+from crane_reference.stream.reference_stream import ERROR, PAUSED, RUNNING, ReferenceStream
 from crane_reference.stream.schedule import FrameSchedule
 from crane_reference.stream.server import CommandRefusedError, Preview, ReferenceServer, ServerStatus
 from crane_reference.stream.solver import LocalSolver, SolverProcess, StreamSolver, StreamSpec, StreamStatus
@@ -139,7 +139,7 @@ def test_a_solver_failure_holds_the_last_sample_and_a_restart_recovers(server: R
     server.begin(NS)
     before = publish(server, NS, 0.3)
 
-    def fail(self: MotionStepper, t_end: float) -> None:
+    def fail(self: MotionStepper, t_end: float, stop: np.ndarray | None = None) -> None:
         raise ConstraintSingularityError("injected by the test")
 
     monkeypatch.setattr(MotionStepper, "advance_until", fail)
@@ -196,21 +196,16 @@ def test_the_solver_process_serves_the_same_frames_and_raises_its_errors() -> No
         os.kill(process.pid, 0)  # ended and reaped
 
 
-def test_an_interrupt_stops_computing_ahead_after_the_compiled_run_under_way() -> None:
-    """A request that computes ahead without a budget stops at the first check after a command says it
-    waits: here the second, so exactly one compiled run of CHUNK_STEPS steps is computed, no frames are made, and
-    the batch says the motion is short of what was asked (busy)."""
-    checks = []
-
-    def interrupted() -> bool:
-        checks.append(None)
-        return len(checks) > 1
-
-    solver = StreamSolver(spec(), interrupted)
+def test_a_stop_flag_set_from_another_thread_ends_computing_ahead_within_a_step() -> None:
+    """A request that computes a minute ahead without a budget ends soon after another thread sets the stop
+    flag (a command waits), within the compiled run under way: no frames are made, the batch says the motion is
+    short of what was asked (busy), and far less than the minute is computed."""
+    solver = StreamSolver(spec())
     schedule = FrameSchedule(RATE, RATE, LEAD, 1.0, solver.stream.sample(0.0))
-    batch = solver.frames(schedule.request(schedule.plan(), 10, 5.0, 4, 10, None), 2.0)
+    threading.Timer(0.3, solver.stop.__setitem__, (0, 1)).start()
+    batch = solver.frames(schedule.request(schedule.plan(), 10, 60.0, 4, 10, None), 2.0)
     assert batch.busy and not len(batch.frames)  # the waiting request comes first; the frames on the next call
-    assert solver.stream.computed_until == pytest.approx(CHUNK_STEPS * STEP, abs=1e-12)
+    assert 0.0 < solver.stream.computed_until < 30.0
 
 
 def test_the_solver_process_obeys_an_interrupt_that_comes_before_or_during_a_frame_request_once() -> None:

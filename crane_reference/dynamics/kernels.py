@@ -611,14 +611,16 @@ def _at_step(k: Coefficients, i):
 
 @njit(cache=True, nogil=True)
 def integration_run(q, qd, qdd, B, earlier, correction: ModalCorrection, t0, times, k: Coefficients, drives,
-                    partition: Partition, chain: ChainData, settings: StepSettings, evaluated):
+                    partition: Partition, chain: ChainData, settings: StepSettings, evaluated, stop):
     """:func:`integration_step` from t0 through ``times`` (N,) in one call, with the constraint
     coefficients ``k`` (stacked per step) and drive parameters ``drives`` (N, 4) of each step's end, B the
     velocity map at t0 and ``earlier`` the accelerations of the two steps before (:func:`integration_step`).
     The rows of the steps where ``evaluated`` (N,) is True, and of the last one, carry the full evaluation
     (:func:`step_evaluation`: reactions, residuals, accounts); the others NaN there but for sigma_min(K_dc)
     in the accounts (every step's; :func:`evaluated_rows` completes them later).
-    Stops at the first step that fails; returns a :class:`Run`."""
+    Stops at the first step that fails, or after a step once ``stop[0]`` (a flag another thread or process may
+    set while the run is in progress) is nonzero: then fewer than N steps completed, all converged.  Returns a
+    :class:`Run`."""
     N, n, m = times.size, q.size, k.order.size
     rows = StepRows(np.empty((N, n)), np.empty((N, n)), np.empty((N, n)), np.full((N, m), np.nan),
                     np.full((N, n), np.nan), np.empty((N, 3)), np.empty((N, 3, 3)), np.empty((N, 3)),
@@ -636,14 +638,15 @@ def integration_run(q, qd, qdd, B, earlier, correction: ModalCorrection, t0, tim
             _evaluated_row(rows, completed, step_evaluation(step.q, step.qd, step.qdd, _at_step(k, completed),
                                                             drives[completed], partition, chain))
         completed += 1
-        if completed == N:
+        if completed == N or stop[0]:
             break
         step = integration_step(step.q, step.qd, step.qdd, step.velocity_map, step.earlier, step.correction,
                                 times[completed - 1], times[completed] - times[completed - 1], _at_step(k, completed),
                                 drives[completed], partition, chain, settings)
     if step.status == CONVERGED:
-        last = step_evaluation(step.q, step.qd, step.qdd, _at_step(k, N - 1), drives[N - 1], partition, chain)
-        _evaluated_row(rows, N - 1, last)
+        i = completed - 1
+        last = step_evaluation(step.q, step.qd, step.qdd, _at_step(k, i), drives[i], partition, chain)
+        _evaluated_row(rows, i, last)
     else:  # the evaluation at the failed step's start
         last = evaluate(step.q, step.qd, _at_step(k, completed), drives[completed], partition, chain)
     return Run(completed, step.status, rows, Step(step.q, step.qd, last, step.earlier, step.correction, step.status,

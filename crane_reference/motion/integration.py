@@ -122,6 +122,12 @@ class IntegrationError(RuntimeError):
     """A step of the integrator did not converge."""
 
 
+def stop_flag() -> np.ndarray:
+    """A stop flag for :meth:`ExactFrequencyTrapezoidal.run`, cleared: one byte (uint8), nonzero to stop; any
+    such byte array works, e.g. one over shared memory that another process sets."""
+    return np.zeros(1, dtype=np.uint8)
+
+
 @dataclass(frozen=True)
 class StepState:
     """Integrator state at t: full q, qd, the solution of (8) there, the modal correction in use and the
@@ -202,12 +208,14 @@ class ExactFrequencyTrapezoidal:
         return self.run(state, np.array([t1], dtype=float), ends_on_jump)[0]
 
     def run(self, state: StepState, times: np.ndarray, ends_on_jump: bool = False,
-            every_row: bool = True) -> tuple[StepState, StepRows]:
+            every_row: bool = True, stop: np.ndarray | None = None) -> tuple[StepState, StepRows]:
         """Advance ``state`` through the increasing ``times`` [s] in one compiled call (the steps of
         :meth:`step`); the last one ends on a drive jump with ``ends_on_jump``.  Returns the final state
         and the per-step rows, each with its full evaluation (reactions, residuals, accounts), or with
         ``every_row`` False only the last (the others read later with
-        :meth:`~.programmed_motion.ProgrammedMotion.evaluated_rows`)."""
+        :meth:`~.programmed_motion.ProgrammedMotion.evaluated_rows`).  ``stop``, a flag of one byte that
+        another thread or process may set meanwhile (:func:`stop_flag`), ends the run after the step in
+        progress: then the state and rows are those of the steps taken, at least one."""
         motion = self.motion
         drive = motion.dynamics.drive
         times = np.asarray(times, dtype=float)
@@ -218,13 +226,13 @@ class ExactFrequencyTrapezoidal:
             state.q, state.qd, state.solution.qdd, state.solution.velocity_map, state.earlier, state.correction,
             state.t, times,
             motion.constraints.coefficients_at(times), drives, motion.partition, motion.dynamics.chain, self.settings,
-            np.full(times.size, every_row))
+            np.full(times.size, every_row), stop_flag() if stop is None else stop)
         if run.status != CONVERGED:
             t0 = times[run.completed - 1] if run.completed else state.t
             raise self.failure(run.status, t0, times[min(run.completed, len(times) - 1)])
-        rows = run.rows
+        rows = run.rows if run.completed == times.size else StepRows(*(a[:run.completed] for a in run.rows))
         motion.check_singularity(float(np.min(rows.accounts[:, SINGULAR_VALUE])))
         self.last_iterations = int(rows.iterations[-1])
         last = run.last
-        return StepState(float(times[-1]), rows.q[-1], rows.qd[-1], motion.solution_from_evaluation(last.evaluation),
-                         last.correction, last.earlier), rows
+        return StepState(float(times[run.completed - 1]), rows.q[-1], rows.qd[-1],
+                         motion.solution_from_evaluation(last.evaluation), last.correction, last.earlier), rows

@@ -159,20 +159,23 @@ class MotionStepper:
         self._run_block(self._t0 + (self._k + 1) * self.step_size)
         return self.sample
 
-    def advance_until(self, t_end: float) -> dict[str, np.ndarray]:
+    def advance_until(self, t_end: float, stop: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Steps through the first grid time >= t_end in compiled runs (cut at drive jumps, restarting
-        there): the samples' fields (:class:`Sample`) stacked per step."""
+        there): the samples' fields (:class:`Sample`) stacked per step.  A ``stop`` flag set meanwhile
+        (:func:`~.integration.stop_flag`) ends it after the step in progress (at least one is taken)."""
         blocks = []
-        while self.state.t < t_end - 1e-9 * self.step_size:
-            blocks.append(self._run_block(t_end))
+        while self.state.t < t_end - 1e-9 * self.step_size and not (blocks and stop is not None and stop[0]):
+            blocks.append(self._run_block(t_end, stop))
         return {name: np.concatenate([b[name] for b in blocks]) for name in blocks[0]} if blocks else {}
 
-    def _run_block(self, t_end: float) -> dict[str, np.ndarray]:
-        """One compiled run towards t_end, up to the first drive jump (restarting there); the trapezoidal
-        work accounts; the samples' fields stacked per step."""
+    def _run_block(self, t_end: float, stop: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """One compiled run towards t_end, up to the first drive jump (restarting there) or a ``stop``; the
+        trapezoidal work accounts; the samples' fields stacked per step."""
         start = self.state
         times, on_jump, covered = self._next_times(t_end)
-        new, rows = self.integrator.run(start, times, ends_on_jump=on_jump, every_row=self.every_row)
+        new, rows = self.integrator.run(start, times, ends_on_jump=on_jump, every_row=self.every_row, stop=stop)
+        if rows.q.shape[0] < times.size:  # stopped on the way: every step taken ends on a grid time
+            times, on_jump, covered = times[:rows.q.shape[0]], False, rows.q.shape[0]
         self._k += covered
         powers = np.vstack((start.solution.powers, rows.accounts[:, POWERS]))
         steps = np.diff(np.concatenate(([start.t], times)))

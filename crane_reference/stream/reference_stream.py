@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -47,8 +46,9 @@ from .targets import blend_constraints, check_task
 from .time_warp import TimeWarp, check_rate
 
 RUNNING, PAUSED, ERROR = "RUNNING", "PAUSED", "ERROR"
-CHUNK_STEPS = 50
-"""Steps computed per compiled run; the wall budget of :meth:`ReferenceStream.compute` is checked between runs."""
+CHUNK_STEPS = 500
+"""Steps of a compiled run at most (:meth:`ReferenceStream.compute`): long runs keep the kernels' data in the
+cache and Python out of the way; a stop flag ends one at the next step."""
 MIN_SINGULAR_VALUE = 1e-3
 """sigma_min(K_dc) below which the computed motion stops with an error (a singular task)."""
 
@@ -114,6 +114,7 @@ class ReferenceStream:
         self._warp = TimeWarp(self._warp.ramp_time, self.speed_scaling, tau)
         self._hold: ReferenceSample | None = None
         self._forgotten: list[list] = []  # motion discarded by commands, freed off their critical path
+        self._pace = 0.0  # wall time [s] per step of the last compiled run (0: none yet)
         self.state = RUNNING
         self.last_error = ""
 
@@ -172,31 +173,35 @@ class ReferenceStream:
 
     # -- computing and sampling ---------------------------------------------------------------------
 
-    def compute(self, until: float, wall_budget: float | None = None,
-                interrupted: Callable[[], bool] | None = None) -> None:
-        """Advance the solver until samples up to publish time ``until`` are available, or until
-        ``wall_budget`` seconds of wall time are spent, or ``interrupted()`` turns true (both checked
-        between compiled runs of CHUNK_STEPS steps); also while PAUSED, along the ramp to rest.  Failures switch
-        to ERROR and hold."""
+    def compute(self, until: float, wall_budget: float | None = None, stop: np.ndarray | None = None) -> None:
+        """Advance the solver until samples up to publish time ``until`` are available, or until about
+        ``wall_budget`` seconds of wall time are spent (compiled runs of up to CHUNK_STEPS steps, each no
+        longer than the budget left at the pace of the run before), or until the ``stop`` flag
+        (:func:`~crane_reference.motion.integration.stop_flag`) is set, which ends a run at its next step;
+        also while PAUSED, along the ramp to rest.  Failures switch to ERROR and hold."""
         if self.state == ERROR:
             return
         deadline = None if wall_budget is None else time.perf_counter() + wall_budget
         target = self.motion_time(until)
         history = self._history
-        while history.end_time < target:
-            if deadline is not None and time.perf_counter() > deadline:
-                return
-            if interrupted is not None and interrupted():
-                return
+        while history.end_time < target and not (stop is not None and stop[0]):
+            steps = CHUNK_STEPS
+            started = time.perf_counter()
+            if deadline is not None:
+                if started > deadline:
+                    return
+                if self._pace:
+                    steps = max(1, min(CHUNK_STEPS, int((deadline - started) / self._pace)))
             try:
                 end = history.end_time
-                rows = self._stepper.advance_until(max(min(target, end + CHUNK_STEPS * self.step),
-                                                       end + 0.5 * self.step))
+                rows = self._stepper.advance_until(max(min(target, end + steps * self.step), end + 0.5 * self.step),
+                                                   stop)
                 if not (np.all(np.isfinite(rows["q"])) and np.all(np.isfinite(rows["qd"]))):
                     raise FloatingPointError(f"non-finite state before t = {rows['t'][-1]:.6g} s")
             except SOLVER_FAILURES as failure:
                 self._fail(failure)
                 return
+            self._pace = (time.perf_counter() - started) / rows["t"].size
             history.extend(rows, self._stepper.snapshot())
 
     def free_forgotten(self) -> None:

@@ -25,7 +25,6 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
-from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -126,10 +125,9 @@ class FrameBatch:
     fault: str = ""
 
 
-def make_frames(stream: ReferenceStream, request: FrameRequest,
-                interrupted: Callable[[], bool] | None = None) -> FrameBatch:
+def make_frames(stream: ReferenceStream, request: FrameRequest, stop: np.ndarray | None = None) -> FrameBatch:
     """The frames of ``request`` as far as the motion is computed, after computing ahead far enough for
-    them and for their previews (or until ``interrupted()``: a request is waiting for the solver; then only
+    them and for their previews (or until the ``stop`` flag is set: a request is waiting for the solver; then only
     urgent frames are made, the motion computed so far is kept and the batch is busy).  A frame due a
     preview waits until its horizon is computed, so previews keep their cadence; an urgent frame (just after
     a command) is made as soon as its own motion is computed, without the preview due to it if its horizon
@@ -145,7 +143,7 @@ def make_frames(stream: ReferenceStream, request: FrameRequest,
     wall = motion = 0.0
     if before < target:
         start = time.perf_counter()
-        stream.compute(target, request.compute_budget, interrupted)
+        stream.compute(target, request.compute_budget, stop)
         if math.isfinite(stream.computed_until):
             wall, motion = time.perf_counter() - start, stream.computed_until - before
     times = tau + dt * np.arange(count)
@@ -153,7 +151,7 @@ def make_frames(stream: ReferenceStream, request: FrameRequest,
         return FrameBatch(Frames.held(plan.k, times, request.last_valid), next_preview_k, False, wall, motion)
     computed_until = stream.computed_until
     made = int(np.count_nonzero(times <= computed_until - TIME_TOLERANCE))
-    dropped = plan.k >= request.urgent_until and interrupted is not None and interrupted()
+    dropped = plan.k >= request.urgent_until and stop is not None and bool(stop[0])
     if dropped:  # a request waits: it comes first (a command may drop them); urgent frames are made still
         made = 0
     previews: dict[int, Samples] = {}

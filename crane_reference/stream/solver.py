@@ -13,25 +13,28 @@ a request names the solver's method itself, which pickles by reference, never a 
   pipes; an exception raised by the solver is raised again in the caller.
 
 Both clients have :meth:`interrupt`: a caller with a command waiting for the solver cuts the request in
-progress short, so the command waits at most one compiled run of computing ahead, not a whole slice
-(:func:`~.schedule.make_frames` returns the frames computed so far).  A third pipe carries it to the
-process.  Pending interrupts are cleared before any request but a frame request (so a command's own frames
-are made whole), and after a frame request (an interrupt that came while the request was on its way ended
-it, and it is not lost: the caller's request comes next).  The child runs in a session of
-  its own and ignores SIGINT (a Ctrl-C is the caller's to handle), and exits when its request pipe closes,
-  also if the caller dies.  It runs at a lower scheduling priority (:data:`SOLVER_NICENESS`): it computes
-  a second of frames ahead and can wait, the caller's publisher cannot.
+progress short, so the command waits at most one integrator step of computing ahead, not a whole slice
+(:func:`~.schedule.make_frames` returns the frames computed so far).  It sets the solver's stop flag
+(:func:`~crane_reference.motion.integration.stop_flag`), which the compiled runs read at every step; the
+process's flag is a byte of memory shared with the caller.  The flag is cleared before any request but a
+frame request (so a command's own frames are made whole), and after a frame request (an interrupt that came
+while the request was on its way ended it, and it is not lost: the caller's request comes next).
+
+The child runs in a session of its own and ignores SIGINT (a Ctrl-C is the caller's to handle), and exits when
+its request pipe closes, also if the caller dies.  It runs at a lower scheduling priority
+(:data:`SOLVER_NICENESS`): it computes a second of frames ahead and can wait, the caller's publisher cannot.
 """
 
 from __future__ import annotations
 
-import contextlib
 import gc
+import mmap
 import os
 import pickle
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import traceback
 from collections.abc import Callable
@@ -45,6 +48,7 @@ import numpy as np
 from ..model.drive import column_drive
 from ..model.parameters import CraneParameters, Task
 from ..model.urdf import model_to_urdf
+from ..motion.integration import stop_flag
 from .reference_stream import ReferenceStream
 from .sample import ReferenceSample
 from .schedule import FrameBatch, FrameRequest, make_frames
@@ -116,11 +120,12 @@ class Return(NamedTuple):
 class StreamSolver:
     """The stream and the requests it answers (see the module)."""
 
-    def __init__(self, spec: StreamSpec, interrupted: Callable[[], bool] = lambda: False):
+    def __init__(self, spec: StreamSpec, stop: np.ndarray | None = None):
         """Build the stream of ``spec`` (after making the kernels ready if ``spec.warm_up``) and check its
-        targets (:class:`~.targets.UnreachableTargetError` or a solver failure if there is no start);
-        ``interrupted()`` says that a command waits (computing ahead stops at the next compiled run)."""
-        self.interrupted = interrupted
+        targets (:class:`~.targets.UnreachableTargetError` or a solver failure if there is no start); the
+        ``stop`` flag (:func:`~crane_reference.motion.integration.stop_flag`, a new one if None), once set,
+        says that a command waits: computing ahead stops at the next step."""
+        self.stop = stop_flag() if stop is None else stop
         self.kernels = warm_up((spec.model,)).describe() if spec.warm_up else ""
         config = spec.config
         self.stream = ReferenceStream(config, spec.model, spec.step, spec.blend_time, spec.targets,
@@ -141,7 +146,7 @@ class StreamSolver:
     def frames(self, request: FrameRequest, keep: float) -> FrameBatch:
         """The frames of ``request`` (:func:`~.schedule.make_frames`); then the motion older than ``keep``
         seconds before the request's first frame is forgotten."""
-        batch = make_frames(self.stream, request, self.interrupted)
+        batch = make_frames(self.stream, request, self.stop)
         self.stream.release(request.plan.tau, keep)
         return batch
 
@@ -246,26 +251,25 @@ class LocalSolver(SolverClient):
     """A :class:`StreamSolver` called in the caller's thread."""
 
     def __init__(self, spec: StreamSpec):
-        self._interrupt = threading.Event()
-        self.solver = StreamSolver(spec, self._interrupt.is_set)
+        self.solver = StreamSolver(spec)
         self.info = self.solver.info()
         self.status = self.solver.status()
 
     def interrupt(self) -> None:
         """Cut the call in progress short (see the module)."""
-        self._interrupt.set()
+        self.solver.stop[0] = 1
 
     def _call(self, method: Callable[..., Any], *args: Any) -> Any:
-        """``method(solver, *args)``; :attr:`status` is the stream's after it (also if it raised); interrupts
-        cleared as the module says."""
+        """``method(solver, *args)``; :attr:`status` is the stream's after it (also if it raised); the stop
+        flag cleared as the module says."""
         frames = method is StreamSolver.frames
         if not frames:
-            self._interrupt.clear()
+            self.solver.stop[0] = 0
         try:
             return method(self.solver, *args)
         finally:
             if frames:
-                self._interrupt.clear()
+                self.solver.stop[0] = 0
             self.status = self.solver.status()
             self.solver.after_reply()
 
@@ -273,19 +277,19 @@ class LocalSolver(SolverClient):
         pass
 
 
-def _clear(interrupts: Connection) -> None:
-    """Read every interrupt pending on the pipe."""
-    while interrupts.poll():
-        interrupts.recv_bytes()
+def shared_flag(fd: int) -> np.ndarray:
+    """A stop flag (:func:`~crane_reference.motion.integration.stop_flag`) over the first byte of the file
+    ``fd``, mapped shared: what one process sets there, another that maps the same file reads."""
+    return np.frombuffer(mmap.mmap(fd, 1), dtype=np.uint8)
 
 
-def _serve(requests: Connection, replies: Connection, interrupts: Connection) -> None:
-    """The solver process: read the :class:`StreamSpec`, build the solver, then answer (method, args)
-    requests until the pipe closes or None comes, clearing interrupts as the module says.  Replies are (ok,
-    result or exception, status)."""
+def _serve(requests: Connection, replies: Connection, stop: np.ndarray) -> None:
+    """The solver process: read the :class:`StreamSpec`, build the solver with the ``stop`` flag shared with
+    the caller, then answer (method, args) requests until the pipe closes or None comes, clearing the flag as
+    the module says.  Replies are (ok, result or exception, status)."""
     try:
         spec = requests.recv()
-        solver = StreamSolver(spec, interrupts.poll)
+        solver = StreamSolver(spec, stop)
     except (EOFError, OSError):
         return
     except Exception as error:  # reported to the caller, which raises it
@@ -302,13 +306,13 @@ def _serve(requests: Connection, replies: Connection, interrupts: Connection) ->
             return
         method, args = request
         if method is not StreamSolver.frames:
-            _clear(interrupts)
+            stop[0] = 0
         try:
             reply = (True, method(solver, *args))
         except Exception as error:  # reported to the caller, which raises it
             reply = (False, _portable(error))
         if method is StreamSolver.frames:
-            _clear(interrupts)
+            stop[0] = 0
         replies.send((*reply, solver.status()))
         del reply
         solver.after_reply()
@@ -332,18 +336,19 @@ class SolverProcess(SolverClient):
         ``stopped()`` turns true meanwhile (checked every POLL_PERIOD) or the process dies."""
         request_read, request_write = os.pipe()
         reply_read, reply_write = os.pipe()
-        interrupt_read, interrupt_write = os.pipe()
         package_root = str(Path(__file__).resolve().parents[2])
         path = os.pathsep.join(p for p in (package_root, os.environ.get("PYTHONPATH", "")) if p)
-        self._process = subprocess.Popen(
-            [sys.executable, "-m", __name__, str(request_read), str(reply_write), str(interrupt_read)],
-            pass_fds=(request_read, reply_write, interrupt_read), env={**os.environ, "PYTHONPATH": path},
-            start_new_session=True)
-        for fd in (request_read, reply_write, interrupt_read):
+        with tempfile.TemporaryFile() as shared:  # the stop flag's byte, mapped by both processes
+            shared.truncate(1)
+            self._stop = shared_flag(shared.fileno())
+            self._process = subprocess.Popen(
+                [sys.executable, "-m", __name__, str(request_read), str(reply_write), str(shared.fileno())],
+                pass_fds=(request_read, reply_write, shared.fileno()), env={**os.environ, "PYTHONPATH": path},
+                start_new_session=True)
+        for fd in (request_read, reply_write):
             os.close(fd)
         self._requests = Connection(request_write, readable=False)
         self._replies = Connection(reply_read, writable=False)
-        self._interrupts = Connection(interrupt_write, readable=False)
         self._stopped = stopped
         self._lock = threading.Lock()
         try:
@@ -375,8 +380,7 @@ class SolverProcess(SolverClient):
 
     def interrupt(self) -> None:
         """Cut the request in progress short (see the module)."""
-        with contextlib.suppress(OSError, ValueError):  # the process is gone: the next call says so
-            self._interrupts.send_bytes(b"!")
+        self._stop[0] = 1
 
     def _call(self, method: Callable[..., Any], *args: Any) -> Any:
         """``method(solver, *args)`` in the process; :attr:`status` is the stream's after it."""
@@ -397,7 +401,6 @@ class SolverProcess(SolverClient):
             finally:
                 self._lock.release()
         self._requests.close()
-        self._interrupts.close()
         try:
             self._process.wait(timeout)
         except subprocess.TimeoutExpired:
@@ -415,4 +418,4 @@ if __name__ == "__main__":
     name_this_thread("ref_solver")
 
     solver._serve(Connection(int(sys.argv[1]), writable=False), Connection(int(sys.argv[2]), readable=False),
-                  Connection(int(sys.argv[3]), writable=False))
+                  solver.shared_flag(int(sys.argv[3])))
