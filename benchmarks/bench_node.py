@@ -1,8 +1,9 @@
 """Benchmark of the crane_reference node: publishing rate, timing and re-target latency.
 
 For each rate (default 100, 500 and 1000 Hz) it starts ``python -m crane_reference.ros.node`` in its own
-process (an isolated ROS domain, localhost only), subscribes to ``joint_states`` from this process
-and, after a warm-up, records for ``--duration`` seconds (default 30):
+process (an isolated ROS domain, localhost only), subscribes to ``joint_states`` (and, as a consumer would,
+``end_effector_pose``, ``reference_preview`` and /diagnostics) from this process and, after a warm-up,
+records for ``--duration`` seconds (default 30):
 
 * achieved rate: messages received / duration;
 * period: standard deviation of the time between receptions, and the p99 and maximum of
@@ -28,7 +29,8 @@ and, after a warm-up, records for ``--duration`` seconds (default 30):
   stamp gaps longer than two periods, non-finite positions or velocities, requests without a response
   and whether a valid change still takes effect afterwards;
 * the node's CPU over its floor (issue 29's ratio): the floor is the CPU share of a process that only publishes
-  the node's serialized messages at the rate, paced, with a subscriber in another process, plus that of the
+  the node's messages, paced (the samples' two serialized messages at the rate, the preview at its rate,
+  /diagnostics once a second), with a subscriber in another process on each topic, plus that of the
   compiled steps alone at the node's ``integrator.step`` for real-time motion, both measured just before and
   just after each rate's run and averaged (``floor_publish_percent``, ``floor_steps_percent``, ``floor_percent``,
   ``cpu_over_floor``), and its parts: the node's process over the publish-only process
@@ -73,6 +75,7 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
+from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from crane_reference.interface import messages
@@ -81,8 +84,10 @@ from crane_reference.model.config import load_config
 from crane_reference.motion.simulation import Scenario
 from crane_reference.motion.steps import ONLINE_STEP
 from crane_reference.ros.message_types import rclpy_types
+from crane_reference.ros.parameters import SPECS
 from crane_reference.ros.publishing import MARKER_RATE, TRAIL_POINTS
 from crane_reference.stream.reference_stream import ReferenceStream
+from crane_reference.stream.schedule import Counters
 from crane_reference.stream.server import REFILL
 
 NS = 10**9
@@ -281,6 +286,8 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
     recorder = Recorder()
     subscriber.create_subscription(JointState, "/crane_reference/joint_states", recorder.joint_state, 10000)
     subscriber.create_subscription(DiagnosticArray, "/diagnostics", recorder.diagnostic, 100)
+    for message, topic in ((PoseStamped, "end_effector_pose"), (JointTrajectory, "reference_preview")):
+        subscriber.create_subscription(message, f"/{NODE}/{topic}", lambda msg: None, 100)
     client = AsyncParameterClient(subscriber, NODE)
     try:
         if not spin_until(executor, lambda: recorder.stamps, 60.0):
@@ -342,10 +349,14 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
+from diagnostic_msgs.msg import DiagnosticArray
+from trajectory_msgs.msg import JointTrajectory
 rclpy.init()
 node = Node("bench_messages_subscriber")
 node.create_subscription(JointState, "/bench_joint_states", lambda msg: None, 1000)
 node.create_subscription(PoseStamped, "/bench_pose", lambda msg: None, 1000)
+node.create_subscription(JointTrajectory, "/bench_preview", lambda msg: None, 100)
+node.create_subscription(DiagnosticArray, "/bench_diagnostics", lambda msg: None, 100)
 try:
     rclpy.spin(node)
 except (KeyboardInterrupt, ExternalShutdownException):
@@ -357,10 +368,13 @@ TARGET_OVER_FLOOR, TARGET_REAL_TIME_FACTOR, TARGET_P99_MS, TARGET_MAX_MS_100HZ =
 
 
 def message_costs(model: str, domain: int, rates: list[int], details: bool) -> dict[int, float]:
-    """This process's CPU share [%] when it only publishes the node's serialized messages at each of ``rates``,
-    with a subscriber in another process (the floor of the node's publishing in rclpy: no stream, no clock,
-    no schedule); with ``details``, print the publisher's per-sample costs alone and with the subscriber and
-    that share both for the serialized messages and for message objects, and the markers' cost."""
+    """This process's CPU share [%] when it only publishes the node's messages at each of ``rates``, with a
+    subscriber in another process on each topic, as the node's run has (the floor of the node's publishing in
+    rclpy: no stream, no clock, no schedule): ~/joint_states and ~/end_effector_pose serialized and filled per
+    sample, ~/reference_preview (built once, the default preview) at the default preview rate and
+    /diagnostics (built once, with the node's keys) once a second; with ``details``, print the publisher's
+    per-sample costs of the first two alone and with the subscriber and that share both for the serialized
+    messages and for message objects, and the markers' cost."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     context = rclpy.Context()
@@ -373,9 +387,18 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
         sample, names = stream.sample(0.05), list(stream.joint_names)
         joints = node.create_publisher(JointState, "/bench_joint_states", 10)
         poses = node.create_publisher(PoseStamped, "/bench_pose", 10)
+        previews = node.create_publisher(JointTrajectory, "/bench_preview", 10)
+        statuses = node.create_publisher(DiagnosticArray, "/bench_diagnostics", 10)
         joint_writer = SerializedJointState(serialize_message(messages.joint_state(types, 0, names, sample)))
         pose_writer = SerializedPose(serialize_message(messages.end_effector_pose(types, 0, "world", sample)))
         kept = {"joint": None, "pose": None}
+        preview_joints, points = SPECS["preview.joints"].default, SPECS["preview.points"].default
+        preview = messages.reference_preview(
+            types, 0, "world", preview_joints, [names.index(j) for j in preview_joints],
+            messages.preview_offsets(SPECS["preview.horizon"].default, points - 1), [sample] * points)
+        status = messages.diagnostics(types, 0, NODE, NODE, 0, "RUNNING", messages.diagnostic_values(
+            "RUNNING", sample, 10.0, max(rates), float(max(rates)), Counters().as_dict(), stream.targets, 1.0, "",
+            {"frames_ready": 0, "blend_time_s": "2"}))
 
         def one_sample(k: int) -> None:
             """As the node publishes: serialized once, filled in place and published as bytes."""
@@ -397,11 +420,16 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
             return (time.perf_counter() - wall) / count, (time.process_time() - cpu) / count
 
         def paced(rate: int, publish: Callable[[int], None], seconds: float = 5.0) -> float:
-            """CPU share of this process [%] publishing at ``rate`` Hz (sleeping until each period's start)."""
+            """CPU share of this process [%] publishing samples at ``rate`` Hz (sleeping until each period's
+            start), the preview every round(rate / preview.rate) samples and /diagnostics once a second."""
             start, cpu = time.monotonic(), time.process_time()
-            k = 0
+            k, decimation = 0, max(1, round(rate / SPECS["preview.rate"].default))
             while (now := time.monotonic()) - start < seconds:
                 publish(k)
+                if k % decimation == 0:
+                    previews.publish(preview)
+                if k % rate == 0:
+                    statuses.publish(status)
                 k += 1
                 time.sleep(max(0.0, start + k / rate - now))
             return 100.0 * (time.process_time() - cpu) / (time.monotonic() - start)
@@ -409,7 +437,7 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
         ways = {"serialized (the node)": one_sample, "message objects": one_message_object}
         alone = {way: per_sample(publish) for way, publish in ways.items()} if details else {}
         subscriber = subprocess.Popen([sys.executable, "-c", SUBSCRIBER], env=env)
-        if not spin_until_matched(joints, poses, timeout=30.0):
+        if not spin_until_matched(joints, poses, previews, statuses, timeout=30.0):
             raise RuntimeError("the subscriber process did not match the bench topics within 30 s")
         if not details:
             return {rate: paced(rate, one_sample) for rate in rates}

@@ -16,14 +16,14 @@ Publishing
 
 Computing ahead
     The worker asks the solver for frames in batches of :data:`REFILL` seconds of stream, once that much room
-    is free (a quarter of the look-ahead if less), each after at most :data:`COMPUTE_SLICE` s of computing while
-    publishing (unbounded before; any other request cuts it short at the next compiled run).  Frames close to
-    publishing (within a quarter of the look-ahead, as after a command) are urgent: made as soon as their own
-    motion is computed, as many as :data:`URGENT_SLICE` s of computing give (a command's own request:
-    :data:`URGENT_BATCH` seconds of them), so the first frames come back soon.  The worker forgets motion
-    older than :data:`RELEASE_KEEP` s before the frames it asks for.  Few large requests: the solver computes
-    in long runs (the kernels' data stay in the cache) and answers few round trips.  The publisher never
-    waits for the solver: the schedule's lock is held only to move frames.
+    is free (half the look-ahead if less), each after at most :data:`COMPUTE_SLICE` s of computing while
+    publishing (unbounded before; any other request cuts it short at the next step: the solver's stop flag).
+    Frames close to publishing (within a quarter of the look-ahead, as after a command) are urgent: made as
+    soon as their own motion is computed, as many as :data:`URGENT_SLICE` s of computing give (a command's own
+    request: :data:`URGENT_BATCH` seconds of them), so the first frames come back soon.  The worker forgets
+    motion older than :data:`RELEASE_KEEP` s before the frames it asks for.  Few large requests: the solver
+    computes in long runs, seldom (a compiled run after an idle gap starts with cold caches), and answers few
+    round trips.  The publisher never waits for the solver: the schedule's lock is held only to move frames.
 
 Commands
     :meth:`ReferenceServer.command` applies a stream command (``pause``, ``resume``,
@@ -59,10 +59,10 @@ from .schedule import FrameBatch, FrameRequest, Frames, FrameSchedule, Plan, sta
 from .solver import STREAM_COMMANDS, SolverClient, SolverStoppedError, StreamStatus
 from .threads import start_named
 
-LOOKAHEAD = 1.0  # [s] of frames kept ready ahead of publishing
-COMPUTE_SLICE = 0.05  # [s] of wall time the solver computes per request while publishing (a command cuts it short)
+LOOKAHEAD = 2.0  # [s] of frames kept ready ahead of publishing
+COMPUTE_SLICE = 0.25  # [s] of wall time the solver computes per request while publishing (a command cuts it short)
 URGENT_SLICE = 0.005  # [s] of wall time per request for frames close to publishing (after a command)
-REFILL = 0.2  # [s] of frames made per request, and the room the worker waits for to ask again
+REFILL = 1.0  # [s] of frames made per request, and the room the worker waits for to ask again
 URGENT_BATCH = 0.005  # [s] of stream (at least one frame) made per request close to publishing (after a command)
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to make (for commands)
 MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, the stamps leap (re-anchored)
@@ -168,7 +168,7 @@ class ReferenceServer:
         self.schedule = FrameSchedule(rate, max(2, math.ceil(LOOKAHEAD * rate)), lead, MAX_CATCH_UP,
                                       self.info.start)
         self._urgent_batch = max(1, round(URGENT_BATCH * rate))
-        self._refill = min(max(1, round(REFILL * rate)), max(1, self.schedule.lookahead // 4))
+        self._refill = min(max(1, round(REFILL * rate)), max(1, self.schedule.lookahead // 2))
         self._clock_seen = (0, 0)  # the last clock reading [ns] of due() and the monotonic time [ns] of it
         self._lock = threading.Condition()  # the schedule and the counters here (never held while solving)
         self._solver_lock = threading.Lock()  # one request at a time, and commands against frame requests

@@ -22,7 +22,7 @@ while the request was on its way ended it, and it is not lost: the caller's requ
 
 The child runs in a session of its own and ignores SIGINT (a Ctrl-C is the caller's to handle), and exits when
 its request pipe closes, also if the caller dies.  It runs at a lower scheduling priority
-(:data:`SOLVER_NICENESS`): it computes a second of frames ahead and can wait, the caller's publisher cannot.
+(:data:`SOLVER_NICENESS`): it computes seconds of frames ahead and can wait, the caller's publisher cannot.
 """
 
 from __future__ import annotations
