@@ -10,15 +10,21 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.typesys import Stores, get_typestore
 from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
 
 from crane_reference.interface import messages
-from crane_reference.interface.serialized import SerializedJointState, SerializedPose, SerializedVector3
+from crane_reference.interface.serialized import (
+    SerializedJointState,
+    SerializedPose,
+    SerializedPreview,
+    SerializedVector3,
+)
 from crane_reference.ros.message_types import rclpy_types
-from crane_reference.stream.sample import ReferenceSample
+from crane_reference.stream.sample import ReferenceSample, Samples
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-JOINT_STATE, POSE, VECTOR = ("sensor_msgs/msg/JointState", "geometry_msgs/msg/PoseStamped",
-                             "geometry_msgs/msg/Vector3Stamped")
+JOINT_STATE, POSE, VECTOR, TRAJECTORY = ("sensor_msgs/msg/JointState", "geometry_msgs/msg/PoseStamped",
+                                         "geometry_msgs/msg/Vector3Stamped", "trajectory_msgs/msg/JointTrajectory")
 # frame_ids and names of every length modulo 8, so that each field's alignment padding varies
 FRAME_IDS = ["", "w", "ab", "abc", "world", "crane_1", "map/base", "crane/world"]
 NAME_SETS = [["column_slew"], ["a", "bb", "ccc"], [f"joint_{'x' * i}" for i in range(9)]]
@@ -82,6 +88,35 @@ def test_poses_filled_in_place_equal_rosbags_serialization(little_endian):
                                           sample.ee_quaternion)
 
 
+@pytest.mark.parametrize("little_endian", [True, False])
+@pytest.mark.parametrize("effort", [False, True])
+def test_previews_filled_in_place_equal_rosbags_serialization(effort, little_endian):
+    """A sample and its preview written into a prototype are byte for byte what rosbags serializes for the
+    preview's message object (:func:`~crane_reference.interface.messages.reference_preview`), for joints picked
+    out of the samples' coordinates in any order, with and without efforts, whatever the padding."""
+    types, rng, n = messages.rosbags_types(TYPESTORE), np.random.default_rng(11), 9
+    for frame_id, names in zip(FRAME_IDS, [*NAME_SETS, *NAME_SETS], strict=False):
+        indices = list(rng.permutation(n)[:len(names)])
+        for points in (2, 3, 11):
+            offsets = messages.preview_offsets(0.7, points - 1)
+            prototype = messages.reference_preview(types, 0, frame_id, names, indices, offsets,
+                                                   [zero_sample(n)] * points, effort)
+            writer = SerializedPreview(bytes(TYPESTORE.serialize_cdr(prototype, TRAJECTORY,
+                                                                      little_endian=little_endian)), indices)
+            assert (writer.frame_id, writer.joint_names, writer.effort, writer.points) == (frame_id, names, effort,
+                                                                                           points)
+            for stamp in STAMPS:
+                samples = Samples.stack([random_sample(rng, n) for _ in range(3)])
+                preview = Samples.stack([random_sample(rng, n) for _ in range(points - 1)])
+                data = writer.fill_row(stamp, samples, 1, preview)
+                expected = messages.reference_preview(types, stamp, frame_id, names, indices, offsets,
+                                                      [samples.row(1), *preview.rows()], effort)
+                assert data == bytes(TYPESTORE.serialize_cdr(expected, TRAJECTORY, little_endian=little_endian))
+                read = TYPESTORE.deserialize_cdr(data, TRAJECTORY)
+                np.testing.assert_array_equal([p.positions for p in read.points],
+                                              np.vstack((samples.q[1], preview.q))[:, indices])
+
+
 def test_the_node_s_messages_read_back_by_rclpy_as_the_message_objects():
     """With the prototype from rclpy (as the node makes it), rclpy reads a filled message back as the message
     object with the same values, and it has the length of rclpy's serialization of that object (rclpy's
@@ -107,6 +142,16 @@ def test_a_prototype_that_does_not_fit_is_refused():
         SerializedJointState(bytes(TYPESTORE.serialize_cdr(short, JOINT_STATE)))
     with pytest.raises(ValueError, match="not a plain-CDR serialized message"):
         SerializedPose(b"\x01\x00\x00\x00" + bytes(64))
+    trajectory = messages.reference_preview(types, 0, "w", ["a", "b"], [0, 1], [0, 5], [zero_sample(2)] * 2)
+    trajectory.points[1].velocities = np.zeros(1)
+    with pytest.raises(ValueError, match="1 velocities for 2 joints"):
+        SerializedPreview(bytes(TYPESTORE.serialize_cdr(trajectory, TRAJECTORY)), [0, 1])
+    trajectory.points[1].velocities = np.zeros(2)
+    with pytest.raises(ValueError, match="2 joints for 3 coordinates"):
+        SerializedPreview(bytes(TYPESTORE.serialize_cdr(trajectory, TRAJECTORY)), [0, 1, 2])
+    with pytest.raises(ValueError, match="a preview of 2 points for a prototype of 1"):
+        SerializedPreview(bytes(TYPESTORE.serialize_cdr(trajectory, TRAJECTORY)), [0, 1]).fill_row(
+            0, Samples.stack([zero_sample(2)]), 0, Samples.stack([zero_sample(2)] * 2))
     with pytest.raises(ValueError, match="ends inside its float64 fields"):
         SerializedPose(bytes(TYPESTORE.serialize_cdr(messages.end_effector_pose(types, 0, "w", zero_sample(3)),
                                                      POSE))[:-8])
@@ -132,6 +177,7 @@ def test_a_batch_of_frames_is_published_as_rclpy_and_rosbags_serialize_each_samp
     """The rows of a batch of frames made by the stream at the node's rates, written into the messages as the
     publisher writes them (:meth:`fill_row`), are rclpy's serialization of each sample's message objects, read
     back field by field, and rosbags' bytes in both byte orders."""
+    from crane_reference.model.chain import ACTUATED_JOINTS
     from crane_reference.stream.reference_stream import ReferenceStream
     from crane_reference.stream.schedule import FrameSchedule, make_frames
 
@@ -150,7 +196,24 @@ def test_a_batch_of_frames_is_published_as_rclpy_and_rosbags_serialize_each_samp
                             messages.end_effector_pose(rosbags_message_types, 0, "world", start), POSE,
                             little_endian=little))))
                for little in (True, False)}
-    assert len(frames) == 20
+    indices = [names.index(j) for j in ACTUATED_JOINTS]
+    offsets = messages.preview_offsets(frames.horizon, 5)
+    assert len(frames) == 20 and sorted(frames.previews) == [0, 10]
+    for row, preview in frames.previews.items():
+        stamp = 1_700_000_000_000_000_000 + (frames.k + row) * 10**9 // rate
+        points = [frames.samples.row(row), *preview.rows()]
+        writer = SerializedPreview(serialize_message(messages.reference_preview(
+            rclpy_message_types, 0, "world", list(ACTUATED_JOINTS), indices, offsets, points)), indices)
+        assert deserialize_message(writer.fill_row(stamp, frames.samples, row, preview), JointTrajectory) == \
+            messages.reference_preview(rclpy_message_types, stamp, "world", list(ACTUATED_JOINTS), indices, offsets,
+                                       points)
+        for little in (True, False):
+            writer = SerializedPreview(bytes(TYPESTORE.serialize_cdr(messages.reference_preview(
+                rosbags_message_types, 0, "world", list(ACTUATED_JOINTS), indices, offsets, points), TRAJECTORY,
+                little_endian=little)), indices)
+            assert writer.fill_row(stamp, frames.samples, row, preview) == bytes(TYPESTORE.serialize_cdr(
+                messages.reference_preview(rosbags_message_types, stamp, "world", list(ACTUATED_JOINTS), indices,
+                                           offsets, points), TRAJECTORY, little_endian=little))
     for row in range(len(frames)):
         stamp, sample = 1_700_000_000_000_000_000 + (frames.k + row) * 10**9 // rate, frames.samples.row(row)
         assert deserialize_message(joints.fill_row(stamp, frames.samples, row), JointState) == messages.joint_state(

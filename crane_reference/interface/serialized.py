@@ -1,4 +1,5 @@
-"""The per-sample messages (JointState, E's PoseStamped) as serialized messages, filled in place.
+"""The node's messages (JointState, E's PoseStamped, the preview's JointTrajectory) as serialized messages,
+filled in place.
 
 Publishing a message object costs a conversion to its C form and a serialization at every sample;
 a publisher handed the serialized bytes (rclpy's ``Publisher.publish(bytes)``, which goes to
@@ -11,12 +12,14 @@ Layout of a ROS 2 serialized message (plain CDR, XCDR version 1, as every ROS 2 
 use it): a 4-byte encapsulation header (second byte 1: little endian, 0: big endian), then the body, in
 which each primitive is aligned to its own size counted from the body's start; a string is a uint32
 length (the terminating NUL included) and its bytes; a sequence is a uint32 count and its elements.
-std_msgs/Header is the stamp (int32 sec, uint32 nanosec) and the frame_id string.
+std_msgs/Header is the stamp (int32 sec, uint32 nanosec) and the frame_id string; builtin_interfaces/Duration
+is int32 sec, uint32 nanosec.
 """
 
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -57,6 +60,10 @@ class _Layout:
         start = ENCAPSULATION + self.offset
         self.offset += length
         return self.data[start:start + length - 1].decode()
+
+    def duration(self) -> None:
+        """Moves past a builtin_interfaces/Duration (two 4-byte integers)."""
+        self.offset = _aligned(self.offset, 4) + 8
 
     def doubles(self, count: int) -> int:
         """The body offset of the next ``count`` float64 (aligned to 8); moves past them."""
@@ -156,4 +163,56 @@ class SerializedVector3(_SerializedMessage):
     def fill(self, stamp_ns: int, vector: np.ndarray) -> bytes:
         """The serialized Vector3Stamped of ``vector`` stamped ``stamp_ns``."""
         self._vector[:] = vector
+        return self._stamped(stamp_ns)
+
+
+class SerializedPreview(_SerializedMessage):
+    """trajectory_msgs/JointTrajectory of a sample and its preview (see :func:`~.messages.reference_preview`):
+    header, joint_names[], then per point positions[], velocities[], accelerations[], effort[] and
+    time_from_start.  ``prototype`` is serialized with the joints, the points' count and their times from start
+    of the messages to fill, which carry the coordinates ``indices`` of the samples (efforts if the prototype's
+    points have them; the times from start stay the prototype's)."""
+
+    def __init__(self, prototype: bytes, indices: Sequence[int]):
+        layout = _Layout(prototype)
+        self.frame_id = layout.string()
+        self.joint_names = [layout.string() for _ in range(layout.count())]
+        self._columns = np.asarray(indices, dtype=np.int64)
+        joints = len(self.joint_names)
+        if self._columns.size != joints:
+            raise ValueError(f"prototype JointTrajectory has {joints} joints for {self._columns.size} coordinates")
+        points = []
+        for _ in range(layout.count()):
+            offsets = []
+            for field in ("positions", "velocities", "accelerations", "effort"):
+                count = layout.count()
+                if count != joints and not (field == "effort" and count == 0):
+                    raise ValueError(f"prototype JointTrajectory has {count} {field} for {joints} joints")
+                if count:
+                    offsets.append(layout.doubles(count))
+            layout.duration()
+            points.append(offsets)
+        if not points or len({len(offsets) for offsets in points}) != 1:
+            raise ValueError("prototype JointTrajectory needs points, all with efforts or all without")
+        super().__init__(prototype, layout)
+        self.effort = len(points[0]) == 4
+        self._points = [[self._doubles(offset, joints) for offset in offsets] for offsets in points]
+
+    @property
+    def points(self) -> int:
+        return len(self._points)
+
+    def fill_row(self, stamp_ns: int, samples: Samples, row: int, preview: Samples) -> bytes:
+        """The serialized preview stamped ``stamp_ns`` of row ``row`` of stacked ``samples`` (its first point) and
+        the samples of ``preview`` (the points after it, as many as the prototype has)."""
+        if len(preview.t) != self.points - 1:
+            raise ValueError(f"a preview of {len(preview.t)} points for a prototype of {self.points - 1}")
+        columns = self._columns
+        first = (samples.q[row], samples.qd[row], samples.qdd[row], samples.effort[row])
+        later = (preview.q[:, columns], preview.qd[:, columns], preview.qdd[:, columns], preview.effort[:, columns])
+        for view, values in zip(self._points[0], first, strict=False):
+            view[:] = values[columns]
+        for views, i in zip(self._points[1:], range(self.points - 1), strict=True):
+            for view, values in zip(views, later, strict=False):
+                view[:] = values[i]
         return self._stamped(stamp_ns)

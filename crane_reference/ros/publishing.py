@@ -33,7 +33,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..interface import messages
-from ..interface.serialized import SerializedJointState, SerializedPose
+from ..interface.serialized import SerializedJointState, SerializedPose, SerializedPreview
 from ..model.units import NANOSECONDS
 from ..stream.health import Level, serving_health, startup_health
 from ..stream.server import Outgoing, ReferenceServer
@@ -44,7 +44,8 @@ OVERRIDABLE = QoSOverridingOptions([QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH, 
 """The QoS policies a reference topic's ``qos_overrides`` parameters may set (rclpy's defaults and durability:
 a transient-local preview reaches a controller that starts late)."""
 MAX_WAIT = 0.1  # [s] of wall time the publisher sleeps at most before reading the clock again
-SLEEP_LIMIT = 2_000_000  # [ns]: the publisher sleeps shorter waits without a wake-up on stop
+SLEEP_LIMIT = 20_000_000  # [ns]: the publisher sleeps shorter waits plainly (an Event's wait costs more per
+# wake-up; stopping then waits for the sleep to end, at most this long)
 MARKER_RATE = 10.0  # [Hz]
 TRAIL_RATE = 50.0  # [Hz] of points added to E's trail
 TRAIL_POINTS = 500
@@ -91,6 +92,7 @@ class SamplePublisher:
         self._ellipse: tuple[tuple[float, ...], list[Any]] = ((), [])  # (a, b, z) and its Point messages
         self._joint_writer: SerializedJointState | None = None
         self._pose_writer: SerializedPose | None = None
+        self._preview_writer: tuple[tuple, SerializedPreview] | None = None  # for (settings, horizon, points)
         depth, overridable = messages.PUBLISHER_DEPTH, OVERRIDABLE
         self._managed = [node.create_lifecycle_publisher(message_type, topic, depth, qos_overriding_options=overridable)
                          for message_type, topic in ((JointState, messages.JOINT_STATES_TOPIC),
@@ -163,12 +165,12 @@ class SamplePublisher:
             left = due.next_stamp_ns - now - (time.monotonic_ns() - read_at)
             if left > SLEEP_LIMIT:  # long (a slow rate, a stalled or reset clock): stopping wakes it
                 quiet.wait(min(left / NANOSECONDS, MAX_WAIT))
-            elif left > 0:  # within a period at a high rate: one system call (an Event's wait takes locks too)
+            elif left > 0:  # within a period at 50 Hz or faster: one system call (an Event's wait takes locks too)
                 time.sleep(left / NANOSECONDS)
 
     def send(self, outgoing: Outgoing) -> None:
-        """Publish one sample, a row of the stacked frames: joint states and E's pose (serialized once, then
-        filled in place from the row and published as bytes), the preview if the row has one; E's trail."""
+        """Publish one sample, a row of the stacked frames: joint states, E's pose and the preview if the row has
+        one (each serialized once, then filled in place from the rows and published as bytes); E's trail."""
         frames, row, stamp, settings = outgoing.frames, outgoing.row, outgoing.stamp_ns, self.settings
         samples = frames.samples
         if self._joint_writer is None:
@@ -181,11 +183,14 @@ class SamplePublisher:
         publish(self._poses, self._pose_writer.fill_row(stamp, samples, row))
         preview = frames.previews.get(row)
         if preview is not None:
-            indices = list(settings.preview_indices)
-            self._previews.publish(messages.reference_preview(
-                self.types, stamp, settings.frame_id, [self.joint_names[i] for i in indices], indices,
-                messages.preview_offsets(frames.horizon, preview.t.size), [samples.row(row), *preview.rows()],
-                settings.preview_effort))
+            key = (settings, frames.horizon, preview.t.size)
+            if self._preview_writer is None or self._preview_writer[0] != key:
+                indices = list(settings.preview_indices)
+                self._preview_writer = key, SerializedPreview(serialize_message(messages.reference_preview(
+                    self.types, stamp, settings.frame_id, [self.joint_names[i] for i in indices], indices,
+                    messages.preview_offsets(frames.horizon, preview.t.size), [samples.row(row), *preview.rows()],
+                    settings.preview_effort)), indices)
+            publish(self._previews, self._preview_writer[1].fill_row(stamp, samples, row, preview))
         if outgoing.k % self._trail_stride == 0:
             self.trail.append(messages.point(self.types, samples.ee_position[row]))
 
