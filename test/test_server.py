@@ -19,8 +19,15 @@ from crane_reference.motion.programmed_motion import ConstraintSingularityError
 from crane_reference.motion.simulation import MotionStepper
 from crane_reference.stream.health import Health, Level, serving_health, startup_health
 from crane_reference.stream.reference_stream import ERROR, PAUSED, RUNNING, ReferenceStream
-from crane_reference.stream.schedule import FrameSchedule
-from crane_reference.stream.server import CommandRefusedError, Preview, ReferenceServer, ServerStatus
+from crane_reference.stream.schedule import URGENT_PART, FrameSchedule
+from crane_reference.stream.server import (
+    URGENT_REFILL,
+    URGENT_SLICE,
+    CommandRefusedError,
+    Preview,
+    ReferenceServer,
+    ServerStatus,
+)
 from crane_reference.stream.solver import LocalSolver, SolverProcess, StreamSolver, StreamSpec, StreamStatus
 from crane_reference.stream.targets import UnreachableTargetError
 
@@ -105,6 +112,34 @@ def test_a_command_takes_effect_at_the_last_sample_within_the_lead(server: Refer
     np.testing.assert_array_equal([sample(o).q for o in before + after],
                                   [truth.sample(i / RATE).q for i in range(len(before + after))])
     assert server.stream.targets == targets
+
+
+def test_after_a_command_the_urgent_frames_come_in_short_requests_then_a_full_one(
+        server: ReferenceServer, monkeypatch: pytest.MonkeyPatch) -> None:
+    """After a pause (the motion it publishes is computed already, so making frames is all a request does) the
+    worker asks for the frames close to publishing in requests of at most URGENT_REFILL seconds of frames (not the
+    whole urgent quarter of the look-ahead at once, which takes longer to make than a command's lead), and leaves
+    the urgent window after about as many as it holds: then a full refill, not a request for each frame or two
+    published meanwhile.  Publishing runs in real time on the wall clock."""
+    requests = []
+    ask = server.solver.frames
+    monkeypatch.setattr(server.solver, "frames", lambda request, keep: requests.append(request) or ask(request, keep))
+    start = time.monotonic_ns()
+    server.begin(start)
+    while time.monotonic_ns() < start + NS // 2:
+        time.sleep(0.001)
+        server.due(time.monotonic_ns())
+    requests.clear()
+    server.command("pause", accepted_ns=time.monotonic_ns())
+    while time.monotonic_ns() < start + 2 * NS:
+        time.sleep(0.001)
+        server.due(time.monotonic_ns())
+    most = round(URGENT_REFILL * RATE)
+    urgent = [r.count <= most if r.compute_budget == URGENT_SLICE else None for r in requests]
+    assert urgent[0] and None in urgent and all(urgent[:urgent.index(None)])
+    assert urgent.index(None) <= server.schedule.lookahead // URGENT_PART / most + 3
+    assert requests[urgent.index(None)].count > most
+    assert server.status(time.monotonic_ns()).counters["held_late"] == 0
 
 
 def test_restart_only_while_not_publishing_and_its_jump(server: ReferenceServer) -> None:

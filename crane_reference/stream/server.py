@@ -19,8 +19,10 @@ Computing ahead
     is free (half the look-ahead if less), each after at most :data:`COMPUTE_SLICE` s of computing while
     publishing (unbounded before; any other request cuts it short at the next step: the solver's stop flag).
     Frames close to publishing (within a quarter of the look-ahead, as after a command) are urgent: made as
-    soon as their own motion is computed, as many as :data:`URGENT_SLICE` s of computing give (a command's own
-    request: :data:`URGENT_BATCH` seconds of them), so the first frames come back soon.  The worker forgets
+    soon as their own motion is computed, up to :data:`URGENT_REFILL` seconds of them a request, as many as
+    :data:`URGENT_SLICE` s of computing give (a command's own request: :data:`URGENT_BATCH` seconds of them), so
+    each request comes back soon, whether its motion needs computing or is computed already.  One urgent
+    request goes past the urgent ones, so that the next is a full one.  The worker forgets
     motion older than :data:`RELEASE_KEEP` s before the frames it asks for.  Few large requests: the solver
     computes in long runs, seldom (a compiled run after an idle gap starts with cold caches), and answers few
     round trips.  The publisher never waits for the solver: the schedule's lock is held only to move frames.
@@ -63,7 +65,8 @@ LOOKAHEAD = 2.0  # [s] of frames kept ready ahead of publishing
 COMPUTE_SLICE = 0.25  # [s] of wall time the solver computes per request while publishing (a command cuts it short)
 URGENT_SLICE = 0.005  # [s] of wall time per request for frames close to publishing (after a command)
 REFILL = 1.0  # [s] of frames made per request, and the room the worker waits for to ask again
-URGENT_BATCH = 0.005  # [s] of stream (at least one frame) made per request close to publishing (after a command)
+URGENT_BATCH = 0.005  # [s] of stream (at least one frame) made in a command's own request
+URGENT_REFILL = 0.05  # [s] of stream (at least one frame) made at most per request close to publishing
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to make (for commands)
 MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, the stamps leap (re-anchored)
 REST_MARGIN = 1.0  # [s] :meth:`ReferenceServer.come_to_rest` waits beyond the ramp and the lead
@@ -168,6 +171,7 @@ class ReferenceServer:
         self.schedule = FrameSchedule(rate, max(2, math.ceil(LOOKAHEAD * rate)), lead, MAX_CATCH_UP,
                                       self.info.start)
         self._urgent_batch = max(1, round(URGENT_BATCH * rate))
+        self._urgent_refill = max(1, round(URGENT_REFILL * rate))
         self._refill = min(max(1, round(REFILL * rate)), max(1, self.schedule.lookahead // 2))
         self._clock_seen = (0, 0)  # the last clock reading [ns] of due() and the monotonic time [ns] of it
         self._lock = threading.Condition()  # the schedule and the counters here (never held while solving)
@@ -226,7 +230,7 @@ class ReferenceServer:
                     # in batches, but up to the whole look-ahead before publishing starts
                     refill = plan.room >= self._refill or not self.publishing
                     if self.publishing and schedule.is_urgent(plan):  # as many as computed in a short slice
-                        request = self._frame_request(plan, schedule.urgent_until - plan.k, URGENT_SLICE)
+                        request = self._frame_request(plan, self._urgent_refill, URGENT_SLICE)
                     else:
                         request = self._frame_request(plan, self._refill * refill, COMPUTE_SLICE)
                 with self._solver_lock:
