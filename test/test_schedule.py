@@ -15,7 +15,7 @@ from crane_reference.model.parameters import Task
 from crane_reference.model.units import NANOSECONDS
 from crane_reference.stream.reference_stream import ReferenceStream
 from crane_reference.stream.sample import ReferenceSample, Samples
-from crane_reference.stream.schedule import FrameBatch, Frames, FrameSchedule, checked, make_frames
+from crane_reference.stream.schedule import FRAME_CHUNK, FrameBatch, Frames, FrameSchedule, checked, make_frames
 
 RATE = 100  # [Hz]
 LEAD = 0.25  # [s]
@@ -234,6 +234,35 @@ def test_an_interrupted_request_makes_its_urgent_frames_only(stream_factory):
     schedule.made_k = schedule.urgent_until  # the next frames are beyond the urgent window
     later = make_frames(stream, schedule.request(schedule.plan(), 10, 0.2, 5, 4, 0.005), waiting)
     assert not len(later.frames) and later.busy and stream.computed_until >= 1.5
+
+
+def test_a_request_that_comes_while_frames_are_made_ends_them_and_they_are_made_again(stream_factory, monkeypatch):
+    """Frames that are not urgent are made FRAME_CHUNK at a time: the stop flag set while the first chunk is made (a
+    request came) ends the request with no frames (busy, the preview cadence unchanged); the next request makes them,
+    equal to those of a stream that was never stopped, previews included."""
+    stream, truth = stream_factory(), stream_factory()
+    stream.compute(4.0)
+    schedule = FrameSchedule(RATE, 1000, LEAD, 1.0, stream.sample(0.0))
+    schedule.made_k = schedule.urgent_until  # the next frames are beyond the urgent window
+    request = schedule.request(schedule.plan(), 3 * FRAME_CHUNK, 0.2, 5, 40, 0.25)
+    stop, samples, chunks = np.zeros(1, dtype=np.uint8), stream.samples, []
+
+    def request_comes_during_the_first_chunk(taus):
+        if len(taus) == FRAME_CHUNK:
+            chunks.append(taus)
+            stop[0] = len(chunks) == 1
+        return samples(taus)
+
+    monkeypatch.setattr(stream, "samples", request_comes_during_the_first_chunk)
+    stopped = make_frames(stream, request, stop)
+    assert stopped.busy and not len(stopped.frames) and stopped.next_preview_k == request.plan.next_preview_k
+    stop[0] = 0
+    made, expected = make_frames(stream, request, stop), make_frames(truth, request)
+    assert len(made.frames) == 3 * FRAME_CHUNK and sorted(made.frames.previews) == sorted(expected.frames.previews)
+    for mine, theirs in zip(made.frames.samples, expected.frames.samples, strict=True):
+        np.testing.assert_array_equal(mine, theirs)
+    for row, preview in expected.frames.previews.items():
+        np.testing.assert_array_equal(made.frames.previews[row].q, preview.q)
 
 
 def test_after_a_command_the_last_valid_sample_is_the_frame_before_it(stream_factory):

@@ -63,6 +63,11 @@ class Samples(NamedTuple):
         return cls(*(np.array([getattr(s, f.name) for s in samples]) for f in dataclass_fields(ReferenceSample)))
 
     @classmethod
+    def concatenated(cls, parts: list[Samples]) -> Samples:
+        """The rows of ``parts`` in turn."""
+        return parts[0] if len(parts) == 1 else cls(*(np.concatenate(field) for field in zip(*parts, strict=True)))
+
+    @classmethod
     def repeated(cls, sample: ReferenceSample, count: int) -> Samples:
         """``sample`` ``count`` times."""
         return cls(*(np.repeat(np.asarray(getattr(sample, f.name))[None], count, axis=0)

@@ -36,6 +36,7 @@ from .sample import ReferenceSample, Samples
 TIME_TOLERANCE = 1e-9  # [s], rounding slack when comparing stream times
 COMPUTE_MARGIN = 0.05  # [s] of motion computed beyond the preview horizon
 URGENT_PART = 4  # frames within lookahead / URGENT_PART of publishing are made before their preview horizon
+FRAME_CHUNK = 100  # frames that are not urgent are made this many at a time (a waiting request ends them)
 
 
 def stamp_at(start_ns: int, k: int, rate: int) -> int:
@@ -128,7 +129,8 @@ class FrameBatch:
 def make_frames(stream: ReferenceStream, request: FrameRequest, stop: np.ndarray | None = None) -> FrameBatch:
     """The frames of ``request`` as far as the motion is computed, after computing ahead far enough for
     them and for their previews (or until the ``stop`` flag is set: a request is waiting for the solver; then only
-    urgent frames are made, the motion computed so far is kept and the batch is busy).  A frame due a
+    urgent frames are made, the motion computed so far is kept and the batch is busy; frames that are not urgent
+    are made FRAME_CHUNK at a time, and the flag set meanwhile drops them too).  A frame due a
     preview waits until its horizon is computed, so previews keep their cadence; an urgent frame (just after
     a command) is made as soon as its own motion is computed, without the preview due to it if its horizon
     is not computed yet (the next one is due a decimation later: the cadence stays).  A frame that is not
@@ -166,8 +168,14 @@ def make_frames(stream: ReferenceStream, request: FrameRequest, stop: np.ndarray
             break
         next_preview_k = plan.k + row + decimation  # (urgent, not computed: it goes without)
         row += decimation
-    frames, non_finite, fault = checked(Frames(plan.k, times[:made], stream.samples(times[:made]), previews, horizon),
-                                        request.last_valid)
+    parts = []
+    for first in range(0, made, FRAME_CHUNK):
+        if plan.k >= request.urgent_until and stop is not None and stop[0]:  # a request came meanwhile, as above
+            return FrameBatch(Frames(plan.k, times[:0], stream.samples(times[:0])), plan.next_preview_k, True, wall,
+                              motion)
+        parts.append(stream.samples(times[first:made][:FRAME_CHUNK]))
+    samples = Samples.concatenated(parts) if parts else stream.samples(times[:0])
+    frames, non_finite, fault = checked(Frames(plan.k, times[:made], samples, previews, horizon), request.last_valid)
     return FrameBatch(frames, next_preview_k, computed_until < ahead or dropped, wall, motion, non_finite, fault)
 
 
