@@ -1,9 +1,8 @@
 """Benchmark of the crane_reference node: publishing rate, timing and re-target latency.
 
 For each rate (default 100, 500 and 1000 Hz) it starts ``python -m crane_reference.ros.node`` in its own
-process (an isolated ROS domain, localhost only), subscribes to ``joint_states`` (and, as a consumer would,
-``end_effector_pose``, ``reference_preview`` and /diagnostics) from this process and, after a warm-up,
-records for ``--duration`` seconds (default 30):
+process (an isolated ROS domain, localhost only), subscribes to ``joint_states`` and /diagnostics from this
+process and, after a warm-up, records for ``--duration`` seconds (default 30):
 
 * achieved rate: messages received / duration;
 * period: standard deviation of the time between receptions, and the p99 and maximum of
@@ -30,7 +29,8 @@ records for ``--duration`` seconds (default 30):
   and whether a valid change still takes effect afterwards;
 * the node's CPU over its floor (issue 29's ratio): the floor is the CPU share of a process that only publishes
   the node's messages, paced (the samples' two serialized messages at the rate, the preview at its rate,
-  /diagnostics once a second), with a subscriber in another process on each topic, plus that of the
+  /diagnostics once a second), with a subscriber in another process on the topics the node's run subscribes to
+  (the joint states and /diagnostics), plus that of the
   compiled steps alone at the node's ``integrator.step`` for real-time motion, both measured just before and
   just after each rate's run and averaged (``floor_publish_percent``, ``floor_steps_percent``, ``floor_percent``,
   ``cpu_over_floor``), and its parts: the node's process over the publish-only process
@@ -42,7 +42,7 @@ records for ``--duration`` seconds (default 30):
 * the time from SIGINT (sent while active) to the node's exit (``exit_after_sigint_s``);
 * first (``--message-costs``), in this process: what the node's publisher spends per sample to fill and
   publish ~/joint_states and ~/end_effector_pose (serialized and filled in place, as the node does, and as
-  message objects, for comparison), alone and with a subscriber in another process, the CPU share of a
+  message objects, for comparison), alone and with a subscriber of the joint states in another process, the CPU share of a
   process that only publishes them at each rate (the floor of publishing from rclpy), and the cost of
   building and publishing ~/markers with a full trail.
 
@@ -286,8 +286,6 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
     recorder = Recorder()
     subscriber.create_subscription(JointState, "/crane_reference/joint_states", recorder.joint_state, 10000)
     subscriber.create_subscription(DiagnosticArray, "/diagnostics", recorder.diagnostic, 100)
-    for message, topic in ((PoseStamped, "end_effector_pose"), (JointTrajectory, "reference_preview")):
-        subscriber.create_subscription(message, f"/{NODE}/{topic}", lambda msg: None, 100)
     client = AsyncParameterClient(subscriber, NODE)
     try:
         if not spin_until(executor, lambda: recorder.stamps, 60.0):
@@ -350,12 +348,9 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from diagnostic_msgs.msg import DiagnosticArray
-from trajectory_msgs.msg import JointTrajectory
 rclpy.init()
 node = Node("bench_messages_subscriber")
 node.create_subscription(JointState, "/bench_joint_states", lambda msg: None, 1000)
-node.create_subscription(PoseStamped, "/bench_pose", lambda msg: None, 1000)
-node.create_subscription(JointTrajectory, "/bench_preview", lambda msg: None, 100)
 node.create_subscription(DiagnosticArray, "/bench_diagnostics", lambda msg: None, 100)
 try:
     rclpy.spin(node)
@@ -369,7 +364,8 @@ TARGET_OVER_FLOOR, TARGET_REAL_TIME_FACTOR, TARGET_P99_MS, TARGET_MAX_MS_100HZ =
 
 def message_costs(model: str, domain: int, rates: list[int], details: bool) -> dict[int, float]:
     """This process's CPU share [%] when it only publishes the node's messages at each of ``rates``, with a
-    subscriber in another process on each topic, as the node's run has (the floor of the node's publishing in
+    subscriber in another process on the joint states and the diagnostics, as the node's run has (the floor of the
+    node's publishing in
     rclpy: no stream, no clock, no schedule): ~/joint_states and ~/end_effector_pose serialized and filled per
     sample, ~/reference_preview (built once, the default preview) at the default preview rate and
     /diagnostics (built once, with the node's keys) once a second; with ``details``, print the publisher's
@@ -437,7 +433,7 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
         ways = {"serialized (the node)": one_sample, "message objects": one_message_object}
         alone = {way: per_sample(publish) for way, publish in ways.items()} if details else {}
         subscriber = subprocess.Popen([sys.executable, "-c", SUBSCRIBER], env=env)
-        if not spin_until_matched(joints, poses, previews, statuses, timeout=30.0):
+        if not spin_until_matched(joints, statuses, timeout=30.0):
             raise RuntimeError("the subscriber process did not match the bench topics within 30 s")
         if not details:
             return {rate: paced(rate, one_sample) for rate in rates}
@@ -447,7 +443,7 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
             floors = {rate: paced(rate, publish) for rate in rates}
             node_floors = node_floors or floors
             print(f"[messages] {way}: joint_states and pose filled and published, per sample: alone "
-                  f"{alone_wall * 1e6:.1f} us (CPU {alone_cpu * 1e6:.1f} us), with a subscriber in another process "
+                  f"{alone_wall * 1e6:.1f} us (CPU {alone_cpu * 1e6:.1f} us), with a subscriber of the joint states in another process "
                   f"{with_wall * 1e6:.1f} us (CPU {with_cpu * 1e6:.1f} us, every thread of this process)")
             print(f"[messages] {way}: CPU of a process that only publishes them, paced (floor of the node's "
                   "publishing): " + ", ".join(f"{share:.1f} % at {rate} Hz" for rate, share in floors.items()))
