@@ -42,8 +42,8 @@ process and, after a warm-up, records for ``--duration`` seconds (default 30):
 * the time from SIGINT (sent while active) to the node's exit (``exit_after_sigint_s``);
 * first (``--message-costs``), in this process: what the node's publisher spends per sample to fill and
   publish ~/joint_states and ~/end_effector_pose (serialized and filled in place, as the node does, and as
-  message objects, for comparison), alone and with a subscriber of the joint states in another process, the CPU share of a
-  process that only publishes them at each rate (the floor of publishing from rclpy), and the cost of
+  message objects, for comparison), alone and with a subscriber of the joint states in another process, the CPU
+  share of a process that only publishes them at each rate (the floor of publishing from rclpy), and the cost of
   building and publishing ~/markers with a full trail.
 
 Run: ``.venv/bin/python benchmarks/bench_node.py [--duration 30] [--rates 100 500 1000] [--model flexible]
@@ -443,8 +443,8 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
             floors = {rate: paced(rate, publish) for rate in rates}
             node_floors = node_floors or floors
             print(f"[messages] {way}: joint_states and pose filled and published, per sample: alone "
-                  f"{alone_wall * 1e6:.1f} us (CPU {alone_cpu * 1e6:.1f} us), with a subscriber of the joint states in another process "
-                  f"{with_wall * 1e6:.1f} us (CPU {with_cpu * 1e6:.1f} us, every thread of this process)")
+                  f"{alone_wall * 1e6:.1f} us (CPU {alone_cpu * 1e6:.1f} us), with a subscriber of the joint states in "
+                  f"another process {with_wall * 1e6:.1f} us (CPU {with_cpu * 1e6:.1f} us, every thread of this process)")
             print(f"[messages] {way}: CPU of a process that only publishes them, paced (floor of the node's "
                   "publishing): " + ", ".join(f"{share:.1f} % at {rate} Hz" for rate, share in floors.items()))
         ellipse = messages.points(types, messages.ellipse_points(3.0, 2.0, 2.3))  # kept, as the node does
