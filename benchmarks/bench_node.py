@@ -444,7 +444,8 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
             node_floors = node_floors or floors
             print(f"[messages] {way}: joint_states and pose filled and published, per sample: alone "
                   f"{alone_wall * 1e6:.1f} us (CPU {alone_cpu * 1e6:.1f} us), with a subscriber of the joint states in "
-                  f"another process {with_wall * 1e6:.1f} us (CPU {with_cpu * 1e6:.1f} us, every thread of this process)")
+                  f"another process {with_wall * 1e6:.1f} us (CPU {with_cpu * 1e6:.1f} us, every thread of this "
+                  "process)")
             print(f"[messages] {way}: CPU of a process that only publishes them, paced (floor of the node's "
                   "publishing): " + ", ".join(f"{share:.1f} % at {rate} Hz" for rate, share in floors.items()))
         ellipse = messages.points(types, messages.ellipse_points(3.0, 2.0, 2.3))  # kept, as the node does
