@@ -168,13 +168,15 @@ def test_a_run_stopped_by_its_flag_from_another_thread_goes_on_bit_for_bit(scena
     progress: fewer steps than asked; continuing from there gives the uncut motion, on the same time grid, bit
     for bit (the stepper's grid index follows the steps taken)."""
     q0 = scenario.equilibrium.q
-    whole = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), STEP).advance_until(4.0)
+    whole = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), STEP).advance_until(10.0)
     stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), STEP)
     stop = stop_flag()
-    threading.Timer(0.05, stop.__setitem__, (0, 1)).start()
-    first = stepper.advance_until(4.0, stop)
+    timer = threading.Timer(0.02, stop.__setitem__, (0, 1))
+    timer.start()
+    first = stepper.advance_until(10.0, stop)
+    timer.cancel()
     stop[0] = 0
-    rest = stepper.advance_until(4.0, stop)
+    rest = stepper.advance_until(10.0, stop)
     assert 0 < first["t"].size < whole["t"].size
     for name in ("t", "q", "qd", "qdd"):
         np.testing.assert_array_equal(np.concatenate((first[name], rest[name])), whole[name])

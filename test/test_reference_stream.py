@@ -1,6 +1,6 @@
 """ReferenceStream without ROS: compiled runs of several steps against one step at a time.
 
-The stream computes ahead in compiled runs of :data:`CHUNK_STEPS` steps and keeps the solver state
+The stream computes ahead in compiled runs of up to :data:`CHUNK_STEPS` steps and keeps the solver state
 only at their ends; a re-target inside a run continues from the computed step there (its t, q, qd and
 work accounts: the method restarts under the new constraints).  A stream asked for one step at a time
 has every step at a run's end: both must give the same reference, before and after a re-target that

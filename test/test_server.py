@@ -237,8 +237,10 @@ def test_a_stop_flag_set_from_another_thread_ends_computing_ahead_within_a_step(
     short of what was asked (busy), and far less than the minute is computed."""
     solver = StreamSolver(spec())
     schedule = FrameSchedule(RATE, RATE, LEAD, 1.0, solver.stream.sample(0.0))
-    threading.Timer(0.3, solver.stop.__setitem__, (0, 1)).start()
+    timer = threading.Timer(0.3, solver.stop.__setitem__, (0, 1))
+    timer.start()
     batch = solver.frames(schedule.request(schedule.plan(), 10, 60.0, 4, 10, None), 2.0)
+    timer.cancel()
     assert batch.busy and not len(batch.frames)  # the waiting request comes first; the frames on the next call
     assert 0.0 < solver.stream.computed_until < 30.0
 

@@ -49,6 +49,8 @@ RUNNING, PAUSED, ERROR = "RUNNING", "PAUSED", "ERROR"
 CHUNK_STEPS = 500
 """Steps of a compiled run at most (:meth:`ReferenceStream.compute`): long runs keep the kernels' data in the
 cache and Python out of the way; a stop flag ends one at the next step."""
+PACE_STEPS = 10
+"""Runs of at least this many steps give the pace by which :meth:`ReferenceStream.compute` sizes its runs."""
 MIN_SINGULAR_VALUE = 1e-3
 """sigma_min(K_dc) below which the computed motion stops with an error (a singular task)."""
 
@@ -201,7 +203,8 @@ class ReferenceStream:
             except SOLVER_FAILURES as failure:
                 self._fail(failure)
                 return
-            self._pace = (time.perf_counter() - started) / rows["t"].size
+            if rows["t"].size >= PACE_STEPS:  # a shorter run's fixed costs would make the pace too slow
+                self._pace = (time.perf_counter() - started) / rows["t"].size
             history.extend(rows, self._stepper.snapshot())
 
     def free_forgotten(self) -> None:

@@ -17,7 +17,8 @@ Publishing
 Computing ahead
     The worker asks the solver for frames in batches of :data:`REFILL` seconds of stream, once that much room
     is free (half the look-ahead if less), each after at most :data:`COMPUTE_SLICE` s of computing while
-    publishing (unbounded before; any other request cuts it short at the next step: the solver's stop flag).
+    publishing (unbounded before; any other request cuts it short at the next step, the solver's stop flag, and
+    goes first: the worker asks nothing more while one waits).
     Frames close to publishing (within a quarter of the look-ahead, as after a command) are urgent: made as
     soon as their own motion is computed, up to :data:`URGENT_REFILL` seconds of them a request, as many as
     :data:`URGENT_SLICE` s of computing give (a command's own request: :data:`URGENT_BATCH` seconds of them), so
@@ -178,6 +179,7 @@ class ReferenceServer:
         self._solver_lock = threading.Lock()  # one request at a time, and commands against frame requests
         self._halt = threading.Event()
         self._commands_pending = 0
+        self._requests_waiting = 0  # requests other than the worker's waiting for the solver (they come first)
         self._start_ns: int | None = None
         self._last_stamp = 0
         self._clock_behind = 0
@@ -224,8 +226,8 @@ class ReferenceServer:
         try:
             while not self._halt.is_set():
                 with self._lock:
-                    while self._commands_pending and not self._halt.is_set():  # frames after a command once
-                        self._lock.wait(timeout=LOOKAHEAD)  # it is applied
+                    while (self._commands_pending or self._requests_waiting) and not self._halt.is_set():
+                        self._lock.wait(timeout=LOOKAHEAD)  # frames after a command once it is applied
                     plan = schedule.plan()
                     # in batches, but up to the whole look-ahead before publishing starts
                     refill = plan.room >= self._refill or not self.publishing
@@ -399,12 +401,18 @@ class ReferenceServer:
         """The answer to ``request(*args)`` (a method of the solver client), one request at a time;
         :class:`CommandRefusedError` if the solver has stopped."""
         self.check_computing()
-        self.solver.interrupt()  # the worker's request in progress stops computing ahead at its next run
-        with self._solver_lock:
-            try:
+        with self._lock:
+            self._requests_waiting += 1  # the worker asks nothing more meanwhile
+        try:
+            self.solver.interrupt()  # the worker's request in progress stops at its next step
+            with self._solver_lock:
                 return request(*args)
-            except SolverStoppedError as error:
-                raise CommandRefusedError(f"the solver stopped ({error}): start a new one") from error
+        except SolverStoppedError as error:
+            raise CommandRefusedError(f"the solver stopped ({error}): start a new one") from error
+        finally:
+            with self._lock:
+                self._requests_waiting -= 1
+                self._lock.notify_all()
 
     def command(self, name: str, *args: Any, accepted_ns: int) -> int:
         """Apply the stream command ``name`` (``pause``, ``resume``, ``speed_scaling`` (rate),

@@ -13,12 +13,13 @@ a request names the solver's method itself, which pickles by reference, never a 
   pipes; an exception raised by the solver is raised again in the caller.
 
 Both clients have :meth:`interrupt`: a caller with a command waiting for the solver cuts the request in
-progress short, so the command waits at most one integrator step of computing ahead, not a whole slice
-(:func:`~.schedule.make_frames` returns the frames computed so far).  It sets the solver's stop flag
-(:func:`~crane_reference.motion.integration.stop_flag`), which the compiled runs read at every step; the
-process's flag is a byte of memory shared with the caller.  The flag is cleared before any request but a
-frame request (so a command's own frames are made whole), and after a frame request (an interrupt that came
-while the request was on its way ended it, and it is not lost: the caller's request comes next).
+progress short, so the command waits for one integrator step of computing ahead or one chunk of frames, not a
+whole slice (:func:`~.schedule.make_frames` returns the urgent frames made so far, and no others).  It sets
+the solver's stop flag (:func:`~crane_reference.motion.integration.stop_flag`), which the compiled runs read at
+every step; the process's flag is a byte of memory shared with the caller.  The flag is cleared before any
+request but a frame request (so a command's own frames are made whole), and after a frame request (an
+interrupt that came while the request was on its way ended it; the reference server asks no more frames
+while another request waits, so that one comes next).
 
 The child runs in a session of its own and ignores SIGINT (a Ctrl-C is the caller's to handle), and exits when
 its request pipe closes, also if the caller dies.  It runs at a lower scheduling priority
@@ -334,13 +335,13 @@ class SolverProcess(SolverClient):
         """Start the process and wait until its stream is built (kernels made ready first: a minute or two
         with an empty cache).  Raises what building the stream raised, or :class:`SolverStoppedError` if
         ``stopped()`` turns true meanwhile (checked every POLL_PERIOD) or the process dies."""
-        request_read, request_write = os.pipe()
-        reply_read, reply_write = os.pipe()
         package_root = str(Path(__file__).resolve().parents[2])
         path = os.pathsep.join(p for p in (package_root, os.environ.get("PYTHONPATH", "")) if p)
         with tempfile.TemporaryFile() as shared:  # the stop flag's byte, mapped by both processes
             shared.truncate(1)
             self._stop = shared_flag(shared.fileno())
+            request_read, request_write = os.pipe()
+            reply_read, reply_write = os.pipe()
             self._process = subprocess.Popen(
                 [sys.executable, "-m", __name__, str(request_read), str(reply_write), str(shared.fileno())],
                 pass_fds=(request_read, reply_write, shared.fileno()), env={**os.environ, "PYTHONPATH": path},
