@@ -204,9 +204,11 @@ def test_a_batch_of_frames_is_published_as_rclpy_and_rosbags_serialize_each_samp
         points = [frames.samples.row(row), *preview.rows()]
         writer = SerializedPreview(serialize_message(messages.reference_preview(
             rclpy_message_types, 0, "world", list(ACTUATED_JOINTS), indices, offsets, points)), indices)
-        assert deserialize_message(writer.fill_row(stamp, frames.samples, row, preview), JointTrajectory) == \
-            messages.reference_preview(rclpy_message_types, stamp, "world", list(ACTUATED_JOINTS), indices, offsets,
-                                       points)
+        filled = writer.fill_row(stamp, frames.samples, row, preview)
+        assert deserialize_message(filled, JointTrajectory) == messages.reference_preview(
+            rclpy_message_types, stamp, "world", list(ACTUATED_JOINTS), indices, offsets, points)
+        assert len(filled) == len(TYPESTORE.serialize_cdr(messages.reference_preview(  # no bytes past the message
+            rosbags_message_types, stamp, "world", list(ACTUATED_JOINTS), indices, offsets, points), TRAJECTORY))
         for little in (True, False):
             writer = SerializedPreview(bytes(TYPESTORE.serialize_cdr(messages.reference_preview(
                 rosbags_message_types, 0, "world", list(ACTUATED_JOINTS), indices, offsets, points), TRAJECTORY,

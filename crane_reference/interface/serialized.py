@@ -76,10 +76,12 @@ class _Layout:
 
 
 class _SerializedMessage:
-    """A prototype's bytes and writable views of its stamp and float64 fields."""
+    """A prototype's bytes, up to the end of its last field as ``layout`` read them, and writable views of its stamp
+    and float64 fields.  (rclpy's ``serialize_message`` may return bytes beyond that end: for a JointTrajectory
+    whose points have empty efforts, the size its type support estimates, the excess not written.)"""
 
     def __init__(self, prototype: bytes, layout: _Layout):
-        self._buffer = bytearray(prototype)
+        self._buffer = bytearray(prototype[:ENCAPSULATION + layout.offset])
         self._order = layout.order
         self._stamp = struct.Struct(layout.order + "iI")
 
