@@ -121,30 +121,32 @@ def _start_plant(executor: SingleThreadedExecutor, node, processes: dict[str, su
             if time.monotonic() > start_by:
                 raise LoopError(f"{what} within {START_TIMEOUT:g} s")
 
-    def answered(request_client, request, answer=None):
-        """The answer to ``request`` (sent unless ``answer`` is its future already), or its future if none came
-        within ANSWER_TIMEOUT (a request or its answer can be lost while the service's discovery is under way)."""
-        until(request_client.service_is_ready, f"no lifecycle service of {PLANT_NODE}")
-        answer = answer or request_client.call_async(request)
+    def send(service, request):
+        """``request``'s future, once ``service`` is ready."""
+        until(service.service_is_ready, f"no lifecycle service of {PLANT_NODE}")
+        return service.call_async(request)
+
+    def answered(future) -> bool:
+        """Whether ``future`` is done within ANSWER_TIMEOUT (a request or its answer can be lost while the service's
+        discovery is under way)."""
         wait = time.monotonic() + ANSWER_TIMEOUT
-        until(lambda: answer.done() or time.monotonic() > wait, f"{PLANT_NODE} did not answer")
-        return answer.result() if answer.done() else answer
+        until(lambda: future.done() or time.monotonic() > wait, f"{PLANT_NODE} did not answer")
+        return future.done()
 
     def transition(number: int, before: int, reached: int) -> None:
         """Take the plant from the state ``before`` to ``reached`` by the transition ``number``: asked again if
         the plant is still in ``before`` without an answer (lost), waited for while it is on the way."""
-        request, answer = ChangeState.Request(transition=Transition(id=number)), None
-        while True:
-            answer = answered(client, request, answer)
-            if isinstance(answer, ChangeState.Response):
-                if not answer.success:
-                    raise LoopError(f"{PLANT_NODE} refused its lifecycle transition {number}")
+        request = ChangeState.Request(transition=Transition(id=number))
+        future = send(client, request)
+        while not answered(future):
+            query = send(state_client, GetState.Request())
+            state = query.result().current_state.id if answered(query) else None
+            if state == reached:
                 return
-            state = answered(state_client, GetState.Request())
-            if isinstance(state, GetState.Response) and state.current_state.id in (before, reached):
-                if state.current_state.id == reached:
-                    return
-                answer = None  # still where it was: the request was lost
+            if state == before:  # still where it was: the request was lost
+                future = send(client, request)
+        if not future.result().success:
+            raise LoopError(f"{PLANT_NODE} refused its lifecycle transition {number}")
 
     state_client = node.create_client(GetState, f"/{PLANT_NODE}/get_state")
     transition(Transition.TRANSITION_CONFIGURE, State.PRIMARY_STATE_UNCONFIGURED, State.PRIMARY_STATE_INACTIVE)

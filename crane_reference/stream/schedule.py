@@ -151,11 +151,19 @@ def make_frames(stream: ReferenceStream, request: FrameRequest, stop: np.ndarray
     times = tau + dt * np.arange(count)
     if stream.state == ERROR:  # hold the last sample made, not the stream's (computed further ahead)
         return FrameBatch(Frames.held(plan.k, times, request.last_valid), next_preview_k, False, wall, motion)
+
+    def waited() -> FrameBatch | None:
+        """No frames (busy) if a request waits: it comes first (a command may drop these frames); urgent frames
+        are made still."""
+        if plan.k >= request.urgent_until and stop is not None and stop[0]:
+            return FrameBatch(Frames(plan.k, times[:0], stream.samples(times[:0])), plan.next_preview_k, True, wall,
+                              motion)
+        return None
+
+    if batch := waited():
+        return batch
     computed_until = stream.computed_until
     made = int(np.count_nonzero(times <= computed_until - TIME_TOLERANCE))
-    dropped = plan.k >= request.urgent_until and stop is not None and bool(stop[0])
-    if dropped:  # a request waits: it comes first (a command may drop them); urgent frames are made still
-        made = 0
     previews: dict[int, Samples] = {}
     decimation = max(1, request.decimation)
     row = max(0, next_preview_k - plan.k)
@@ -170,13 +178,12 @@ def make_frames(stream: ReferenceStream, request: FrameRequest, stop: np.ndarray
         row += decimation
     parts = []
     for first in range(0, made, FRAME_CHUNK):
-        if plan.k >= request.urgent_until and stop is not None and stop[0]:  # a request came meanwhile, as above
-            return FrameBatch(Frames(plan.k, times[:0], stream.samples(times[:0])), plan.next_preview_k, True, wall,
-                              motion)
+        if batch := waited():
+            return batch
         parts.append(stream.samples(times[first:made][:FRAME_CHUNK]))
     samples = Samples.concatenated(parts) if parts else stream.samples(times[:0])
     frames, non_finite, fault = checked(Frames(plan.k, times[:made], samples, previews, horizon), request.last_valid)
-    return FrameBatch(frames, next_preview_k, computed_until < ahead or dropped, wall, motion, non_finite, fault)
+    return FrameBatch(frames, next_preview_k, computed_until < ahead, wall, motion, non_finite, fault)
 
 
 def checked(frames: Frames, last_valid: ReferenceSample) -> tuple[Frames, int, str]:
