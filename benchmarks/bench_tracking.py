@@ -66,7 +66,7 @@ def speed(params: CraneParameters, duration: float) -> None:
 
 
 def exact(params: CraneParameters) -> None:
-    """[exact] of the module docstring (the task written out as in test/test_simulation.py)."""
+    """[exact] of the module docstring (the task written out as in crane_reference/test/test_simulation.py)."""
     zero = {name: JointGains(0.0, 0.0) for name in ACTUATED_JOINTS}
     scenario, task = Scenario(params, "rigid"), params.task
     for step in (1e-3, 5e-4):

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Proves the ROS packaging: `colcon build` of this repository in a temporary workspace, then the
+# Proves the ROS packaging: `colcon build` of this repository's two packages (crane_reference_interfaces, then
+# crane_reference) in a temporary workspace, then the
 # installed executable install/crane_reference/lib/crane_reference/node (what `ros2 run crane_reference
 # node` starts) must be executable, publish joint_states, and exit with code 0 and no traceback on SIGINT.
 #
@@ -36,7 +37,11 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 
 echo "check_colcon: colcon build in $WORKSPACE"
 cd "$WORKSPACE"
-if ! colcon build --base-paths "$REPO" --event-handlers console_cohesion- >colcon.log 2>&1; then
+# The PyPI ROS wheels in .venv stand for a ROS distribution: CMake finds them through AMENT_PREFIX_PATH and
+# scripts/pypi_ros.cmake (as scripts/setup.sh builds the interface package).
+if ! AMENT_PREFIX_PATH="$VENV" colcon build --base-paths "$REPO" --event-handlers console_cohesion- \
+    --cmake-args -DCMAKE_PREFIX_PATH="$VENV" -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF \
+    -DCMAKE_PROJECT_INCLUDE="$REPO/scripts/pypi_ros.cmake" >colcon.log 2>&1; then
   cat colcon.log >&2
   fail "colcon build failed"
 fi
@@ -47,6 +52,8 @@ EXECUTABLE=install/crane_reference/lib/crane_reference/node
 for executable in plant controller; do
   [ -x "install/crane_reference/lib/crane_reference/$executable" ] || fail "the $executable executable was not installed"
 done
+[ -f install/crane_reference_interfaces/share/crane_reference_interfaces/action/Retarget.action ] \
+  || fail "the interface package's action was not installed"
 [ -f install/crane_reference/share/crane_reference/config/crane.yaml ] || fail "config/crane.yaml not installed"
 [ -f install/crane_reference/share/crane_reference/launch/crane_reference.launch.py ] || fail "the launch file was not installed"
 [ -f install/crane_reference/share/crane_reference/rviz/crane_reference.rviz ] || fail "the RViz config was not installed"
@@ -57,13 +64,15 @@ set +u
 # shellcheck disable=SC1091
 source install/setup.bash
 set -u
-PACKAGE_DIR=$(cd /tmp && python3 -c "import crane_reference, os; print(os.path.dirname(crane_reference.__file__))")
 # The README's step after colcon build: compile the kernels of the installed package (a new source path).
 install/crane_reference/lib/crane_reference/crane-reference compile || fail "crane-reference compile failed in the install space"
-case "$PACKAGE_DIR" in
-  "$WORKSPACE"/install/*) ;;
-  *) fail "python imports crane_reference from $PACKAGE_DIR, not from the colcon install space" ;;
-esac
+for package in crane_reference crane_reference_interfaces; do
+  PACKAGE_DIR=$(cd /tmp && python3 -c "import $package, os; print(os.path.dirname($package.__file__))")
+  case "$PACKAGE_DIR" in
+    "$WORKSPACE"/install/*) ;;
+    *) fail "python imports $package from $PACKAGE_DIR, not from the colcon install space" ;;
+  esac
+done
 
 echo "check_colcon: starting $EXECUTABLE (ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
 "$EXECUTABLE" --ros-args -p publish_rate:=50 >node.out 2>node.err &

@@ -56,6 +56,7 @@ from typing import Any, NamedTuple
 from ..model.parameters import Task
 from ..model.units import NANOSECONDS
 from ..motion.simulation import SOLVER_FAILURES
+from .history import TIME_SLACK
 from .reference_stream import ERROR, PAUSED, RUNNING
 from .sample import ReferenceSample
 from .schedule import FrameBatch, FrameRequest, Frames, FrameSchedule, Plan, stamp_at
@@ -129,6 +130,23 @@ class CommandPoint(NamedTuple):
     answer: Any
 
 
+class Milestone:
+    """The first sample published at or after motion time ``t`` [s]: its stamp [ns] once published, else None."""
+
+    def __init__(self, t: float) -> None:
+        self.t = t
+        self.stamp_ns: int | None = None
+
+
+class Blend(NamedTuple):
+    """A re-target's blend (:meth:`ReferenceServer.retarget`): its first sample k, the motion time [s] it begins
+    at, and the milestone of its end (the first sample on the new path)."""
+
+    k: int
+    start: float
+    end: Milestone
+
+
 @dataclass(frozen=True)
 class Reply:
     """The answer to a request of the node's services: whether it was done, and what was done or why not."""
@@ -187,6 +205,7 @@ class ReferenceServer:
         self._commands: dict[str, str] = {}
         self._awaiting: dict[str, int] = {}  # command -> its first frame, until made
         self._unstamped: dict[str, int] = {}  # command made while not publishing -> its frame, stamped at begin
+        self._milestones: list[Milestone] = []  # not yet published
         self._rates_reference = (0, 0.0, 0.0, 0)
         self._worker = start_named(self._work, "ref_frames")
 
@@ -322,7 +341,16 @@ class ReferenceServer:
                 if sent is not None:
                     self._last_stamp = stamp_at(start, k, self.rate)
                     out.append(Outgoing(k, self._last_stamp, *sent))
+            if self._milestones:
+                self._pass_milestones(out)
             return Due(out, stamp_at(start, schedule.next_k, self.rate))
+
+    def _pass_milestones(self, out: list[Outgoing]) -> None:
+        """Stamp the milestones that ``out`` reaches (the server's lock held)."""
+        for milestone in self._milestones:
+            milestone.stamp_ns = next((o.stamp_ns for o in out
+                                       if o.frames.samples.t[o.row] >= milestone.t - TIME_SLACK), None)
+        self._milestones = [milestone for milestone in self._milestones if milestone.stamp_ns is None]
 
     def clock_went_back(self, now_ns: int) -> None:
         """The clock jumped back (reported by its owner: rclpy's jump callback) to ``now_ns``: beyond the
@@ -345,9 +373,13 @@ class ReferenceServer:
         with self._lock:
             return Published(self.schedule.last, self._last_stamp)
 
+    def stamp_ns(self, k: int) -> int:
+        """Stamp [ns] of sample k (relative to the start while not publishing)."""
+        return stamp_at(self._start_ns or 0, k, self.rate)
+
     def stamp_of(self, k: int) -> float:
         """Stamp [s] of sample k (relative to the start while not publishing)."""
-        return stamp_at(self._start_ns or 0, k, self.rate) / NANOSECONDS
+        return self.stamp_ns(k) / NANOSECONDS
 
     # -- commands -------------------------------------------------------------------------------------
 
@@ -423,6 +455,15 @@ class ReferenceServer:
         if name not in COMMANDS:
             raise ValueError(f"command {name!r}: not one of {', '.join(COMMANDS)}")
         return self._at_command_point(name, accepted_ns, *args).k
+
+    def retarget(self, targets: Task, blend_time: float, accepted_ns: int) -> Blend:
+        """The stream command ``retarget`` over ``blend_time`` s of motion time (:meth:`command`; ``targets`` checked
+        with :meth:`check_targets`), and its blend."""
+        point = self._at_command_point("retarget", accepted_ns, targets, blend_time)
+        end = Milestone(point.answer + blend_time)
+        with self._lock:
+            self._milestones.append(end)
+        return Blend(point.k, point.answer, end)
 
     def check_targets(self, targets: Task) -> None:
         """Raise :class:`~.targets.UnreachableTargetError` unless ``targets`` can be streamed from here."""

@@ -20,11 +20,10 @@ lifecycle nodes configure and activate themselves (their ``autostart``).  The pa
 three nodes where launch is not installed).
 """
 
+from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode, Node
-
-from launch import LaunchDescription
 
 PACKAGE = "crane_reference"
 

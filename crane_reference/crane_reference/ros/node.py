@@ -39,6 +39,7 @@ from . import settings
 from .message_types import rclpy_types
 from .parameters import SPECS, ParameterError, declare_all, pre_set_callback, reach_descriptor
 from .publishing import DiagnosticsPublisher, SamplePublisher
+from .retarget_action import RetargetActionServer
 from .running import spin_once
 from .settings import StartupError
 
@@ -72,6 +73,8 @@ class CraneReferenceNode(LifecycleNode):
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.create_service(Trigger, "~/restart", self._on_restart)
         self.create_service(SetBool, "~/pause", self._on_pause)
+        self._retarget = RetargetActionServer(self, self._types, lambda: self._server, lambda: self._params,
+                                              lambda: self._lifecycle_state() == "active")
         self.create_subscription(Float64, messages.SPEED_SCALING_TOPIC, self._on_speed_scaling,
                                  messages.PUBLISHER_DEPTH)
         self._status_timer = self.create_timer(self._params.status_period, self._diagnostics.log_status)
@@ -269,6 +272,7 @@ class CraneReferenceNode(LifecycleNode):
             self._server.close()
             self._server = None
         self._diagnostics.join()
+        self._retarget.destroy()
         super().destroy_node()
 
 

@@ -68,7 +68,7 @@ def preview(params: NodeParameters) -> Preview:
 def refusal(parameters: list[Parameter], params: NodeParameters, server: ReferenceServer | None) -> str | None:
     """Why the change ``parameters`` of the values ``params`` is refused, or None: the table's checks, then
     with a ``server`` (else they are checked at configure) the preview's joints, a solver that stopped for a
-    commanding parameter, and the reachability of changed targets."""
+    commanding parameter, and the reachability of targets other than those in force."""
     reason = check(parameters)
     if reason is not None or server is None:
         return reason
@@ -85,9 +85,10 @@ def refusal(parameters: list[Parameter], params: NodeParameters, server: Referen
     except CommandRefusedError as error:
         return f"{', '.join(commanding)}: {error} (deactivate, cleanup, configure and activate start a new solver)"
     changed = {p.name: p.value for p in parameters if p.name in TARGET_PARAMETERS}
+    targets = params.changed(parameters).targets()
     try:
-        if changed:
-            server.check_targets(params.changed(parameters).targets())
+        if changed and targets != server.stream.targets:  # those in force are reachable
+            server.check_targets(targets)
     except UnreachableTargetError as error:
         names = ", ".join(f"{name} = {value!r}" for name, value in changed.items())
         return f"{names}: target not reachable: {error}"

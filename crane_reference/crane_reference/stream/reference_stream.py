@@ -262,10 +262,11 @@ class ReferenceStream:
         check_task(self.scenario, targets, float(self._history.last_snapshot.sample.ee_position[2]),
                    self.singular_value_margin)
 
-    def retarget(self, tau: float, targets: Task, checked: bool = False) -> None:
+    def retarget(self, tau: float, targets: Task, checked: bool = False, blend_time: float | None = None) -> float:
         """Blend the constraints to those of ``targets`` from the first computed instant at or after
-        publish time tau (C2, over the blend time).  Unless the caller has just run
-        :meth:`check_targets` itself (``checked``), it does so first and may raise UnreachableTargetError."""
+        publish time tau (C2, over ``blend_time`` s of motion time, default the stream's blend time).  Unless the
+        caller has just run :meth:`check_targets` itself (``checked``), it does so first and may raise
+        UnreachableTargetError.  Returns the motion time [s] the blend begins at."""
         if not checked:
             self.check_targets(targets)
         t = self.motion_time(tau)
@@ -273,8 +274,9 @@ class ReferenceStream:
         k = self._history.first_at_or_after(t)
         at = self._history.instant(k)
         new = self.task_constraints(targets, self.scenario.z_static)
-        self._stepper.retarget(blend_constraints(at.motion.constraints, new, at.t, self.blend_time), at.t, at.q,
-                               at.qd)
+        self._stepper.retarget(blend_constraints(at.motion.constraints, new, at.t, blend_time or self.blend_time),
+                               at.t, at.q, at.qd)
         self._forgotten.append(self._history.truncate(k))
         self._history.set_snapshot(k, self._stepper.snapshot())
         self.targets = targets
+        return at.t

@@ -1,0 +1,140 @@
+"""The node's ``~/retarget`` action (crane_reference_interfaces/action/Retarget): re-targets with goal, feedback
+and result, served as joint_trajectory_controller serves ``follow_joint_trajectory``.
+
+* A goal is refused while the node is not active.
+* An accepted goal's targets are checked as the target parameters are (:func:`.settings.refusal`: their ranges,
+  E's reach); if one is not allowed the goal is aborted with ``INVALID_GOAL`` and the reason.  Otherwise it
+  re-targets the stream over its blend time (:class:`~crane_reference.stream.retarget_goal.RetargetGoal`) and
+  sets the target parameters to its targets, so that they show the targets in force.
+* Feedback every :data:`FEEDBACK_PERIOD` s of wall time: the stamp of the last sample published, the blend's
+  progress and E's distance to the new path.
+* The result, once the first sample on the new path is published: its stamp and that of the blend's first sample.
+* A newer goal, or a change of the target parameters, pre-empts a goal (aborted, ``PREEMPTED``); a cancel sets
+  the target parameters back to those before the goal (their blend, over ``blend_time``, brings the old path
+  back); a goal is aborted (``STOPPED``) if the node stops publishing or its solver stops first.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from crane_reference_interfaces.action import Retarget
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.server import ServerGoalHandle
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.task import Future
+
+from ..interface import messages
+from ..interface.messages import MessageTypes
+from ..stream.retarget_goal import RetargetGoal
+from ..stream.server import CommandRefusedError, ReferenceServer
+from .parameters import TARGET_PARAMETERS, NodeParameters, field_name
+from .settings import refusal
+
+FEEDBACK_PERIOD = 0.1  # [s] of wall time between two feedbacks of an active goal
+GOAL_FIELDS = {name: field_name(name) for name in TARGET_PARAMETERS}
+"""The target parameters and the goal fields that carry them."""
+
+
+class RetargetActionServer:
+    """See the module documentation."""
+
+    def __init__(self, node: Node, types: MessageTypes, server: Callable[[], ReferenceServer | None],
+                 params: Callable[[], NodeParameters], active: Callable[[], bool]) -> None:
+        """Serve ``~/retarget`` on ``node``; ``server``, ``params`` and ``active`` give the node's server (None
+        while unconfigured), its parameter values and whether it publishes."""
+        self._node, self._types = node, types
+        self._server, self._params, self._active = server, params, active
+        self._goal: tuple[ServerGoalHandle, RetargetGoal, Future] | None = None
+        self._action = ActionServer(node, Retarget, "~/retarget", self._execute, goal_callback=self._on_goal,
+                                    cancel_callback=self._on_cancel)
+        self._timer = node.create_timer(FEEDBACK_PERIOD, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME),
+                                        autostart=False)  # runs while a goal is active
+
+    def destroy(self) -> None:
+        self._timer.cancel()
+        self._node.destroy_timer(self._timer)
+        self._action.destroy()
+
+    def _on_goal(self, request: Retarget.Goal) -> GoalResponse:
+        """Refuse goals while the node is not active (as joint_trajectory_controller does)."""
+        if self._active():
+            return GoalResponse.ACCEPT
+        self._node.get_logger().error("~/retarget goal refused: the node is not active")
+        return GoalResponse.REJECT
+
+    def _on_cancel(self, goal_handle: ServerGoalHandle) -> CancelResponse:
+        return CancelResponse.ACCEPT
+
+    async def _execute(self, goal_handle: ServerGoalHandle) -> Retarget.Result:
+        """Check the goal, re-target, then wait for its end (:meth:`_tick` finishes it)."""
+        request = goal_handle.request
+        params, server = self._params(), self._server()
+        targets = [Parameter(name, value=float(getattr(request, field))) for name, field in GOAL_FIELDS.items()]
+        blend = [Parameter("blend_time", value=float(request.blend_time))] if request.blend_time != 0.0 else []
+        reason = refusal([*targets, *blend], params, server) if server is not None else "the node is not configured"
+        if reason is not None:
+            return self._end(goal_handle, goal_handle.abort, Retarget.Result.INVALID_GOAL, reason)
+        if goal_handle.is_cancel_requested:
+            return self._end(goal_handle, goal_handle.canceled, Retarget.Result.CANCELED, "canceled before it began")
+        try:
+            goal = RetargetGoal(server, params.changed(targets).targets(),
+                                params.changed(blend).blend_time, self._node.get_clock().now().nanoseconds)
+        except CommandRefusedError as error:
+            return self._end(goal_handle, goal_handle.abort, Retarget.Result.STOPPED, str(error))
+        self._preempt("a newer goal took over")
+        self._node.set_parameters_atomically(targets)  # the targets in force: no second re-target
+        done = Future()
+        self._goal = goal_handle, goal, done
+        self._timer.reset()
+        self._node.get_logger().info(f"~/retarget: re-targeting to {goal.targets} from the sample stamped "
+                                     f"{goal.blend_stamp_ns * 1e-9:.6f} s over {goal.blend_time:g} s")
+        return await done
+
+    def _tick(self) -> None:
+        """Feedback of the active goal, or its end: reached, canceled, pre-empted or stopped."""
+        if self._goal is None:
+            return
+        goal_handle, goal, _ = self._goal
+        Result = Retarget.Result
+        if goal.path_stamp_ns is not None:
+            self._finish(goal_handle.succeed, Result.SUCCESSFUL, "", goal.path_stamp_ns)
+        elif goal.superseded:
+            self._preempt("the target parameters were changed")
+        elif self._server() is not goal.server or not goal.server.computing or not self._active():
+            self._finish(goal_handle.abort, Result.STOPPED, "the node stopped publishing before the new path")
+        elif goal_handle.is_cancel_requested:
+            result = self._node.set_parameters_atomically([Parameter(name, value=getattr(goal.previous, field))
+                                                           for name, field in TARGET_PARAMETERS.items()])
+            failed = None if result.successful else result.reason
+            self._finish(goal_handle.canceled, Result.CANCELED, f"blending back to {goal.previous}" if failed is None
+                         else f"canceled, but the targets before the goal were refused: {failed}")
+        else:
+            published = goal.server.last_sample()
+            if published.sample is not None:
+                feedback = goal.feedback(published.sample, published.stamp_ns)
+                goal_handle.publish_feedback(Retarget.Feedback(
+                    stamp=messages.time_msg(self._types, feedback.stamp_ns), progress=feedback.progress,
+                    ellipse_error=feedback.ellipse_error, height_error=feedback.height_error))
+
+    def _preempt(self, why: str) -> None:
+        if self._goal is not None:
+            self._finish(self._goal[0].abort, Retarget.Result.PREEMPTED, why)
+
+    def _finish(self, end: Callable[[], None], code: int, message: str, path_stamp_ns: int = 0) -> None:
+        """End the active goal with ``end`` (succeed, abort, canceled) and the result ``code`` and ``message``."""
+        goal_handle, goal, done = self._goal
+        self._goal = None
+        self._timer.cancel()
+        done.set_result(self._end(goal_handle, end, code, message, goal.blend_stamp_ns, path_stamp_ns))
+
+    def _end(self, goal_handle: ServerGoalHandle, end: Callable[[], None], code: int, message: str,
+             blend_stamp_ns: int = 0, path_stamp_ns: int = 0) -> Retarget.Result:
+        end()
+        log = self._node.get_logger().info if code == Retarget.Result.SUCCESSFUL else self._node.get_logger().warning
+        log(f"~/retarget goal {message or 'reached'}")
+        return Retarget.Result(error_code=code, error_string=message,
+                               blend_stamp=messages.time_msg(self._types, blend_stamp_ns),
+                               path_stamp=messages.time_msg(self._types, path_stamp_ns))

@@ -1,0 +1,149 @@
+"""The node's ``~/retarget`` action with an rclpy action client, as another process would use it: the result's
+stamps against the published path (E's poses on the old and the new ellipse), cancel, pre-emption, refusal while
+not active and invalid goals."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+from action_msgs.msg import GoalStatus
+from crane_reference_interfaces.action import Retarget
+from lifecycle_msgs.msg import Transition
+from rclpy.action import ActionClient
+from rclpy.parameter import Parameter
+from test_ros_node import NODE, NS, Harness, change_state, diagnostic_messages, stamp_ns
+
+from crane_reference.ros.node import CraneReferenceNode
+
+RATE = 100  # [Hz]
+ON_PATH = 1e-9  # E's ellipse residual (5.1) on the path (as the node's parameter test)
+
+
+@pytest.fixture
+def ros() -> Iterator[Harness]:
+    harness = Harness()
+    try:
+        yield harness
+    finally:
+        harness.close()
+
+
+class Client:
+    """An action client of the node's ~/retarget on the harness's probe node, with each goal's feedback."""
+
+    def __init__(self, ros: Harness) -> None:
+        self.ros = ros
+        self.action = ActionClient(ros.probe, Retarget, f"/{NODE}/retarget")
+        assert self.action.wait_for_server(timeout_sec=10.0)
+
+    def send(self, feedback: list | None = None, **goal: float) -> Any:
+        """The goal handle of ``goal`` (the node's targets by default) once the node answered it."""
+        request = Retarget.Goal(**{"ellipse_a": 3.0, "ellipse_b": 2.0, "z_increment": 0.2, "z_rise_time": 5.0, **goal})
+        future = self.action.send_goal_async(request, feedback_callback=None if feedback is None else
+                                             lambda message: feedback.append(message.feedback))
+        return self.ros.result(future)
+
+    def result(self, goal_handle: Any, timeout: float = 15.0) -> Any:
+        """The goal's status and result."""
+        return self.ros.result(goal_handle.get_result_async(), timeout)
+
+
+def ns(stamp: Any) -> int:
+    return stamp.sec * NS + stamp.nanosec
+
+
+def ellipse_residuals(ros: Harness, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
+    """Stamps [ns] of the received poses of E and their residuals of the ellipse (5.1) with semi-axes a, b."""
+    poses = [m for _, m in list(ros.received["pose"])]
+    p = np.array([[m.pose.position.x, m.pose.position.y] for m in poses])
+    return np.array([stamp_ns(m) for m in poses]), (p[:, 0] / a) ** 2 + (p[:, 1] / b) ** 2 - 1.0
+
+
+def test_a_goal_gets_feedback_and_the_stamp_from_which_the_published_path_is_the_new_one(ros: Harness) -> None:
+    node = ros.start(publish_rate=RATE, model="rigid")
+    client = Client(ros)
+    time.sleep(0.3)
+    feedback: list = []
+    blend = 0.8
+    goal_handle = client.send(feedback, ellipse_a=3.3, ellipse_b=2.2, blend_time=blend)
+    assert goal_handle.accepted
+    answer = client.result(goal_handle)
+    assert answer.status == GoalStatus.STATUS_SUCCEEDED, answer.result.error_string
+    result = answer.result
+    assert result.error_code == Retarget.Result.SUCCESSFUL
+    blend_stamp, path_stamp = ns(result.blend_stamp), ns(result.path_stamp)
+    # at speed 1 the blend spans blend_time of stamps, to a period (samples held by a late solver delay it)
+    assert blend * NS - NS // RATE <= path_stamp - blend_stamp <= (blend + 0.2) * NS
+    ros.wait_until_stamp(path_stamp + NS // 2)
+    stamps, old = ellipse_residuals(ros, 3.0, 2.0)
+    _, new = ellipse_residuals(ros, 3.3, 2.2)
+    before, after = stamps < blend_stamp, stamps >= path_stamp
+    assert before.sum() > 10 and after.sum() > 10
+    assert np.abs(old[before]).max() < ON_PATH and np.abs(new[after]).max() < ON_PATH
+    assert np.abs(new[before]).min() > 1e-3 and np.abs(old[after]).min() > 1e-3
+    middle = (stamps > blend_stamp + NS * blend / 4) & (stamps < path_stamp - NS * blend / 4)
+    assert np.abs(new[middle]).min() > 1e-4 and np.abs(old[middle]).min() > 1e-4  # blending: on neither
+    # feedback: progress from 0 towards 1, E's distance to the new ellipse shrinking to none
+    assert len(feedback) >= 3
+    progress = [f.progress for f in feedback]
+    assert progress == sorted(progress) and 0.0 <= progress[0] < 0.5 and progress[-1] <= 1.0
+    assert abs(feedback[0].ellipse_error) > 1e-3 and abs(feedback[-1].ellipse_error) < abs(feedback[0].ellipse_error)
+    assert all(math.isfinite(f.height_error) for f in feedback)
+    assert node.get_parameter("ellipse.a").value == 3.3 and node.get_parameter("ellipse.b").value == 2.2
+    assert node.get_parameter("blend_time").value == 2.0  # the goal's blend time was its own
+
+
+def test_a_newer_goal_preempts_and_a_cancel_blends_the_old_targets_back(ros: Harness) -> None:
+    node = ros.start(publish_rate=RATE, model="rigid")
+    client = Client(ros)
+    first = client.send(ellipse_a=3.2, blend_time=3.0)
+    assert first.accepted
+    time.sleep(0.3)
+    second = client.send(ellipse_a=3.4, blend_time=3.0)
+    answer = client.result(first)
+    assert answer.status == GoalStatus.STATUS_ABORTED and answer.result.error_code == Retarget.Result.PREEMPTED
+    assert node.get_parameter("ellipse.a").value == 3.4
+    time.sleep(0.3)
+    ros.result(second.cancel_goal_async())
+    answer = client.result(second)
+    assert answer.status == GoalStatus.STATUS_CANCELED and answer.result.error_code == Retarget.Result.CANCELED
+    assert node.get_parameter("ellipse.a").value == 3.2  # the targets before the canceled goal
+    # a change of the target parameters pre-empts a goal too
+    third = client.send(ellipse_b=2.3, blend_time=3.0)
+    time.sleep(0.3)
+    (changed,) = ros.set_parameters(Parameter("ellipse.b", value=1.9))
+    assert changed.successful, changed.reason
+    answer = client.result(third)
+    assert answer.status == GoalStatus.STATUS_ABORTED and answer.result.error_code == Retarget.Result.PREEMPTED
+
+
+def test_invalid_goals_are_aborted_naming_the_field_and_the_stream_goes_on(ros: Harness) -> None:
+    ros.start(publish_rate=RATE, model="rigid")
+    client = Client(ros)
+    for goal, expected in (({"ellipse_a": math.nan}, "ellipse.a"), ({"blend_time": -1.0}, "blend_time"),
+                           ({"ellipse_a": 19.0}, "not reachable")):
+        answer = client.result(client.send(**goal))
+        assert answer.status == GoalStatus.STATUS_ABORTED
+        assert answer.result.error_code == Retarget.Result.INVALID_GOAL and expected in answer.result.error_string
+    count = len(ros.received["joint_states"])
+    ros.wait_for(lambda: len(ros.received["joint_states"]) > count + RATE // 2, "samples after the refusals")
+
+
+def test_goals_are_refused_while_the_node_is_not_active(ros: Harness) -> None:
+    node = CraneReferenceNode(context=ros.context, parameter_overrides=[
+        Parameter("autostart", value=False), Parameter("publish_rate", value=RATE), Parameter("model", value="rigid")])
+    ros.node = node
+    ros.spin(node)
+    client = Client(ros)
+    assert not client.send().accepted  # unconfigured
+    assert change_state(ros, Transition.TRANSITION_CONFIGURE)
+    ros.wait_for(lambda: any(m.startswith("inactive") for m in diagnostic_messages(ros)), "inactive diagnostics")
+    assert not client.send().accepted  # inactive
+    assert change_state(ros, Transition.TRANSITION_ACTIVATE)
+    answer = client.result(client.send(ellipse_a=3.1, blend_time=0.2))
+    assert answer.status == GoalStatus.STATUS_SUCCEEDED, answer.result.error_string
