@@ -19,6 +19,11 @@ process and, after a warm-up, records for ``--duration`` seconds (default 30):
   node's margin: how long before that stamp the sample was ready (``retarget_margin_s``, smallest of the
   changes; ``margin_*`` for the commands below); samples held late while the changes and the commands
   below were made (held_late_commands);
+* the ~/retarget action, over ``--changes`` goals (alternating ellipse.a 3.1 / 3.0 m, blend 0.5 s): the time from
+  sending a goal to its acceptance (``goal_accepted_max_ms``), the result's ``path_stamp`` - ``blend_stamp`` less
+  the blend time (``goal_blend_span_error_max_ms``: 0 at speed 1, a period at most from rounding, more where
+  samples were held), and the time from the reception of the sample stamped ``path_stamp`` to the reception of
+  the result (``goal_result_after_path_max_ms``: the action's poll of 0.1 s at most, plus delivery);
 * smoothness of the commands: the largest change of the column's velocity between two received samples
   (rad/s) in normal running and after ~/pause, resume, a speed_scaling change to 0.5 and a re-target
   (each window: the ramp time plus 0.5 s; the flexible boom's 70 Hz bending makes the column's velocity
@@ -66,8 +71,10 @@ from typing import Any
 import numpy as np
 import rclpy
 from common import print_table, process_cpu_seconds, run_times
+from crane_reference_interfaces.action import Retarget
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
+from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -197,6 +204,38 @@ def measure_latency(executor: SingleThreadedExecutor, client: AsyncParameterClie
     return latencies, after_acceptance, margins
 
 
+def measure_goals(executor: SingleThreadedExecutor, subscriber: Node, recorder: Recorder, goals: int,
+                  blend: float = 0.5) -> dict[str, float]:
+    """``goals`` re-targets through ~/retarget: acceptance time, blend span error and result delay (module doc)."""
+    action = ActionClient(subscriber, Retarget, f"/{NODE}/retarget")
+    if not action.wait_for_server(timeout_sec=10.0):
+        raise RuntimeError("no ~/retarget action server")
+    accepted, span_error, after_path = [], [], []
+    for i in range(goals):
+        sent = time.monotonic_ns()
+        future = action.send_goal_async(Retarget.Goal(ellipse_a=3.1 if i % 2 == 0 else 3.0, ellipse_b=2.0,
+                                                      z_increment=0.2, z_rise_time=5.0, blend_time=blend))
+        if not spin_until(executor, future.done, 10.0) or not future.result().accepted:
+            raise RuntimeError(f"goal {i} not accepted")
+        accepted.append((time.monotonic_ns() - sent) / NS)
+        result_future = future.result().get_result_async()
+        if not spin_until(executor, result_future.done, 10.0 + blend):
+            raise RuntimeError(f"no result of goal {i}")
+        received = time.monotonic_ns()
+        result = result_future.result().result
+        if result.error_code != Retarget.Result.SUCCESSFUL:
+            raise RuntimeError(f"goal {i}: {result.error_string}")
+        path = result.path_stamp.sec * NS + result.path_stamp.nanosec
+        blend_stamp = result.blend_stamp.sec * NS + result.blend_stamp.nanosec
+        span_error.append((path - blend_stamp) / NS - blend)
+        first = next(j for j, s in enumerate(recorder.stamps) if s >= path)
+        after_path.append((received - recorder.monotonic[first]) / NS)
+        spin_for(executor, 0.5)
+    action.destroy()
+    return {"goal_accepted_max_ms": 1e3 * max(accepted), "goal_blend_span_error_max_ms": 1e3 * max(span_error),
+            "goal_result_after_path_max_ms": 1e3 * max(after_path)}
+
+
 def call(executor: SingleThreadedExecutor, client, request, timeout: float = 10.0):
     future = client.call_async(request)
     if not spin_until(executor, future.done, timeout):
@@ -307,6 +346,7 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         factor = recorder.diagnostics.get("real_time_factor", "nan")
         latencies, after_acceptance, margins = (measure_latency(executor, client, recorder, changes) if changes
                                                 else ([float("nan")],) * 3)
+        goals = measure_goals(executor, subscriber, recorder, changes) if changes else {}
         smoothness = command_smoothness(executor, subscriber, client, recorder, 1.0)
         held_in_commands = float(recorder.diagnostics.get("held_late", 0)) - before["held_late"] - late["held_late"]
         flooded = flood(executor, client, recorder, flood_requests, rate) if flood_requests else {}
@@ -336,7 +376,7 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         "effect_after_acceptance_max_ms": 1e3 * float(np.max(after_acceptance)),
         "margin_retarget_min_ms": 1e3 * float(np.min(margins)),
         "held_late_commands": int(held_in_commands),
-        **smoothness, **flooded, "exit_code": node.returncode, "exit_after_sigint_s": exit_after,
+        **goals, **smoothness, **flooded, "exit_code": node.returncode, "exit_after_sigint_s": exit_after,
         "traceback": "Traceback" in stderr,
     }
 
