@@ -228,6 +228,7 @@ def measure_goals(executor: SingleThreadedExecutor, subscriber: Node, recorder: 
         path = result.path_stamp.sec * NS + result.path_stamp.nanosec
         blend_stamp = result.blend_stamp.sec * NS + result.blend_stamp.nanosec
         span_error.append((path - blend_stamp) / NS - blend)
+        spin_until(executor, lambda p=path: recorder.stamps and recorder.stamps[-1] >= p, 5.0)
         first = next(j for j, s in enumerate(recorder.stamps) if s >= path)
         after_path.append((received - recorder.monotonic[first]) / NS)
         spin_for(executor, 0.5)

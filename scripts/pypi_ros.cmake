@@ -4,6 +4,10 @@
 # configure step each such directory of an imported target becomes this Python's.  A ROS distribution needs none
 # of this (colcon builds the package as it is).
 
+if(CMAKE_VERSION VERSION_LESS 3.19)
+  message(FATAL_ERROR "building against the PyPI ROS wheels needs CMake >= 3.19 (cmake_language(DEFER)); this is ${CMAKE_VERSION}")
+endif()
+
 function(_pypi_ros_local_include_directories)
   find_package(Python3 REQUIRED COMPONENTS Interpreter Development.Module NumPy)
   get_property(targets DIRECTORY "${CMAKE_SOURCE_DIR}" PROPERTY IMPORTED_TARGETS)

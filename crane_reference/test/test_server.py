@@ -102,7 +102,7 @@ def test_a_command_takes_effect_at_the_last_sample_within_the_lead(server: Refer
     before = publish(server, start, 0.5)
     targets = Task(3.2, 2.0, 0.2, 5.0)
     server.check_targets(targets)
-    k = server.command("retarget", targets, accepted_ns=start + 49 * PERIOD + 1)  # just after sample 49 went out
+    k = server.retarget(targets, 0.5, accepted_ns=start + 49 * PERIOD + 1).k  # just after sample 49 went out
     assert k == 49 + round(LEAD * RATE)  # stamped LEAD - 1 ns after the acceptance
     assert server.commands["retarget_stamp_s"] == f"{(start + k * PERIOD) / NS:.6f}"
     after = publish(server, start + len(before) * PERIOD, 1.0)

@@ -9,9 +9,11 @@ and result, served as joint_trajectory_controller serves ``follow_joint_trajecto
 * Feedback every :data:`FEEDBACK_PERIOD` s of wall time: the stamp of the last sample published, the blend's
   progress and E's distance to the new path.
 * The result, once the first sample on the new path is published: its stamp and that of the blend's first sample.
-* A newer goal, or a change of the target parameters, pre-empts a goal (aborted, ``PREEMPTED``); a cancel sets
-  the target parameters back to those before the goal (their blend, over ``blend_time``, brings the old path
-  back); a goal is aborted (``STOPPED``) if the node stops publishing or its solver stops first.
+* A newer goal, or a change of the target parameters, pre-empts a goal (aborted, ``PREEMPTED``: rclpy ends a goal
+  as canceled only after a cancel request, where joint_trajectory_controller cancels it); a cancel sets the
+  target parameters back to those before the goal (their blend, over ``blend_time``, brings the old path back); a
+  goal is aborted (``STOPPED``) if the node stops publishing, its solver stops or its stream goes to ERROR first,
+  or the node is destroyed.  While the stream is paused (speed 0) a goal waits.
 """
 
 from __future__ import annotations
@@ -28,6 +30,8 @@ from rclpy.task import Future
 
 from ..interface import messages
 from ..interface.messages import MessageTypes
+from ..motion.simulation import SOLVER_FAILURES
+from ..stream.reference_stream import ERROR
 from ..stream.retarget_goal import RetargetGoal
 from ..stream.server import CommandRefusedError, ReferenceServer
 from .parameters import TARGET_PARAMETERS, NodeParameters, field_name
@@ -54,6 +58,9 @@ class RetargetActionServer:
                                         autostart=False)  # runs while a goal is active
 
     def destroy(self) -> None:
+        """End an active goal (STOPPED) and the action server."""
+        if self._goal is not None:
+            self._finish(self._goal[0].abort, Retarget.Result.STOPPED, "the node was destroyed")
         self._timer.cancel()
         self._node.destroy_timer(self._timer)
         self._action.destroy()
@@ -70,27 +77,34 @@ class RetargetActionServer:
 
     async def _execute(self, goal_handle: ServerGoalHandle) -> Retarget.Result:
         """Check the goal, re-target, then wait for its end (:meth:`_tick` finishes it)."""
-        request = goal_handle.request
-        params, server = self._params(), self._server()
+        request, params, server = goal_handle.request, self._params(), self._server()
         targets = [Parameter(name, value=float(getattr(request, field))) for name, field in GOAL_FIELDS.items()]
         blend = [Parameter("blend_time", value=float(request.blend_time))] if request.blend_time != 0.0 else []
-        reason = refusal([*targets, *blend], params, server) if server is not None else "the node is not configured"
-        if reason is not None:
-            return self._end(goal_handle, goal_handle.abort, Retarget.Result.INVALID_GOAL, reason)
+        Result = Retarget.Result
         if goal_handle.is_cancel_requested:
-            return self._end(goal_handle, goal_handle.canceled, Retarget.Result.CANCELED, "canceled before it began")
+            return self._end(goal_handle, goal_handle.canceled, Result.CANCELED, "canceled before it began")
+        if server is None or not self._active():
+            return self._end(goal_handle, goal_handle.abort, Result.STOPPED, "the node is no longer active")
+        if server.stream.state == ERROR:
+            return self._end(goal_handle, goal_handle.abort, Result.STOPPED,
+                             f"the stream is in ERROR ({server.stream.last_error})")
         try:
-            goal = RetargetGoal(server, params.changed(targets).targets(),
-                                params.changed(blend).blend_time, self._node.get_clock().now().nanoseconds)
-        except CommandRefusedError as error:
-            return self._end(goal_handle, goal_handle.abort, Retarget.Result.STOPPED, str(error))
+            reason = refusal([*targets, *blend], params, server)
+            if reason is not None:
+                return self._end(goal_handle, goal_handle.abort, Result.INVALID_GOAL, reason)
+            goal = RetargetGoal(server, params.changed(targets).targets(), params.changed(blend).blend_time,
+                                self._node.get_clock().now().nanoseconds)
+        except (CommandRefusedError, *SOLVER_FAILURES) as error:
+            return self._end(goal_handle, goal_handle.abort, Result.STOPPED, f"{type(error).__name__}: {error}")
         self._preempt("a newer goal took over")
-        self._node.set_parameters_atomically(targets)  # the targets in force: no second re-target
+        result = self._node.set_parameters_atomically(targets)  # the targets in force: no second re-target
+        if not result.successful:
+            self._node.get_logger().error(f"~/retarget: the target parameters were not set: {result.reason}")
         done = Future()
         self._goal = goal_handle, goal, done
         self._timer.reset()
         self._node.get_logger().info(f"~/retarget: re-targeting to {goal.targets} from the sample stamped "
-                                     f"{goal.blend_stamp_ns * 1e-9:.6f} s over {goal.blend_time:g} s")
+                                     f"{server.stamp_of(goal.blend.k):.6f} s over {goal.blend_time:g} s")
         return await done
 
     def _tick(self) -> None:
@@ -99,18 +113,20 @@ class RetargetActionServer:
             return
         goal_handle, goal, _ = self._goal
         Result = Retarget.Result
+        stream = goal.server.stream
         if goal.path_stamp_ns is not None:
-            self._finish(goal_handle.succeed, Result.SUCCESSFUL, "", goal.path_stamp_ns)
+            self._finish(goal_handle.succeed, Result.SUCCESSFUL, "")
         elif goal.superseded:
             self._preempt("the target parameters were changed")
         elif self._server() is not goal.server or not goal.server.computing or not self._active():
             self._finish(goal_handle.abort, Result.STOPPED, "the node stopped publishing before the new path")
+        elif stream.state == ERROR:
+            self._finish(goal_handle.abort, Result.STOPPED, f"the stream is in ERROR ({stream.last_error})")
         elif goal_handle.is_cancel_requested:
             result = self._node.set_parameters_atomically([Parameter(name, value=getattr(goal.previous, field))
                                                            for name, field in TARGET_PARAMETERS.items()])
-            failed = None if result.successful else result.reason
-            self._finish(goal_handle.canceled, Result.CANCELED, f"blending back to {goal.previous}" if failed is None
-                         else f"canceled, but the targets before the goal were refused: {failed}")
+            self._finish(goal_handle.canceled, Result.CANCELED, f"canceled: blending back to {goal.previous}"
+                         if result.successful else f"canceled, but the targets before it were refused: {result.reason}")
         else:
             published = goal.server.last_sample()
             if published.sample is not None:
@@ -123,18 +139,20 @@ class RetargetActionServer:
         if self._goal is not None:
             self._finish(self._goal[0].abort, Retarget.Result.PREEMPTED, why)
 
-    def _finish(self, end: Callable[[], None], code: int, message: str, path_stamp_ns: int = 0) -> None:
-        """End the active goal with ``end`` (succeed, abort, canceled) and the result ``code`` and ``message``."""
+    def _finish(self, end: Callable[[], None], code: int, message: str) -> None:
+        """End the active goal with ``end`` (succeed, abort, canceled), the result ``code`` and ``message``."""
         goal_handle, goal, done = self._goal
         self._goal = None
         self._timer.cancel()
-        done.set_result(self._end(goal_handle, end, code, message, goal.blend_stamp_ns, path_stamp_ns))
+        done.set_result(self._end(goal_handle, end, code, message, goal.blend_stamp_ns, goal.path_stamp_ns))
 
     def _end(self, goal_handle: ServerGoalHandle, end: Callable[[], None], code: int, message: str,
-             blend_stamp_ns: int = 0, path_stamp_ns: int = 0) -> Retarget.Result:
+             blend_stamp_ns: int | None = None, path_stamp_ns: int | None = None) -> Retarget.Result:
+        """End ``goal_handle`` with ``end`` and its result: ``code``, ``message`` and the stamps (zero if not
+        published)."""
         end()
         log = self._node.get_logger().info if code == Retarget.Result.SUCCESSFUL else self._node.get_logger().warning
         log(f"~/retarget goal {message or 'reached'}")
         return Retarget.Result(error_code=code, error_string=message,
-                               blend_stamp=messages.time_msg(self._types, blend_stamp_ns),
-                               path_stamp=messages.time_msg(self._types, path_stamp_ns))
+                               blend_stamp=messages.time_msg(self._types, blend_stamp_ns or 0),
+                               path_stamp=messages.time_msg(self._types, path_stamp_ns or 0))

@@ -112,7 +112,7 @@ def apply(server: ReferenceServer, params: NodeParameters, names: list[str], acc
         done.append(f"speed scaling {params.speed_scaling:g} from the sample stamped {server.stamp_of(k):.6f} s")
     targets = params.targets()
     if any(name in TARGET_PARAMETERS for name in names) and targets != server.stream.targets:
-        k = server.command("retarget", targets, accepted_ns=accepted_ns)  # they passed check_targets on set
+        k = server.retarget(targets, params.blend_time, accepted_ns).k  # they passed check_targets on set
         done.append(f"re-targeting to {targets} from the sample stamped {server.stamp_of(k):.6f} s over "
                     f"{params.blend_time:g} s")
     return done

@@ -17,7 +17,7 @@ from typing import NamedTuple
 from ..model.parameters import Task
 from ..motion.simulation import paper_task_constraints
 from .sample import ReferenceSample
-from .server import Blend, ReferenceServer
+from .server import ReferenceServer, RetargetBlend
 
 
 class RetargetFeedback(NamedTuple):
@@ -42,13 +42,13 @@ class RetargetGoal:
         self.previous = server.stream.targets
         self.targets = targets
         self.blend_time = blend_time
-        self.blend: Blend = server.retarget(targets, blend_time, accepted_ns)
+        self.blend: RetargetBlend = server.retarget(targets, blend_time, accepted_ns)
         self._ellipse, self._height = paper_task_constraints(targets, server.info.z_static).constraints
 
     @property
-    def blend_stamp_ns(self) -> int:
-        """The stamp [ns] of the blend's first sample."""
-        return self.server.stamp_ns(self.blend.k)
+    def blend_stamp_ns(self) -> int | None:
+        """The stamp [ns] of the first sample published at or after the blend's start, None until it is published."""
+        return self.blend.first.stamp_ns
 
     @property
     def path_stamp_ns(self) -> int | None:
@@ -64,11 +64,12 @@ class RetargetGoal:
         """The goal's progress at ``sample`` published with the stamp ``stamp_ns``: the progress is
         (t - t_0) / T_blend between 0 and 1, with t the sample's motion time, t_0 the blend's start; E's distance
         to the ellipse (5.1) of semi-axes a, b is |p_xy| (1 - 1 / rho) with rho^2 = (x / a)^2 + (y / b)^2 = Phi_1 + 1;
-        its height error is Phi_2 = z_E - z_E,a(t) of (5.2)."""
+        its height error is Phi_2 = z_E - z_E,a(t) of (5.2).  The constraints' profiles a(t), b(t), z_E,a(t) give
+        the values (plain Python: the node's process runs no compiled kernel for it)."""
         p, t = sample.ee_position, sample.t
-        rho = math.sqrt(max(self._ellipse.quadric(t).residual(p) + 1.0, 0.0))
+        rho = math.hypot(p[0] / self._ellipse.a(t)[0], p[1] / self._ellipse.b(t)[0])
         radius = math.hypot(p[0], p[1])
         return RetargetFeedback(
             stamp_ns, min(max((t - self.blend.start) / self.blend_time, 0.0), 1.0),
             radius * (1.0 - 1.0 / rho) if rho > 0.0 else -radius,
-            self._height.quadric(t).residual(p))
+            float(p[2] - self._height.z(t)[0]))

@@ -30,7 +30,9 @@ Computing ahead
 
 Commands
     :meth:`ReferenceServer.command` applies a stream command (``pause``, ``resume``,
-    ``speed_scaling``, ``retarget``) at the last frame stamped within ``lead`` seconds of its acceptance
+    ``speed_scaling``; :meth:`ReferenceServer.retarget` a re-target, whose milestones are stamped when the first
+    samples at or after the blend's start and end are published) at the last frame stamped within ``lead``
+    seconds of its acceptance
     (at least the one after the next to publish: the effect comes at most ``lead`` after the acceptance when
     ``lead`` spans two periods), or at the next frame to make while nothing is published; the frames from
     there on are dropped at once and made again after it (the first batch in the command's own request to
@@ -72,7 +74,7 @@ URGENT_REFILL = 0.05  # [s] of stream (at least one frame) made at most per requ
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to make (for commands)
 MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, the stamps leap (re-anchored)
 REST_MARGIN = 1.0  # [s] :meth:`ReferenceServer.come_to_rest` waits beyond the ramp and the lead
-COMMANDS = tuple(name for name in STREAM_COMMANDS if name != "restart")  # :meth:`ReferenceServer.command`'s
+COMMANDS = tuple(name for name in STREAM_COMMANDS if name not in ("restart", "retarget"))  # those of ``command``
 
 
 class CommandRefusedError(RuntimeError):
@@ -138,12 +140,13 @@ class Milestone:
         self.stamp_ns: int | None = None
 
 
-class Blend(NamedTuple):
-    """A re-target's blend (:meth:`ReferenceServer.retarget`): its first sample k, the motion time [s] it begins
-    at, and the milestone of its end (the first sample on the new path)."""
+class RetargetBlend(NamedTuple):
+    """A re-target's blend (:meth:`ReferenceServer.retarget`): its command point k, the motion time [s] it begins
+    at, and the milestones of its start and its end (the first sample on the new path)."""
 
     k: int
     start: float
+    first: Milestone
     end: Milestone
 
 
@@ -373,22 +376,20 @@ class ReferenceServer:
         with self._lock:
             return Published(self.schedule.last, self._last_stamp)
 
-    def stamp_ns(self, k: int) -> int:
-        """Stamp [ns] of sample k (relative to the start while not publishing)."""
-        return stamp_at(self._start_ns or 0, k, self.rate)
-
     def stamp_of(self, k: int) -> float:
         """Stamp [s] of sample k (relative to the start while not publishing)."""
-        return self.stamp_ns(k) / NANOSECONDS
+        return stamp_at(self._start_ns or 0, k, self.rate) / NANOSECONDS
 
     # -- commands -------------------------------------------------------------------------------------
 
-    def _at_command_point(self, name: str, accepted_ns: int, *args: Any) -> CommandPoint:
+    def _at_command_point(self, name: str, accepted_ns: int, *args: Any,
+                          milestones: Callable[[Any], list[Milestone]] | None = None) -> CommandPoint:
         """Send the solver the stream command ``name`` with ``args`` at the stream time tau of the command point
         (frame k: the last one stamped within ``lead`` of the acceptance
         ``accepted_ns``, at least the one after the next to publish; the next frame to make while not
         publishing); the frames from k on are dropped at once, and the first batch of them is made again in
-        the same request.  Records the command's acceptance and effect."""
+        the same request.  Records the command's acceptance and effect, and watches the ``milestones`` of the
+        solver's answer from before any frame made after the command can be published."""
         self.check_computing()
         with self._lock:
             k, tau = self.schedule.command_point(accepted_ns if self.publishing else None, self._start_ns or 0)
@@ -405,6 +406,7 @@ class ReferenceServer:
         finally:
             with self._lock:
                 if batch is not None:
+                    self._milestones += milestones(answer) if milestones is not None else []
                     self._accept(batch, plan)
                 self._commands_pending -= 1
                 self._lock.notify_all()  # the worker goes on after these frames, not at the next publish
@@ -447,8 +449,8 @@ class ReferenceServer:
                 self._lock.notify_all()
 
     def command(self, name: str, *args: Any, accepted_ns: int) -> int:
-        """Apply the stream command ``name`` (``pause``, ``resume``, ``speed_scaling`` (rate),
-        ``retarget`` (targets, checked with :meth:`check_targets`)) at the command point of its acceptance
+        """Apply the stream command ``name`` (``pause``, ``resume``, ``speed_scaling`` (rate); a re-target is
+        :meth:`retarget`) at the command point of its acceptance
         at the clock reading ``accepted_ns`` [ns] (:meth:`~.schedule.FrameSchedule.command_point`).  Returns
         the sample it takes effect at.  Raises what the stream raises (the stream unchanged), or
         :class:`CommandRefusedError` once the solver has stopped."""
@@ -456,14 +458,18 @@ class ReferenceServer:
             raise ValueError(f"command {name!r}: not one of {', '.join(COMMANDS)}")
         return self._at_command_point(name, accepted_ns, *args).k
 
-    def retarget(self, targets: Task, blend_time: float, accepted_ns: int) -> Blend:
-        """The stream command ``retarget`` over ``blend_time`` s of motion time (:meth:`command`; ``targets`` checked
-        with :meth:`check_targets`), and its blend."""
-        point = self._at_command_point("retarget", accepted_ns, targets, blend_time)
-        end = Milestone(point.answer + blend_time)
-        with self._lock:
-            self._milestones.append(end)
-        return Blend(point.k, point.answer, end)
+    def retarget(self, targets: Task, blend_time: float, accepted_ns: int) -> RetargetBlend:
+        """Re-target to ``targets`` (checked with :meth:`check_targets`) over ``blend_time`` s of motion time from
+        the command point of ``accepted_ns`` (as :meth:`command`); its blend, whose milestones are stamped as the
+        samples at or after its start and end are published."""
+        first, end = Milestone(math.inf), Milestone(math.inf)
+
+        def watch(start: float) -> list[Milestone]:
+            first.t, end.t = start, start + blend_time
+            return [first, end]
+
+        point = self._at_command_point("retarget", accepted_ns, targets, blend_time, milestones=watch)
+        return RetargetBlend(point.k, point.answer, first, end)
 
     def check_targets(self, targets: Task) -> None:
         """Raise :class:`~.targets.UnreachableTargetError` unless ``targets`` can be streamed from here."""
