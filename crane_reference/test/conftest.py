@@ -14,7 +14,7 @@ from __future__ import annotations
 import importlib
 import os
 import pkgutil
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -76,3 +76,15 @@ def kernel_signatures() -> Callable[[], int]:
             total += sum(len(f.signatures) for f in vars(module).values() if isinstance(f, CPUDispatcher))
         return total
     return count
+
+
+@pytest.fixture
+def ros() -> Iterator:
+    """test_ros_node's Harness: the node under test and a probe node in one rclpy Context (ROS tests only)."""
+    from test_ros_node import Harness
+
+    harness = Harness()
+    try:
+        yield harness
+    finally:
+        harness.close()

@@ -14,7 +14,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -165,15 +165,6 @@ class Harness:
     def wait_until_stamp(self, stamp: int, timeout: float = 15.0) -> None:
         self.wait_for(lambda: self.received["joint_states"] and stamp_ns(self.received["joint_states"][-1][1]) >= stamp,
                       f"the sample stamped {stamp}", timeout)
-
-
-@pytest.fixture
-def ros() -> Iterator[Harness]:
-    harness = Harness()
-    try:
-        yield harness
-    finally:
-        harness.close()
 
 
 def diagnostics_values(ros: Harness, since: float = 0.0) -> list[dict[str, str]]:

@@ -6,11 +6,9 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
-import pytest
 from action_msgs.msg import GoalStatus
 from crane_reference_interfaces.action import Retarget
 from lifecycle_msgs.msg import Transition
@@ -22,15 +20,6 @@ from crane_reference.ros.node import CraneReferenceNode
 
 RATE = 100  # [Hz]
 ON_PATH = 1e-9  # E's ellipse residual (5.1) on the path (as the node's parameter test)
-
-
-@pytest.fixture
-def ros() -> Iterator[Harness]:
-    harness = Harness()
-    try:
-        yield harness
-    finally:
-        harness.close()
 
 
 class Client:

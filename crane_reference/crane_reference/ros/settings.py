@@ -85,9 +85,9 @@ def refusal(parameters: list[Parameter], params: NodeParameters, server: Referen
     except CommandRefusedError as error:
         return f"{', '.join(commanding)}: {error} (deactivate, cleanup, configure and activate start a new solver)"
     changed = {p.name: p.value for p in parameters if p.name in TARGET_PARAMETERS}
-    targets = params.changed(parameters).targets()
+    targets = params.changed(parameters).targets() if changed else server.stream.targets
     try:
-        if changed and targets != server.stream.targets:  # those in force are reachable
+        if targets != server.stream.targets:  # those in force are reachable
             server.check_targets(targets)
     except UnreachableTargetError as error:
         names = ", ".join(f"{name} = {value!r}" for name, value in changed.items())
