@@ -228,7 +228,8 @@ def measure_goals(executor: SingleThreadedExecutor, subscriber: Node, recorder: 
         path = result.path_stamp.sec * NS + result.path_stamp.nanosec
         blend_stamp = result.blend_stamp.sec * NS + result.blend_stamp.nanosec
         span_error.append((path - blend_stamp) / NS - blend)
-        spin_until(executor, lambda p=path: recorder.stamps and recorder.stamps[-1] >= p, 5.0)
+        if not spin_until(executor, lambda p=path: recorder.stamps and recorder.stamps[-1] >= p, 5.0):
+            raise RuntimeError(f"goal {i}: no sample stamped path_stamp received")
         first = next(j for j, s in enumerate(recorder.stamps) if s >= path)
         after_path.append((received - recorder.monotonic[first]) / NS)
         spin_for(executor, 0.5)

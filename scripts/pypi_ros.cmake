@@ -1,5 +1,5 @@
-# Included into the CMake build of crane_reference_interfaces by scripts/setup.sh (CMAKE_PROJECT_INCLUDE), which
-# builds it against ROS 2 Jazzy's PyPI wheels in .venv.  Those wheels' CMake exports name the include directories
+# Included into the CMake build of crane_reference_interfaces by scripts/setup.sh and scripts/check_colcon.sh
+# (CMAKE_PROJECT_INCLUDE), which build it against ROS 2 Jazzy's PyPI wheels in .venv.  Those wheels' CMake exports name the include directories
 # of the machine that built them (/opt/python/cp3XX-cp3XX/...: Python's and NumPy's headers).  At the end of the
 # configure step each such directory of an imported target becomes this Python's.  A ROS distribution needs none
 # of this (colcon builds the package as it is).

@@ -12,7 +12,7 @@ import pytest
 from test_server import NS, PERIOD, RATE, STEP, publish, sample, spec, wait_ready
 from test_simulation import quintic_z
 
-from crane_reference.stream.retarget_goal import RetargetGoal
+from crane_reference.stream.retarget_goal import PREEMPTED, REACHED, STOPPED, RetargetGoal
 from crane_reference.stream.sample import ReferenceSample
 from crane_reference.stream.server import Preview, ReferenceServer
 from crane_reference.stream.solver import LocalSolver
@@ -64,6 +64,7 @@ def test_the_path_stamp_is_where_the_published_path_becomes_the_new_one(server: 
     assert middle.any() and not (on_old | on_new)[middle].any()  # blending: on neither
     assert (t[stamps >= path] >= goal.blend.start + BLEND - 1e-12).all()
     assert (t[stamps < path] < goal.blend.start + BLEND).all()
+    assert goal.end(serving=True).outcome == REACHED
 
 
 def test_feedback_is_the_distance_to_the_new_path(server: ReferenceServer) -> None:
@@ -90,20 +91,37 @@ def test_feedback_is_the_distance_to_the_new_path(server: ReferenceServer) -> No
         assert feedback.height_error == pytest.approx(up, abs=1e-12)
 
 
-def test_a_newer_retarget_supersedes_a_goal(server: ReferenceServer) -> None:
+def test_a_newer_retarget_preempts_a_goal_which_is_then_never_reached(server: ReferenceServer) -> None:
+    """A re-target that begins within a goal's blend replaces the path the goal was heading for: the goal ends
+    pre-empted, and no sample of the newer blend is taken for its path."""
     server.begin(NS)
     before = publish(server, NS, 0.2)
     old = server.stream.targets
     first = dataclasses.replace(old, ellipse_a=old.ellipse_a + 0.2)
     goal = RetargetGoal(server, first, BLEND, before[-1].stamp_ns)
-    server.retarget(dataclasses.replace(first, ellipse_b=old.ellipse_b + 0.1), BLEND, before[-1].stamp_ns + PERIOD)
-    assert goal.superseded
+    during = publish(server, before[-1].stamp_ns + PERIOD, BLEND / 2)
+    assert goal.end(serving=True) is None
+    server.retarget(dataclasses.replace(first, ellipse_b=old.ellipse_b + 0.1), BLEND, during[-1].stamp_ns)
+    publish(server, during[-1].stamp_ns + PERIOD, 2 * BLEND)  # past both blends' ends
+    assert goal.superseded and goal.end(serving=True).outcome == PREEMPTED
+    assert goal.blend_stamp_ns is not None and goal.path_stamp_ns is None
 
 
-def test_feedback_with_e_on_the_column_axis_is_finite(server: ReferenceServer) -> None:
-    """E on the ellipse's centre (rho = 0, no ray to the ellipse): the feedback is finite."""
+def test_a_goal_stops_with_publishing(server: ReferenceServer) -> None:
+    server.begin(NS)
+    before = publish(server, NS, 0.2)
+    goal = RetargetGoal(server, dataclasses.replace(server.stream.targets, ellipse_a=3.2), BLEND,
+                        before[-1].stamp_ns)
+    assert goal.end(serving=True) is None and goal.end(serving=False).outcome == STOPPED
+    server.end()
+    assert goal.end(serving=True).outcome == STOPPED
+
+
+def test_feedback_with_e_on_the_column_axis_is_the_nearest_ellipse_point(server: ReferenceServer) -> None:
+    """E on the ellipse's centre (no ray to the ellipse): inside by the smaller semi-axis."""
     server.begin(NS)
     before = publish(server, NS, 0.1)
-    goal = RetargetGoal(server, server.stream.targets, BLEND, before[-1].stamp_ns)
+    targets = server.stream.targets
+    goal = RetargetGoal(server, targets, BLEND, before[-1].stamp_ns)
     probe: ReferenceSample = dataclasses.replace(sample(before[-1]), ee_position=np.array([0.0, 0.0, 1.0]))
-    assert np.isfinite(goal.feedback(probe, 0)).all()
+    assert goal.feedback(probe, 0).ellipse_error == -min(targets.ellipse_a, targets.ellipse_b)

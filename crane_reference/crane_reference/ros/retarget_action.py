@@ -32,12 +32,15 @@ from ..interface import messages
 from ..interface.messages import MessageTypes
 from ..motion.simulation import SOLVER_FAILURES
 from ..stream.reference_stream import ERROR
-from ..stream.retarget_goal import RetargetGoal
+from ..stream.retarget_goal import PREEMPTED, REACHED, STOPPED, RetargetGoal
 from ..stream.server import CommandRefusedError, ReferenceServer
 from .parameters import TARGET_PARAMETERS, NodeParameters, field_name
 from .settings import refusal
 
 FEEDBACK_PERIOD = 0.1  # [s] of wall time between two feedbacks of an active goal
+OUTCOME_CODES = {REACHED: Retarget.Result.SUCCESSFUL, PREEMPTED: Retarget.Result.PREEMPTED,
+                 STOPPED: Retarget.Result.STOPPED}
+"""The result's error code of each way a goal ends (:class:`~crane_reference.stream.retarget_goal.GoalEnd`)."""
 GOAL_FIELDS = {name: field_name(name) for name in TARGET_PARAMETERS}
 """The target parameters and the goal fields that carry them."""
 
@@ -89,6 +92,7 @@ class RetargetActionServer:
             return self._end(goal_handle, goal_handle.abort, Result.STOPPED,
                              f"the stream is in ERROR ({server.stream.last_error})")
         try:
+            server.check_computing()  # a stopped solver is STOPPED, not an invalid goal
             reason = refusal([*targets, *blend], params, server)
             if reason is not None:
                 return self._end(goal_handle, goal_handle.abort, Result.INVALID_GOAL, reason)
@@ -112,20 +116,15 @@ class RetargetActionServer:
         if self._goal is None:
             return
         goal_handle, goal, _ = self._goal
-        Result = Retarget.Result
-        stream = goal.server.stream
-        if goal.path_stamp_ns is not None:
-            self._finish(goal_handle.succeed, Result.SUCCESSFUL, "")
-        elif goal.superseded:
-            self._preempt("the target parameters were changed")
-        elif self._server() is not goal.server or not goal.server.computing or not self._active():
-            self._finish(goal_handle.abort, Result.STOPPED, "the node stopped publishing before the new path")
-        elif stream.state == ERROR:
-            self._finish(goal_handle.abort, Result.STOPPED, f"the stream is in ERROR ({stream.last_error})")
+        end = goal.end(serving=self._server() is goal.server and self._active())
+        if end is not None:
+            succeeded = end.outcome == REACHED
+            self._finish(goal_handle.succeed if succeeded else goal_handle.abort,
+                         OUTCOME_CODES[end.outcome], end.message)
         elif goal_handle.is_cancel_requested:
             result = self._node.set_parameters_atomically([Parameter(name, value=getattr(goal.previous, field))
                                                            for name, field in TARGET_PARAMETERS.items()])
-            self._finish(goal_handle.canceled, Result.CANCELED, f"canceled: blending back to {goal.previous}"
+            self._finish(goal_handle.canceled, Retarget.Result.CANCELED, f"canceled: blending back to {goal.previous}"
                          if result.successful else f"canceled, but the targets before it were refused: {result.reason}")
         else:
             published = goal.server.last_sample()

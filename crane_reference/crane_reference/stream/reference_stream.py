@@ -148,10 +148,14 @@ class ReferenceStream:
             return math.inf
         return self._warp.publish_time(end)
 
-    def set_blend_time(self, seconds: float) -> None:
+    @staticmethod
+    def _checked_blend_time(seconds: float) -> float:
         if not (math.isfinite(seconds) and seconds > 0.0):
             raise ValueError(f"blend_time = {seconds}: must be a finite number > 0 s")
-        self.blend_time = seconds
+        return seconds
+
+    def set_blend_time(self, seconds: float) -> None:
+        self.blend_time = self._checked_blend_time(seconds)
 
     def pause(self, tau: float) -> None:
         """Bring the motion to rest from publish time tau along a speed-scaling ramp (C2: no step in
@@ -267,6 +271,7 @@ class ReferenceStream:
         publish time tau (C2, over ``blend_time`` s of motion time, default the stream's blend time).  Unless the
         caller has just run :meth:`check_targets` itself (``checked``), it does so first and may raise
         UnreachableTargetError.  Returns the motion time [s] the blend begins at."""
+        duration = self.blend_time if blend_time is None else self._checked_blend_time(blend_time)
         if not checked:
             self.check_targets(targets)
         t = self.motion_time(tau)
@@ -274,8 +279,7 @@ class ReferenceStream:
         k = self._history.first_at_or_after(t)
         at = self._history.instant(k)
         new = self.task_constraints(targets, self.scenario.z_static)
-        self._stepper.retarget(blend_constraints(at.motion.constraints, new, at.t, blend_time or self.blend_time),
-                               at.t, at.q, at.qd)
+        self._stepper.retarget(blend_constraints(at.motion.constraints, new, at.t, duration), at.t, at.q, at.qd)
         self._forgotten.append(self._history.truncate(k))
         self._history.set_snapshot(k, self._stepper.snapshot())
         self.targets = targets

@@ -5,8 +5,10 @@ What the node's ``~/retarget`` action serves, without ROS.  A :class:`RetargetGo
 from those in force to the goal's over its blend time (in motion time) from the command point of its acceptance.
 For a published sample, :meth:`RetargetGoal.feedback` gives the blend's progress and E's distance to the new path;
 the goal is reached when the first sample at or after the blend's end is published, and
-:attr:`RetargetGoal.path_stamp_ns` is then that sample's stamp.  It is superseded once the stream's targets are no
-longer the goal's (a newer goal, a change of the target parameters).
+:attr:`RetargetGoal.path_stamp_ns` is then that sample's stamp.  :meth:`RetargetGoal.end` says how it ended:
+reached; pre-empted once the stream's targets are no longer the goal's (a newer goal, a change of the target
+parameters: a re-target that begins before this blend's end drops its milestones, so a superseded goal is never
+reached); stopped when the server no longer serves it, its solver stopped or its stream is in ERROR.
 """
 
 from __future__ import annotations
@@ -16,8 +18,11 @@ from typing import NamedTuple
 
 from ..model.parameters import Task
 from ..motion.simulation import paper_task_constraints
+from .reference_stream import ERROR
 from .sample import ReferenceSample
 from .server import ReferenceServer, RetargetBlend
+
+REACHED, PREEMPTED, STOPPED = "reached", "preempted", "stopped"
 
 
 class RetargetFeedback(NamedTuple):
@@ -29,6 +34,13 @@ class RetargetFeedback(NamedTuple):
     progress: float
     ellipse_error: float
     height_error: float
+
+
+class GoalEnd(NamedTuple):
+    """How a goal ended: ``outcome`` (:data:`REACHED`, :data:`PREEMPTED` or :data:`STOPPED`) and why."""
+
+    outcome: str
+    message: str
 
 
 class RetargetGoal:
@@ -60,6 +72,20 @@ class RetargetGoal:
         """Whether the stream's targets are no longer the goal's (a newer re-target took over)."""
         return self.server.stream.targets != self.targets
 
+    def end(self, serving: bool) -> GoalEnd | None:
+        """How the goal has ended, or None while it goes on; ``serving``: whether its server still publishes for
+        the goal's owner (false once the node deactivates or replaces the server)."""
+        stream = self.server.stream
+        if self.path_stamp_ns is not None:
+            return GoalEnd(REACHED, "")
+        if self.superseded:
+            return GoalEnd(PREEMPTED, "a newer re-target took over")
+        if not (serving and self.server.computing and self.server.publishing):
+            return GoalEnd(STOPPED, "publishing or the solver stopped before the new path")
+        if stream.state == ERROR:
+            return GoalEnd(STOPPED, f"the stream is in ERROR ({stream.last_error})")
+        return None
+
     def feedback(self, sample: ReferenceSample, stamp_ns: int) -> RetargetFeedback:
         """The goal's progress at ``sample`` published with the stamp ``stamp_ns``: the progress is
         (t - t_0) / T_blend between 0 and 1, with t the sample's motion time, t_0 the blend's start; E's distance
@@ -67,9 +93,10 @@ class RetargetGoal:
         its height error is Phi_2 = z_E - z_E,a(t) of (5.2).  The constraints' profiles a(t), b(t), z_E,a(t) give
         the values (plain Python: the node's process runs no compiled kernel for it)."""
         p, t = sample.ee_position, sample.t
-        rho = math.hypot(p[0] / self._ellipse.a(t)[0], p[1] / self._ellipse.b(t)[0])
+        a, b = self._ellipse.a(t)[0], self._ellipse.b(t)[0]
+        rho = math.hypot(p[0] / a, p[1] / b)
         radius = math.hypot(p[0], p[1])
         return RetargetFeedback(
             stamp_ns, min(max((t - self.blend.start) / self.blend_time, 0.0), 1.0),
-            radius * (1.0 - 1.0 / rho) if rho > 0.0 else -radius,
+            radius * (1.0 - 1.0 / rho) if rho > 0.0 else -min(a, b),  # at the centre: the nearest ellipse point
             float(p[2] - self._height.z(t)[0]))

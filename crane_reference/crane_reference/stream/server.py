@@ -406,7 +406,8 @@ class ReferenceServer:
         finally:
             with self._lock:
                 if batch is not None:
-                    self._milestones += milestones(answer) if milestones is not None else []
+                    watched = milestones(answer) if milestones is not None else []  # may drop earlier ones
+                    self._milestones += watched
                     self._accept(batch, plan)
                 self._commands_pending -= 1
                 self._lock.notify_all()  # the worker goes on after these frames, not at the next publish
@@ -464,8 +465,10 @@ class ReferenceServer:
         samples at or after its start and end are published."""
         first, end = Milestone(math.inf), Milestone(math.inf)
 
-        def watch(start: float) -> list[Milestone]:
+        def watch(start: float) -> list[Milestone]:  # the server's lock held
             first.t, end.t = start, start + blend_time
+            # the path an earlier blend's milestones at or after this start marked is never published
+            self._milestones = [milestone for milestone in self._milestones if milestone.t < start]
             return [first, end]
 
         point = self._at_command_point("retarget", accepted_ns, targets, blend_time, milestones=watch)

@@ -183,9 +183,9 @@ class StreamSolver:
     def set_speed_scaling(self, tau: float, rate: float) -> None:
         self.stream.set_speed_scaling(tau, rate)
 
-    def retarget(self, tau: float, targets: Task, blend_time: float | None = None) -> float:
-        """Re-target at tau to targets already checked (:meth:`check_targets`) over ``blend_time`` (default the
-        stream's); the motion time [s] the blend begins at."""
+    def retarget(self, tau: float, targets: Task, blend_time: float) -> float:
+        """Re-target at tau to targets already checked (:meth:`check_targets`) over ``blend_time`` [s]; the motion
+        time [s] the blend begins at."""
         return self.stream.retarget(tau, targets, checked=True, blend_time=blend_time)
 
     def restart(self, tau: float) -> Return:
