@@ -11,7 +11,9 @@ process and, after a warm-up, records for ``--duration`` seconds (default 30):
 * missed samples: stamps absent from the received sequence, plus the samples the node itself held
   because it ran late and the times its stamps leapt (from /diagnostics: held_late, stamp_leaps);
 * CPU share of the node (user + system time of its process and of the solver's process / wall time,
-  100 % = one core; also each process alone) and the solver's real-time factor it reports;
+  100 % = one core; also each process alone) and the solver's real-time factor it reports (/diagnostics'
+  ``real_time_factor``, over the second before each report: ``real_time_factor`` is the median of the reports
+  of the measured seconds in which the solver computed, ``real_time_factor_min`` the smallest);
 * latency from a parameter change (``ellipse.a``, through the parameter service) to the reception of
   the first sample that uses it (the node reports that sample's stamp in /diagnostics as
   ``retarget_stamp_s``), over ``--changes`` changes, and from the node's acceptance of the change to that
@@ -104,7 +106,8 @@ WARM_UP = 2.0  # [s] after the first message
 
 @dataclass
 class Recorder:
-    """Receptions of joint_states (monotonic and system time, stamp) and the last diagnostics values."""
+    """Receptions of joint_states (monotonic and system time, stamp), the last diagnostics values and every
+    real-time factor reported (monotonic time [ns], value)."""
 
     monotonic: list[int] = field(default_factory=list)
     system: list[int] = field(default_factory=list)
@@ -112,6 +115,7 @@ class Recorder:
     slew_velocity: list[float] = field(default_factory=list)
     finite: list[bool] = field(default_factory=list)
     diagnostics: dict[str, str] = field(default_factory=dict)
+    real_time_factors: list[tuple[int, float]] = field(default_factory=list)
 
     def joint_state(self, msg: JointState) -> None:
         self.monotonic.append(time.monotonic_ns())
@@ -124,6 +128,8 @@ class Recorder:
         for status in msg.status:
             if status.name.startswith(NODE):
                 self.diagnostics = {kv.key: kv.value for kv in status.values}
+                if "real_time_factor" in self.diagnostics:
+                    self.real_time_factors.append((time.monotonic_ns(), float(self.diagnostics["real_time_factor"])))
 
 
 def descendants(pid: int) -> list[int]:
@@ -345,7 +351,8 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         last = len(recorder.stamps)
         spin_until(executor, lambda: float(recorder.diagnostics.get("published", 0)) > 0, 2.0)
         late = {k: float(recorder.diagnostics.get(k, 0)) - before[k] for k in before}
-        factor = recorder.diagnostics.get("real_time_factor", "nan")
+        factors = [value for at, value in recorder.real_time_factors
+                   if t0 * NS < at <= (t0 + wall) * NS and math.isfinite(value)]  # inf: nothing computed
         latencies, after_acceptance, margins = (measure_latency(executor, client, recorder, changes) if changes
                                                 else ([float("nan")],) * 3)
         goals = measure_goals(executor, subscriber, recorder, changes) if changes else {}
@@ -373,7 +380,9 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         "missed": int(expected - len(stamps)), "held_late": int(late["held_late"]),
         "stamp_leaps": int(late["stamp_leaps"]),
         "cpu_percent": 100.0 * cpu.sum() / wall, "cpu_node_process_percent": 100.0 * cpu[0] / wall,
-        "cpu_solver_process_percent": 100.0 * cpu[1] / wall, "real_time_factor": float(factor),
+        "cpu_solver_process_percent": 100.0 * cpu[1] / wall,
+        "real_time_factor": float(np.median(factors)) if factors else math.nan,
+        "real_time_factor_min": min(factors, default=math.nan),
         "latency_median_ms": 1e3 * float(np.median(latencies)), "latency_max_ms": 1e3 * float(np.max(latencies)),
         "effect_after_acceptance_max_ms": 1e3 * float(np.max(after_acceptance)),
         "margin_retarget_min_ms": 1e3 * float(np.min(margins)),
