@@ -74,7 +74,8 @@ class CraneReferenceNode(LifecycleNode):
         self.create_service(Trigger, "~/restart", self._on_restart)
         self.create_service(SetBool, "~/pause", self._on_pause)
         self._retarget = RetargetActionServer(self, self._types, lambda: self._server, lambda: self._params,
-                                              lambda: self._lifecycle_state() == "active")
+                                              lambda: self._lifecycle_state() == "active",
+                                              self._params.action_monitor_rate)
         self.create_subscription(Float64, messages.SPEED_SCALING_TOPIC, self._on_speed_scaling,
                                  messages.PUBLISHER_DEPTH)
         self._status_timer = self.create_timer(self._params.status_period, self._diagnostics.log_status)

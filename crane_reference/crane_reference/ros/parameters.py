@@ -182,6 +182,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "~/pause, resume and the stop before ~/restart)", "s", (0.01, 60.0), read_only=True),
     ParameterSpec("autostart", BOOL, True, "Configure and activate the (lifecycle) node at once; if false, it "
                   "waits unconfigured for a lifecycle manager or `ros2 lifecycle set`", read_only=True),
+    ParameterSpec("action_monitor_rate", DOUBLE, 10.0, "Rate at which an active ~/retarget goal is checked and its "
+                  "feedback published (joint_trajectory_controller's parameter of that name)", "Hz", (0.1, 1000.0),
+                  read_only=True),
     ParameterSpec("status_period", DOUBLE, 5.0, "Period of the one-line status log", "s", (0.1, 3600.0)),
     ParameterSpec("solver_process", BOOL, True, "Compute the reference in a process of its own (its own Python "
                   "interpreter, so the solver and the publisher never wait for each other); false: in a thread of "
@@ -223,6 +226,7 @@ class NodeParameters:
     speed_scaling: float
     speed_scaling_ramp_time: float
     autostart: bool
+    action_monitor_rate: float
     status_period: float
     solver_process: bool
 

@@ -6,8 +6,8 @@ and result, served as joint_trajectory_controller serves ``follow_joint_trajecto
   E's reach); if one is not allowed the goal is aborted with ``INVALID_GOAL`` and the reason.  Otherwise it
   re-targets the stream over its blend time (:class:`~crane_reference.stream.retarget_goal.RetargetGoal`) and
   sets the target parameters to its targets, so that they show the targets in force.
-* Feedback every :data:`FEEDBACK_PERIOD` s of wall time: the stamp of the last sample published, the blend's
-  progress and E's distance to the new path.
+* Feedback at ``monitor_rate`` (the node's ``action_monitor_rate``, Hz of wall time): the stamp of the last
+  sample published, the blend's progress and E's distance to the new path.
 * The result, once the first sample on the new path is published: its stamp and that of the blend's first sample.
 * A newer goal, or a change of the target parameters, pre-empts a goal (aborted, ``PREEMPTED``: rclpy ends a goal
   as canceled only after a cancel request, where joint_trajectory_controller cancels it); a cancel sets the
@@ -37,7 +37,6 @@ from ..stream.server import CommandRefusedError, ReferenceServer
 from .parameters import TARGET_PARAMETERS, NodeParameters, field_name
 from .settings import refusal
 
-FEEDBACK_PERIOD = 0.1  # [s] of wall time between two feedbacks of an active goal
 OUTCOME_CODES = {REACHED: Retarget.Result.SUCCESSFUL, PREEMPTED: Retarget.Result.PREEMPTED,
                  STOPPED: Retarget.Result.STOPPED}
 """The result's error code of each way a goal ends (:class:`~crane_reference.stream.retarget_goal.GoalEnd`)."""
@@ -49,15 +48,16 @@ class RetargetActionServer:
     """See the module documentation."""
 
     def __init__(self, node: Node, types: MessageTypes, server: Callable[[], ReferenceServer | None],
-                 params: Callable[[], NodeParameters], active: Callable[[], bool]) -> None:
+                 params: Callable[[], NodeParameters], active: Callable[[], bool], monitor_rate: float) -> None:
         """Serve ``~/retarget`` on ``node``; ``server``, ``params`` and ``active`` give the node's server (None
-        while unconfigured), its parameter values and whether it publishes."""
+        while unconfigured), its parameter values and whether it publishes; an active goal is checked at
+        ``monitor_rate`` [Hz]."""
         self._node, self._types = node, types
         self._server, self._params, self._active = server, params, active
         self._goal: tuple[ServerGoalHandle, RetargetGoal, Future] | None = None
         self._action = ActionServer(node, Retarget, "~/retarget", self._execute, goal_callback=self._on_goal,
                                     cancel_callback=self._on_cancel)
-        self._timer = node.create_timer(FEEDBACK_PERIOD, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME),
+        self._timer = node.create_timer(1.0 / monitor_rate, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME),
                                         autostart=False)  # runs while a goal is active
 
     def destroy(self) -> None:
