@@ -34,7 +34,6 @@ from .structures import (
     ACCOUNTS,
     CONSTRAINTS_UNSOLVABLE,
     CONVERGED,
-    DRIVE_TORQUE,
     NOT_CONVERGED,
     SINGULAR_VALUE,
     Accelerations,
@@ -52,7 +51,14 @@ from .structures import (
     StepRows,
     StepSettings,
 )
-from .terms import energy_accounts, frame_terms, generalized_forces, inverse_dynamics, velocity_products
+from .terms import (
+    drive_torque,
+    energy_accounts,
+    frame_terms,
+    generalized_forces,
+    inverse_dynamics,
+    velocity_products,
+)
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -216,21 +222,26 @@ def _with_accelerations(s: StateTerms, qdd):
 
 
 @njit(cache=True, nogil=True, inline='always')
+def _reactions(A, imbalance, partition: Partition):
+    """The reactions to the imbalance M qdd + h - Q and their generalized force: for ideal constraints
+    lambda = (A A^T)^-1 A (M qdd + h - Q) and A^T lambda (the imbalance itself where qdd solves (8); for the
+    integrator's accelerations its part along the constraints: the rest is the modal correction's force,
+    see :mod:`crane_reference.motion.integration`); for servo-constraints the dependent joints' torques and
+    the imbalance."""
+    if partition.servo:
+        return imbalance[partition.dependent], imbalance
+    reactions = solve_small_vector(matmul(A, A.T), matvec(A, imbalance))
+    return reactions, matvec(np.ascontiguousarray(A.T), reactions)
+
+
+@njit(cache=True, nogil=True, inline='always')
 def _evaluation(q, qd, acc: Accelerations, k: Coefficients, drive, partition: Partition, chain: ChainData):
     """The full :class:`Evaluation` from :class:`Accelerations`: adds the constraint residuals, gradients,
-    distances and velocity residuals, the reactions, their generalized force and the accounts.  The
-    reactions come from the imbalance M qdd + h - Q: lambda = (A A^T)^-1 A (M qdd + h - Q) for ideal
-    constraints, with the generalized force A^T lambda (the imbalance itself where qdd solves (8); for the
-    integrator's accelerations its part along the constraints: the rest is the modal correction's force,
-    see :mod:`crane_reference.motion.integration`); the dependent joints' torques for servo-constraints."""
+    distances and velocity residuals, the reactions to the imbalance M qdd + h - Q and their generalized
+    force (:func:`_reactions`), and the accounts."""
     dependent = partition.dependent
-    reaction_force = matvec(acc.M, acc.qdd) + acc.h - acc.forces
     residual, grads, distance, rate = constraint_values(acc.ee_position, matvec(acc.ee_jacobian, qd), k)
-    if partition.servo:
-        reactions = reaction_force[dependent]
-    else:
-        reactions = solve_small_vector(matmul(acc.A, acc.A.T), matvec(acc.A, reaction_force))
-        reaction_force = matvec(np.ascontiguousarray(acc.A.T), reactions)
+    reactions, reaction_force = _reactions(acc.A, matvec(acc.M, acc.qdd) + acc.h - acc.forces, partition)
     energy = energy_accounts(q, qd, acc.M, acc.gravity_potential, chain, drive)
     accounts = np.array([energy[0], energy[1], energy[2], energy[3], reaction_force @ qd, energy[4],
                          smallest_singular_value(np.ascontiguousarray(acc.A[:, dependent]))])
@@ -655,15 +666,25 @@ def integration_run(q, qd, qdd, B, earlier, correction: ModalCorrection, t0, tim
 
 @njit(cache=True, nogil=True)
 def evaluated_rows(q, qd, qdd, k: Coefficients, drives, partition: Partition, chain: ChainData):
-    """The full evaluation (:func:`step_evaluation`) of computed steps that :func:`integration_run` left
-    unevaluated: rows of q, qd and the integrator's qdd (N, n) with the constraint coefficients ``k`` (stacked
-    per row) and the drive parameters ``drives`` of each; returns the generalized force of the constraints
-    (N, n), the drive torque (N,) [N m] and the constraint distances (N, m) [m]."""
+    """What a reader of computed steps that :func:`integration_run` left unevaluated needs of their full
+    evaluation (:func:`step_evaluation`), without M: rows of q, qd and the integrator's qdd (N, n) with the
+    constraint coefficients ``k`` (stacked per row) and the drive parameters ``drives`` of each; returns the
+    generalized force of the constraints (N, n; :func:`_reactions` to M qdd + h - Q by O(n) inverse
+    dynamics), the drive torque (N,) [N m] and the constraint distances (N, m) [m]."""
     N, n, m = q.shape[0], q.shape[1], k.order.size
     forces, torques, distances = np.empty((N, n)), np.empty(N), np.empty((N, m))
     for i in range(N):
-        e = step_evaluation(q[i], qd[i], qdd[i], _at_step(k, i), drives[i], partition, chain)
-        forces[i], torques[i], distances[i] = e.constraint_forces, e.accounts[DRIVE_TORQUE], e.distance
+        k_i = _at_step(k, i)
+        T, S = forward_kinematics(q[i], chain.kinds, chain.axes, chain.origins)
+        velocity_term = velocity_terms(qd[i], S)
+        imbalance = _imbalance(q[i], qd[i], qdd[i], S, world_pseudo_inertias(T, chain.body_joint, chain.body_H),
+                               velocity_term, chain, drives[i])
+        p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
+        v = matvec(C, qd[i])
+        A = acceleration_terms(p, v, C, point_bias(velocity_term, chain.ee_joint, p), k_i)[0]
+        forces[i] = _reactions(A, imbalance, partition)[1]
+        torques[i] = drive_torque(drives[i], q[i, chain.drive_joint])
+        distances[i] = constraint_values(p, v, k_i)[2]
     return forces, torques, distances
 
 

@@ -180,7 +180,8 @@ class ProgrammedMotion:
         """What the full evaluation of computed steps gives that a run without it left out
         (:meth:`~.integration.ExactFrequencyTrapezoidal.run` with ``every_row`` False): at each of ``times``
         (N,) [s], with the rows of q, qd and the integrator's qdd (N, n) there, the generalized force of the
-        constraints (N, n), the drive torque (N,) [N m] and the constraint distances (N, m) [m]."""
+        constraints (N, n), the drive torque (N,) [N m] and the constraint distances (N, m) [m]; by O(n)
+        inverse dynamics, without M (:func:`~crane_reference.dynamics.kernels.evaluated_rows`)."""
         times = np.asarray(times, dtype=float)
         return kernels.evaluated_rows(np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float),
                                       np.ascontiguousarray(qdd, dtype=float), self.constraints.coefficients_at(times),

@@ -1,7 +1,7 @@
 """The computed motion kept for sampling and for rewinding (a re-target or a command in the past).
 
 The steps are kept as rows of arrays, in the order computed.  What only a reader needs (the generalized
-effort and the constraint distance, from the full evaluation of a step; the quaternion of E's frame) is
+effort and the constraint distance, by inverse dynamics at the step; the quaternion of E's frame) is
 computed for the rows that are read, when they are first read: the stream's runs evaluate only their last
 step (:class:`~crane_reference.motion.simulation.MotionStepper` with ``every_row`` False), and a node
 publishing at 100 Hz reads one step in twenty.
@@ -49,9 +49,7 @@ class History:
         self._begin = self._end = 0
         self.drive_joint = drive_joint
         self.extend({"t": np.array([s.t]), "q": s.q[None], "qd": s.qd[None], "qdd": s.qdd[None],
-                      "ee_position": s.ee_position[None], "ee_rotation": s.ee_rotation[None],
-                      "constraint_forces": s.constraint_forces[None], "drive_torque": np.array([s.drive_torque]),
-                      "residual_distance": s.residual_distance[None]}, start)
+                      "ee_position": s.ee_position[None], "ee_rotation": s.ee_rotation[None]}, start)
 
     def __len__(self) -> int:
         return self._end - self._begin
@@ -70,18 +68,15 @@ class History:
         return self._snapshots[self._end - 1]
 
     def extend(self, rows: dict[str, np.ndarray], end: StepperSnapshot) -> None:
-        """Append a compiled run, its rows stacked (``MotionStepper.advance_until``; the rows it did not
-        evaluate, NaN in their constraint distance, are left for :meth:`read`); the last one restartable from
-        ``end``."""
+        """Append a compiled run, its rows stacked (``MotionStepper.advance_until``; their effort and constraint
+        distance are left for :meth:`read`, one formula for every row); the last one restartable from ``end``."""
         count = rows["t"].size
         if self._end + count > self._motion.size:
             self._compact(count)
         new = slice(self._end, self._end + count)
         for name in ("t", "q", "qd", "qdd", "ee_position", "ee_rotation"):
             self._rows[name][new] = rows[name]
-        self._rows["effort"][new] = generalized_effort(rows["constraint_forces"], rows["drive_torque"],
-                                                       self.drive_joint)
-        self._rows["residual_distance"][new] = np.max(rows["residual_distance"], axis=-1)  # NaN: not evaluated
+        self._rows["effort"][new] = self._rows["residual_distance"][new] = np.nan  # NaN: not evaluated yet
         if not self._motions or self._motions[-1] is not end.motion:
             self._motions.append(end.motion)
         self._motion[new] = len(self._motions) - 1
