@@ -98,6 +98,7 @@ class Plant:
         self.keep = keep
         self._samples = [stack_samples([self.stepper.sample])]
         self._torque_rows = [np.zeros((1, len(ACTUATED_JOINTS)))]
+        self._open_loop: JointController | None = None  # apply's controller: all gains zero
 
     def actuate(self, end: float, torque_start: np.ndarray, torque_end: np.ndarray) -> None:
         """Command the joint drives [N m] from now to ``end`` [s] (on the step grid), linear from
@@ -159,10 +160,14 @@ class Plant:
         :meth:`follow` with no feedback (a controller whose gains are all zero, so that u_k is its
         feedforward)."""
         efforts = np.asarray(efforts, dtype=float)
-        starts, finals = np.vstack([efforts, efforts[-1:]]), np.vstack([efforts[:1], efforts])
+        starts, finals = np.empty((efforts.shape[0] + 1, efforts.shape[1])), np.empty((efforts.shape[0] + 1,
+                                                                                       efforts.shape[1]))
+        starts[:-1], starts[-1], finals[0], finals[1:] = efforts, efforts[-1], efforts[0], efforts
         zeros = np.zeros_like(efforts)
-        open_loop = JointController([JointGains(0.0, 0.0)] * len(ACTUATED_JOINTS), float(ends[0]) - self.t)
-        self.follow(ends, zeros, zeros, starts, finals, open_loop)
+        period = float(ends[0]) - self.t
+        if self._open_loop is None or self._open_loop.period != period:
+            self._open_loop = JointController([JointGains(0.0, 0.0)] * len(ACTUATED_JOINTS), period)
+        self.follow(ends, zeros, zeros, starts, finals, self._open_loop)
 
     def _keep(self, times: np.ndarray, rows: LoopRows) -> None:
         """Keep the rows of a :meth:`follow` (from its start, at ``times``) for :meth:`trajectory`."""

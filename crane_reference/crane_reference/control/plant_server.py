@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..dynamics.cache import WarmUp, cache_counts
-from ..dynamics.deflection import boom_tip_deflection
+from ..dynamics.deflection import TipDeflection
 from ..dynamics.kernels import imbalance_rows
 from ..dynamics.kinematics import quaternion
 from ..model.chain import ACTUATED_JOINTS, VARIANTS
@@ -139,6 +139,7 @@ class PlantServer:
         luff = model.index("boom_luff")
         self.deflection_frame = next(body.name for body in model.bodies if body.joint == luff)
         """The frame of the tip deflection: the URDF link of the first boom element."""
+        self._deflection = TipDeflection(model, self.plant.dynamics.chain) if settings.variant == "flexible" else None
         self._command = start.torques.copy()  # u in the order of ACTUATED_JOINTS
         self._last_command = -math.inf  # when the last command was accepted [s, the caller's clock]
         self._ticks = 0
@@ -215,8 +216,7 @@ class PlantServer:
         sample = plant.stepper.sample
         effort = np.zeros(plant.model.dof)
         effort[plant.actuated] = self._command - plant.joint_damping * plant.qd[plant.actuated]
-        deflection = (boom_tip_deflection(plant.model, plant.dynamics.chain, plant.q)[0]
-                      if self.settings.variant == "flexible" else np.zeros(3))
+        deflection = self._deflection(plant.q)[0] if self._deflection is not None else np.zeros(3)
         rows = self._published
         return PlantState(plant.t, plant.q[rows], plant.qd[rows], effort[rows], np.asarray(sample.ee_position).copy(),
                           quaternion(sample.ee_rotation), deflection, self.holding)

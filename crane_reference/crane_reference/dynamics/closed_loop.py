@@ -71,8 +71,8 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
     first_step[k] .. first_step[k + 1] - 1 ending at ``step_times`` (S,), ``on_jump`` where a step ends on a
     jump of the column drive (``inner`` (S, 4): the column drive's parameters at the step ends, left limits
     there; ``inner_after`` (S + 1, 4): right limits at t0 and at the step ends, where the integrator
-    restarts).  Tick k commands u_k (:func:`controller_tick` every ``period`` [s] on ``reference_q`` [k] - q
-    and ``reference_qd`` [k] of the ``actuated`` coordinates, feedforward ``feedforward_start`` [k]) at its
+    restarts; K >= 1).  Tick k commands u_k (:func:`controller_tick` every ``period`` [s] on ``reference_q`` [k]
+    - q and ``reference_qd`` [k] of the ``actuated`` coordinates, feedforward ``feedforward_start`` [k]) at its
     start, linear to clip(u_k + feedforward_end[k + 1] - feedforward_start[k], +-limit) at its end;
     ``integral`` and ``saturated`` are updated in place; the actuator torques are the commands minus
     ``joint_damping`` qd (the joint drives' velocity loops, in the plant's damping).  Stops at the first
@@ -87,9 +87,6 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
     work, t, done = work.copy(), t0, 0
     earlier = np.full((2, partition.integrated.size), np.nan)
     command = np.zeros((2, na))
-    # what is returned without ticks (each tick evaluates at its own start)
-    e = evaluate(q, qd, k, _drive_at(inner_after[0], t0, t0, tick_ends[0], command[0], command[1], actuated, n),
-                 partition, chain)
     for tick in range(tick_ends.size):
         start, end = t, tick_ends[tick]
         error, rate = np.empty(na), np.empty(na)

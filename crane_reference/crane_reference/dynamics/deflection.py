@@ -24,13 +24,22 @@ def rfe_indices(model: ChainModel, suffix: str = "") -> np.ndarray:
                      if name.startswith("boom_sde") and name.endswith(suffix)], dtype=np.int64)
 
 
+class TipDeflection:
+    """w of the module docstring for the chain of ``model`` (``chain`` is ``CraneDynamics.chain``)."""
+
+    def __init__(self, model: ChainModel, chain: ChainData):
+        self._arguments = (rfe_indices(model), model.index("boom_luff"), model.index("knuckle"), chain.kinds,
+                           chain.axes, chain.origins)
+
+    def __call__(self, q: np.ndarray) -> np.ndarray:
+        """w (N, 3) [m] for q (N, n) (one row for q (n,))."""
+        return _deflections(np.ascontiguousarray(np.atleast_2d(q), dtype=float), *self._arguments)
+
+
 def boom_tip_deflection(model: ChainModel, chain: ChainData, q: np.ndarray) -> np.ndarray:
     """w (N, 3) [m] for q (N, n) (one row for q (n,)), see the module docstring; ``chain`` is
     ``CraneDynamics.chain``."""
-    rows = np.ascontiguousarray(np.atleast_2d(q), dtype=float)
-    w = _deflections(rows, rfe_indices(model), model.index("boom_luff"), model.index("knuckle"), chain.kinds,
-                     chain.axes, chain.origins)
-    return w
+    return TipDeflection(model, chain)(q)
 
 
 @njit(cache=True, nogil=True)
