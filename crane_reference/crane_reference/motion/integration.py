@@ -105,7 +105,7 @@ PROJECTION_TOLERANCE = 1e-9
 Newton converges quadratically, so the residual left is ~|Phi_qq| 1e-18, far below 1e-15 m; the
 velocities and (8) are then evaluated at the projected q itself."""
 
-REFRESH_INTERVAL = 0.005
+REFRESH_INTERVAL = 0.01
 """[s] of motion after which the modal correction is computed again at the current configuration."""
 
 CUTOFF = 0.8 * math.pi
