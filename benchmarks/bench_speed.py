@@ -11,7 +11,8 @@ the same run.
 2. [profile] Per crane of ``--rfe`` (default 6), the compiled cost of the parts of one step (timed in compiled
    loops, also in ABA calls): the modal correction
    (an eigenproblem, every REFRESH_INTERVAL of motion), the iteration factor, per Newton evaluation a
-   projection and a residual, and a full evaluation (on the rows a caller reads).
+   projection and a residual, a full evaluation (on the rows a caller reads) and what the node reads of a row
+   (its effort and constraint distance, by inverse dynamics: ``evaluated_rows``).
 3. [speed] Per case (rigid; flexible with n_rfe = 6, 12, 24): Pinocchio's ABA per call; at
    the node's default ``ONLINE_STEP`` and at 1 ms the steps alone per step (compiled runs of
    0.25 s, best of ``--repeats``), as a multiple of one ABA call and as a real-time factor, and with every
@@ -189,6 +190,14 @@ def _repeat_evaluation(q, qd, k, drive, partition, chain, n):
     return total
 
 
+@njit
+def _repeat_read_row(q, qd, qdd, k, drives, partition, chain, n):
+    total = 0.0
+    for _ in range(n):
+        total += kernels.evaluated_rows(q, qd, qdd, k, drives, partition, chain)[1][0]
+    return total
+
+
 def component_times(params: CraneParameters, rfe_count: int, repeat: int = 3000) -> None:
     """[profile] Compiled cost of the parts of a step (flexible, ``rfe_count`` RFEs), each timed in a compiled
     loop (no Python call overhead), best of 5, also as a multiple of one Pinocchio ABA call on the same chain
@@ -219,7 +228,10 @@ def component_times(params: CraneParameters, rfe_count: int, repeat: int = 3000)
               (acc.M, acc.velocity_map, correction, drive, partition, chain)),
              ("qdd from (8) solved (accelerations_at)", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
              ("full evaluation (+ residuals, reactions, accounts)", _repeat_evaluation,
-              (q, qd, k, drive, partition, chain)))
+              (q, qd, k, drive, partition, chain)),
+             ("a read row's effort and distance (evaluated_rows)", _repeat_read_row,
+              (q[None], qd[None], acc.qdd[None], Coefficients(k.Q[None], k.g[None], k.c[None], k.order),
+               drive[None], partition, chain)))
     aba = aba_time(scenario)
     print(f"[profile] n_rfe={rfe_count:2d} dof={scenario.model.dof:2d} n_ic={partition.independent.size:2d}: "
           f"Pinocchio ABA {aba * 1e6:.2f} us/call")
