@@ -16,12 +16,13 @@ import pytest
 from scipy.linalg import expm
 from test_simulation import quintic_z
 
+from crane_reference.analysis.tracking.ahead import ComputedAhead
 from crane_reference.analysis.tracking.closed_loop import TrackingSpec, run_tracking
 from crane_reference.control.controller import JointController, JointGains, bandwidth_gains
 from crane_reference.control.feedforward import RigidInverseDynamics
 from crane_reference.control.plant import ACTUATED_JOINTS, Plant, held_start
 from crane_reference.model.drive import Actuated, TorqueSource, column_drive
-from crane_reference.motion.simulation import Scenario
+from crane_reference.motion.simulation import Scenario, simulate, simulated_runs
 
 ZERO_GAINS = {name: JointGains(0.0, 0.0) for name in ACTUATED_JOINTS}
 
@@ -249,3 +250,29 @@ def test_rigid_feedforward_is_m_qdd_plus_h_minus_q(params):
             expected = (terms.M @ qdd[i] + terms.h - terms.Q)[[model.index(name) for name in ACTUATED_JOINTS]]
             np.testing.assert_allclose(rows[i], expected, rtol=1e-10, atol=1e-8 * np.abs(expected).max())
             np.testing.assert_allclose(inverse(times[i], q[i], qd[i], qdd[i], left_limit), rows[i], rtol=1e-13)
+
+
+def test_references_computed_ahead_are_simulates_and_hand_on_a_failure(params):
+    """The runs computed in a thread ahead of the loop join into simulate's trajectory, bit for bit, for two
+    motions at once (the task's and the rigid feedforward's); a failure while computing reaches the reader."""
+    motions = [Scenario(params, variant) for variant in ("flexible", "rigid")]
+    ahead = ComputedAhead([s.motion for s in motions],
+                          [simulated_runs(s.motion, s.equilibrium.q, 0.3, step=1e-3, chunk=0.1, every_row=False)
+                           for s in motions])
+    early, _ = ahead.through(0.1)
+    assert all(r.t[-1] >= 0.1 - 1e-12 for r in early)
+    computed, finished = ahead.through(0.3)
+    assert finished
+    for s, trajectory in zip(motions, computed, strict=True):
+        expected = simulate(s.motion, s.equilibrium.q, 0.3, step=1e-3, chunk=0.1, every_row=False)
+        np.testing.assert_array_equal(trajectory.t, expected.t)
+        np.testing.assert_array_equal(trajectory.q, expected.q)
+        np.testing.assert_array_equal(trajectory.qd, expected.qd)
+        np.testing.assert_array_equal(trajectory.qdd, expected.qdd)
+
+    def failing():
+        yield from simulated_runs(motions[1].motion, motions[1].equilibrium.q, 0.1, step=1e-3, every_row=False)
+        raise FloatingPointError("the solver failed")
+
+    with pytest.raises(FloatingPointError, match="the solver failed"):
+        ComputedAhead([motions[1].motion], [failing()]).through(0.2)

@@ -160,8 +160,8 @@ class Plant:
         :meth:`follow` with no feedback (a controller whose gains are all zero, so that u_k is its
         feedforward)."""
         efforts = np.asarray(efforts, dtype=float)
-        starts, finals = np.empty((efforts.shape[0] + 1, efforts.shape[1])), np.empty((efforts.shape[0] + 1,
-                                                                                       efforts.shape[1]))
+        count, joints = efforts.shape
+        starts, finals = np.empty((count + 1, joints)), np.empty((count + 1, joints))
         starts[:-1], starts[-1], finals[0], finals[1:] = efforts, efforts[-1], efforts[0], efforts
         zeros = np.zeros_like(efforts)
         period = float(ends[0]) - self.t

@@ -11,7 +11,7 @@ the converged reference for accuracy checks.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from itertools import pairwise
 from typing import NamedTuple
 
@@ -236,13 +236,29 @@ def simulate(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, step: float
     of ``chunk`` seconds (``progress`` is called after each).  With ``every_row`` False only the motion
     and E's pose are kept: the reactions, residuals, energies and work are NaN but at each run's last step
     (:class:`MotionStepper`)."""
+    parts = []
+    for part in simulated_runs(motion, q0, t_end, step, t0, qd0, chunk, tolerance, evaluations, every_row):
+        parts.append(part)
+        if progress is not None and len(parts) > 1:
+            progress(float(part["t"][-1]))
+    return joined(motion, parts)
+
+
+def simulated_runs(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, step: float = ANALYSIS_STEP,
+                   t0: float = 0.0, qd0: np.ndarray | None = None, chunk: float = 0.25,
+                   tolerance: float = ONLINE_TOLERANCE, evaluations: int = EVALUATIONS,
+                   every_row: bool = True) -> Iterator[dict[str, np.ndarray]]:
+    """What :func:`simulate` computes, as it is computed: the start's sample, then the samples of each compiled run
+    of ``chunk`` seconds, stacked (:func:`joined` makes them the :class:`Trajectory`)."""
     qd0 = np.zeros_like(q0) if qd0 is None else qd0
     stepper = MotionStepper(motion, t0, q0, qd0, step, tolerance, evaluations, every_row)
-    parts = [stack_samples([stepper.sample])]
+    yield stack_samples([stepper.sample])
     while stepper.state.t < t_end - 1e-9 * step:
-        parts.append(stepper.advance_until(min(stepper.state.t + chunk, t_end)))
-        if progress is not None:
-            progress(stepper.state.t)
+        yield stepper.advance_until(min(stepper.state.t + chunk, t_end))
+
+
+def joined(motion: ProgrammedMotion, parts: list[dict[str, np.ndarray]]) -> Trajectory:
+    """The :class:`Trajectory` of ``motion`` from consecutive stacked samples (:func:`simulated_runs`)."""
     model = motion.dynamics.model
     arrays = {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
     return Trajectory.from_arrays(model.variant, model.joint_names, model.drive_joint, arrays)

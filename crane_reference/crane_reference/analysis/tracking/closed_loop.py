@@ -38,10 +38,11 @@ from ...model.chain import ACTUATED_JOINTS, VARIANTS
 from ...model.parameters import CraneParameters
 from ...motion.constraints import ConstraintSet
 from ...motion.programmed_motion import REALISATIONS, ProgrammedMotion
-from ...motion.simulation import Scenario, simulate
+from ...motion.simulation import Scenario, simulated_runs
 from ...motion.steps import PLANT_STEP
 from ...motion.trajectory import Trajectory
 from ..bands import vibration_band
+from .ahead import ComputedAhead
 
 
 @dataclass(frozen=True)
@@ -120,8 +121,8 @@ class TrackingRun:
     """A closed-loop run: the spec, the gains used, the plant's trajectory and actuator torques (N, 3) [N m] per step,
     the reference on the same times (its motion and E's pose; forces and energies not evaluated), E's distance
     to the programmed path (N, 2) [m] (ellipse in XY, height), the boom tip deflection of the plant and of the
-    reference (N, 3) [m] (zeros for the rigid boom), the saturated share of ticks per joint and the wall time
-    [s]."""
+    reference (N, 3) [m] (zeros for the rigid boom), the saturated share of ticks per joint, the wall time
+    [s] and the part of it spent in the compiled closed loop (NaN where not measured: a recorded run)."""
 
     spec: TrackingSpec
     gains: list[JointGains]
@@ -133,6 +134,7 @@ class TrackingRun:
     reference_tip_deflection: np.ndarray
     saturated_share: np.ndarray
     wall: float
+    loop_wall: float = math.nan
 
     @property
     def t(self) -> np.ndarray:
@@ -180,39 +182,54 @@ TaskMotion = Callable[[Scenario], tuple[ProgrammedMotion, np.ndarray]]
 def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress | None = None,
                  task: TaskMotion | None = None) -> TrackingRun:
     """The closed-loop run of ``spec`` on the crane ``params`` (``progress`` gets the simulated time); the
-    reference is the programmed motion ``task`` gives (default: the scenario's paper task)."""
+    reference is the programmed motion ``task`` gives (default: the scenario's paper task).  The reference, and
+    the rigid feedforward's own on a flexible crane, are computed ahead of the loop in a thread
+    (:class:`~.ahead.ComputedAhead`), 0.25 s of motion at a time."""
     started = time.perf_counter()
     task = task or (lambda scenario: _paper_task(scenario, spec.realisation))
     scenario = Scenario(params, spec.variant)
     start = held_start(scenario)
-    reference, reference_motion = _reference(scenario, spec, task)
+    tasks = [task(scenario)]
+    if spec.feedforward == "rigid" and spec.variant != "rigid":
+        tasks.append(task(Scenario(params, "rigid")))  # the rigid feedforward follows its own reference
+    ahead = ComputedAhead([motion for motion, _ in tasks],
+                          [simulated_runs(motion, q0, spec.duration, step=spec.reference_step or spec.step,
+                                          every_row=False) for motion, q0 in tasks])
     gains = spec.joint_gains(held_inertia(scenario, ACTUATED_JOINTS))
     controller = JointController(gains, 1.0 / spec.rate)
     plant = Plant(params, spec.variant, start, spec.step, controller.damping)
     actuated = plant.actuated
     per = spec.steps_per_tick
-    ticks = (len(reference.t) - 1) // per
-    if spec.feedforward == "rigid" and spec.variant != "rigid":
-        rigid = Scenario(params, "rigid")
-        starts, ends = _feedforward(params, spec, *_reference(rigid, spec, task), per, ticks)
-    else:
-        starts, ends = _feedforward(params, spec, reference, reference_motion, per, ticks)
+    inverse = (RigidInverseDynamics(params, tasks[-1][0].dynamics.model.joint_names) if spec.feedforward == "rigid"
+               else None)
     chunk = max(1, round(0.25 * spec.rate))  # ticks per compiled call: progress every 0.25 s
-    for first in range(0, ticks, chunk):
-        k = np.arange(first, min(first + chunk, ticks))
+    first, looped = 0, 0.0
+    while True:  # tick k runs from the reference's sample k per to sample (k + 1) per
+        references, finished = ahead.through((first + chunk) * per * spec.step * (1.0 - 1e-9))
+        reference, feedforward_reference = (_every(r, spec.reference_stride) for r in (references[0], references[-1]))
+        k = np.arange(first, min(first + chunk, (len(reference.t) - 1) // per))
+        if k.size == 0:
+            if finished:
+                break
+            continue
         i = k * per
+        starts, ends = _feedforward(inverse, spec.step, feedforward_reference, tasks[-1][0], np.append(i, i[-1] + per))
+        loop_start = time.perf_counter()
         plant.follow(reference.t[i + per], reference.q[np.ix_(i, actuated)], reference.qd[np.ix_(i, actuated)],
-                     starts[k[0]:k[-1] + 2], ends[k[0]:k[-1] + 2], controller)
+                     starts, ends, controller)
+        looped += time.perf_counter() - loop_start
+        first = k[-1] + 1
         if progress is not None:
             progress(plant.t)
     trajectory, torques = plant.trajectory()
     reference = _every(reference, 1, len(trajectory.t))
+    reference_motion = tasks[0][0]
     constraints = ConstraintSet(tuple(c for c in reference_motion.constraints.constraints if c.order == 0))
     path_error = constraints.surface_offsets(trajectory.t, trajectory.ee_position)
     deflections = [boom_tip_deflection(plant.model, plant.dynamics.chain, q) if spec.variant == "flexible"
                    else np.zeros((len(trajectory.t), 3)) for q in (trajectory.q, reference.q)]
     return TrackingRun(spec, gains, trajectory, torques, reference, path_error, *deflections,
-                       controller.saturated_ticks / max(1, controller.ticks), time.perf_counter() - started)
+                       controller.saturated_ticks / max(1, controller.ticks), time.perf_counter() - started, looped)
 
 
 def recorded_run(params: CraneParameters, spec: TrackingSpec, recording: LoopRecording) -> TrackingRun:
@@ -257,29 +274,21 @@ def _paper_task(scenario: Scenario, realisation: str) -> tuple[ProgrammedMotion,
     return scenario.motion, scenario.equilibrium.q
 
 
-def _reference(scenario: Scenario, spec: TrackingSpec, task: TaskMotion) -> tuple[Trajectory, ProgrammedMotion]:
-    """The programmed motion ``task`` gives ``scenario``, on the plant's step grid, and its motion equations."""
-    motion, q0 = task(scenario)
-    reference = simulate(motion, q0, spec.duration, step=spec.reference_step or spec.step, every_row=False)
-    return _every(reference, spec.reference_stride), motion
-
-
-def _feedforward(params: CraneParameters, spec: TrackingSpec, reference: Trajectory, motion: ProgrammedMotion,
-                 per: int, ticks: int) -> tuple[np.ndarray, np.ndarray]:
-    """tau_ff at the ticks (ticks + 1, 3) [N m] as a command starts there and as one ends there: they differ
-    at a jump of the drive's torque, where the end takes the drive and the reference's qdd from before it.
-    (A jump between ticks reaches the feedforward at the next tick.)"""
-    starts = np.zeros((ticks + 1, len(ACTUATED_JOINTS)))
-    if spec.feedforward == "none":
+def _feedforward(inverse: RigidInverseDynamics | None, step: float, reference: Trajectory,
+                 motion: ProgrammedMotion, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """tau_ff of ``inverse`` (None: no feedforward) at the samples ``at`` (ticks' starts) of ``reference``, the
+    programmed motion ``motion`` at the plant's ``step`` (len(at), 3) [N m], as a command starts there and as one
+    ends there: they differ at a jump of the drive's torque, where the end takes the drive and the reference's
+    qdd from before it.  (A jump between ticks reaches the feedforward at the next tick.)"""
+    starts = np.zeros((at.size, len(ACTUATED_JOINTS)))
+    if inverse is None:
         return starts, starts
-    inverse = RigidInverseDynamics(params, reference.joint_names)
     jumps = motion.dynamics.drive.breakpoints
-    at = np.arange(0, ticks * per + 1, per)
     starts = inverse(reference.t[at], reference.q[at], reference.qd[at], reference.qdd[at])
     ends = starts.copy()
     for k, i in enumerate(at):
         t, q, qd = reference.t[i], reference.q[i], reference.qd[i]
-        if any(abs(t - jump) <= 1e-9 * spec.step for jump in jumps):
+        if any(abs(t - jump) <= 1e-9 * step for jump in jumps):
             ends[k] = inverse(t, q, qd, motion.solve(t, q, qd, left_limit=True).qdd, left_limit=True)
     return starts, ends
 

@@ -1,0 +1,64 @@
+"""Programmed motions integrated in a thread ahead of the closed loop that reads them.
+
+The compiled kernels release the GIL, so on a machine with a second core the references of a closed-loop run
+(the task's, and the rigid feedforward's own) are computed while the loop runs instead of before it.  The
+motion is the one :func:`~crane_reference.motion.simulation.simulate` gives, run for run: only when it is
+computed changes.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator, Sequence
+
+import numpy as np
+
+from ...motion.programmed_motion import ProgrammedMotion
+from ...motion.simulation import joined
+from ...motion.trajectory import Trajectory
+
+
+class ComputedAhead:
+    """The runs of each of ``motions`` (:func:`~crane_reference.motion.simulation.simulated_runs`), computed in a
+    thread in turn, one run of each at a time; :meth:`through` waits for them."""
+
+    def __init__(self, motions: Sequence[ProgrammedMotion], runs: Sequence[Iterator[dict[str, np.ndarray]]]):
+        self._motions = tuple(motions)
+        self._parts: list[list[dict[str, np.ndarray]]] = [[] for _ in motions]
+        self._computed = [-np.inf] * len(motions)  # motion time [s] each is computed through
+        self._finished = False
+        self._failure: BaseException | None = None
+        self._changed = threading.Condition()
+        self._thread = threading.Thread(target=self._compute, args=(list(runs),), name="references", daemon=True)
+        self._thread.start()
+
+    def _compute(self, runs: list[Iterator[dict[str, np.ndarray]]]) -> None:
+        try:
+            active = list(range(len(runs)))
+            while active:
+                for i in list(active):
+                    part = next(runs[i], None)
+                    with self._changed:
+                        if part is None:
+                            active.remove(i)
+                        else:
+                            self._parts[i].append(part)
+                            self._computed[i] = float(part["t"][-1])
+                        self._changed.notify_all()
+        except BaseException as failure:  # handed to the reader, which raises it
+            with self._changed:
+                self._failure = failure
+        finally:
+            with self._changed:
+                self._finished = True
+                self._changed.notify_all()
+
+    def through(self, t: float) -> tuple[list[Trajectory], bool]:
+        """Each motion as computed once all are computed through motion time t [s] (or are complete), and whether
+        all are complete; raises what stopped the computing."""
+        with self._changed:
+            self._changed.wait_for(lambda: self._finished or min(self._computed) >= t)
+            if self._failure is not None:
+                raise self._failure
+            parts, finished = [list(p) for p in self._parts], self._finished
+        return [joined(m, p) for m, p in zip(self._motions, parts, strict=True)], finished
