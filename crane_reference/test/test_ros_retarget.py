@@ -12,6 +12,7 @@ import numpy as np
 from action_msgs.msg import GoalStatus
 from crane_reference_interfaces.action import Retarget
 from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState
 from rclpy.action import ActionClient
 from rclpy.parameter import Parameter
 from test_ros_node import NODE, NS, Harness, change_state, diagnostic_messages, stamp_ns
@@ -130,10 +131,13 @@ def test_invalid_goals_are_aborted_naming_the_field_and_the_stream_goes_on(ros: 
 def test_a_goal_is_stopped_by_a_deactivation(ros: Harness) -> None:
     ros.start(publish_rate=RATE, model="rigid", speed_scaling__ramp_time=0.2)
     client = Client(ros)
-    goal_handle = client.send(ellipse_a=3.2, blend_time=5.0)
+    transitions = ros.probe.create_client(ChangeState, f"/{NODE}/change_state")
+    assert transitions.wait_for_service(timeout_sec=10.0)  # discovered before the goal: its blend outlasts the call
+    goal_handle = client.send(ellipse_a=3.2, blend_time=30.0)
     assert goal_handle.accepted
     time.sleep(0.2)
-    assert change_state(ros, Transition.TRANSITION_DEACTIVATE)
+    deactivate = ChangeState.Request(transition=Transition(id=Transition.TRANSITION_DEACTIVATE))
+    assert ros.call(transitions, deactivate).success
     answer = client.result(goal_handle)
     assert answer.status == GoalStatus.STATUS_ABORTED and answer.result.error_code == Retarget.Result.STOPPED
     assert ns(answer.result.blend_stamp) > 0 and ns(answer.result.path_stamp) == 0
