@@ -164,9 +164,8 @@ class Plant:
         starts, finals = np.empty((count + 1, joints)), np.empty((count + 1, joints))
         starts[:-1], starts[-1], finals[0], finals[1:] = efforts, efforts[-1], efforts[0], efforts
         zeros = np.zeros_like(efforts)
-        period = float(ends[0]) - self.t
-        if self._open_loop is None or self._open_loop.period != period:
-            self._open_loop = JointController([JointGains(0.0, 0.0)] * len(ACTUATED_JOINTS), period)
+        if self._open_loop is None:  # all gains zero: its period does not act
+            self._open_loop = JointController([JointGains(0.0, 0.0)] * len(ACTUATED_JOINTS), float(ends[0]) - self.t)
         self.follow(ends, zeros, zeros, starts, finals, self._open_loop)
 
     def _keep(self, times: np.ndarray, rows: LoopRows) -> None:

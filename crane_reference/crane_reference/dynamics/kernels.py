@@ -675,10 +675,7 @@ def evaluated_rows(q, qd, qdd, k: Coefficients, drives, partition: Partition, ch
     forces, torques, distances = np.empty((N, n)), np.empty(N), np.empty((N, m))
     for i in range(N):
         k_i = _at_step(k, i)
-        T, S = forward_kinematics(q[i], chain.kinds, chain.axes, chain.origins)
-        velocity_term = velocity_terms(qd[i], S)
-        imbalance = _imbalance(q[i], qd[i], qdd[i], S, world_pseudo_inertias(T, chain.body_joint, chain.body_H),
-                               velocity_term, chain, drives[i])
+        imbalance, T, S, velocity_term = _imbalance_at(q[i], qd[i], qdd[i], drives[i], chain)
         p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
         v = matvec(C, qd[i])
         A = acceleration_terms(p, v, C, point_bias(velocity_term, chain.ee_joint, p), k_i)[0]
@@ -694,10 +691,19 @@ def imbalance_rows(q, qd, qdd, drives, chain: ChainData):
     by O(n) inverse dynamics (no M)."""
     out = np.empty_like(q)
     for i in range(q.shape[0]):
-        T, S = forward_kinematics(q[i], chain.kinds, chain.axes, chain.origins)
-        Hw = world_pseudo_inertias(T, chain.body_joint, chain.body_H)
-        out[i] = _imbalance(q[i], qd[i], qdd[i], S, Hw, velocity_terms(qd[i], S), chain, drives[i])
+        out[i] = _imbalance_at(q[i], qd[i], qdd[i], drives[i], chain)[0]
     return out
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _imbalance_at(q, qd, qdd, drive, chain: ChainData):
+    """M qdd + h - Q at (q, qd, qdd) by O(n) inverse dynamics (:func:`_imbalance`), with the frames T, twists S
+    and velocity terms it computed on the way."""
+    T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
+    velocity_term = velocity_terms(qd, S)
+    imbalance = _imbalance(q, qd, qdd, S, world_pseudo_inertias(T, chain.body_joint, chain.body_H), velocity_term,
+                           chain, drive)
+    return imbalance, T, S, velocity_term
 
 
 @njit(cache=True, nogil=True)

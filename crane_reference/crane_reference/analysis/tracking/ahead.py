@@ -16,11 +16,13 @@ import numpy as np
 from ...motion.programmed_motion import ProgrammedMotion
 from ...motion.simulation import joined
 from ...motion.trajectory import Trajectory
+from ...stream.threads import start_named
 
 
 class ComputedAhead:
     """The runs of each of ``motions`` (:func:`~crane_reference.motion.simulation.simulated_runs`), computed in a
-    thread in turn, one run of each at a time; :meth:`through` waits for them."""
+    thread in turn, one run of each at a time; :meth:`through` waits for them, :meth:`close` stops the thread
+    after the run in progress."""
 
     def __init__(self, motions: Sequence[ProgrammedMotion], runs: Sequence[Iterator[dict[str, np.ndarray]]]):
         self._motions = tuple(motions)
@@ -29,13 +31,13 @@ class ComputedAhead:
         self._finished = False
         self._failure: BaseException | None = None
         self._changed = threading.Condition()
-        self._thread = threading.Thread(target=self._compute, args=(list(runs),), name="references", daemon=True)
-        self._thread.start()
+        self._closed = False
+        self._thread = start_named(lambda runs=list(runs): self._compute(runs), "references")
 
     def _compute(self, runs: list[Iterator[dict[str, np.ndarray]]]) -> None:
         try:
             active = list(range(len(runs)))
-            while active:
+            while active and not self._closed:
                 for i in list(active):
                     part = next(runs[i], None)
                     with self._changed:
@@ -62,3 +64,8 @@ class ComputedAhead:
                 raise self._failure
             parts, finished = [list(p) for p in self._parts], self._finished
         return [joined(m, p) for m, p in zip(self._motions, parts, strict=True)], finished
+
+    def close(self) -> None:
+        """Stop computing after the run in progress and wait for the thread (the reader is done, or failed)."""
+        self._closed = True
+        self._thread.join()

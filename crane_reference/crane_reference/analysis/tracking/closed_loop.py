@@ -203,28 +203,32 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
     inverse = (RigidInverseDynamics(params, tasks[-1][0].dynamics.model.joint_names) if spec.feedforward == "rigid"
                else None)
     chunk = max(1, round(0.25 * spec.rate))  # ticks per compiled call: progress every 0.25 s
-    first, looped, reference, finished, samples = 0, 0.0, None, False, 0
-    while True:  # tick k runs from the reference's sample k per to sample (k + 1) per
-        end = (first + chunk) * per  # the sample this chunk's last tick ends on
-        if reference is None or (samples <= end and not finished):  # all computed so far, joined once
-            references, finished = ahead.through(end * spec.step * (1.0 - 1e-9))
-            reference, feedforward_reference = (_every(r, spec.reference_stride) for r in (references[0],
-                                                                                            references[-1]))
-            samples = min(len(reference.t), len(feedforward_reference.t))  # one may be a run ahead of the other
-        k = np.arange(first, min(first + chunk, (samples - 1) // per))
-        if k.size == 0:
-            if finished:
-                break
-            continue
-        i = k * per
-        starts, ends = _feedforward(inverse, spec.step, feedforward_reference, tasks[-1][0], np.append(i, i[-1] + per))
-        loop_start = time.perf_counter()
-        plant.follow(reference.t[i + per], reference.q[np.ix_(i, actuated)], reference.qd[np.ix_(i, actuated)],
-                     starts, ends, controller)
-        looped += time.perf_counter() - loop_start
-        first = k[-1] + 1
-        if progress is not None:
-            progress(plant.t)
+    try:
+        first, looped, reference, finished, samples = 0, 0.0, None, False, 0
+        while True:  # tick k runs from the reference's sample k per to sample (k + 1) per
+            end = (first + chunk) * per  # the sample this chunk's last tick ends on
+            if reference is None or (samples <= end and not finished):  # all computed so far, joined once
+                references, finished = ahead.through(end * spec.step * (1.0 - 1e-9))
+                reference, feedforward_reference = (_every(r, spec.reference_stride) for r in (references[0],
+                                                                                                references[-1]))
+                samples = min(len(reference.t), len(feedforward_reference.t))  # one may be a run ahead of the other
+            k = np.arange(first, min(first + chunk, (samples - 1) // per))
+            if k.size == 0:
+                if finished:
+                    break
+                continue
+            i = k * per
+            at = np.append(i, i[-1] + per)  # the ticks' starts and the last one's end
+            starts, ends = _feedforward(inverse, spec.step, feedforward_reference, tasks[-1][0], at)
+            loop_start = time.perf_counter()
+            plant.follow(reference.t[i + per], reference.q[np.ix_(i, actuated)], reference.qd[np.ix_(i, actuated)],
+                         starts, ends, controller)
+            looped += time.perf_counter() - loop_start
+            first = k[-1] + 1
+            if progress is not None:
+                progress(plant.t)
+    finally:
+        ahead.close()
     trajectory, torques = plant.trajectory()
     reference = _every(reference, 1, len(trajectory.t))
     reference_motion = tasks[0][0]
