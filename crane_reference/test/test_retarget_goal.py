@@ -107,6 +107,21 @@ def test_a_newer_retarget_preempts_a_goal_which_is_then_never_reached(server: Re
     assert goal.blend_stamp_ns is not None and goal.path_stamp_ns is None
 
 
+def test_a_goal_reached_before_a_newer_command_stays_reached(server: ReferenceServer) -> None:
+    """The newer command's reason pre-empts a goal still on its way, not one whose new path was published."""
+    server.begin(NS)
+    before = publish(server, NS, 0.2)
+    old = server.stream.targets
+    goal = RetargetGoal(server, dataclasses.replace(old, ellipse_a=old.ellipse_a + 0.2), BLEND, before[-1].stamp_ns)
+    during = publish(server, before[-1].stamp_ns + PERIOD, BLEND / 2)
+    end = goal.end(serving=True, preempted_by="a newer goal took over")
+    assert end == (PREEMPTED, "a newer goal took over") and not goal.superseded
+    after = publish(server, during[-1].stamp_ns + PERIOD, BLEND)  # past the blend's end
+    server.retarget(dataclasses.replace(old, ellipse_b=old.ellipse_b + 0.1), BLEND, after[-1].stamp_ns)
+    assert goal.superseded and goal.end(serving=True, preempted_by="a newer goal took over").outcome == REACHED
+    assert goal.path_stamp_ns in [o.stamp_ns for o in after]
+
+
 def test_a_goal_stops_with_publishing(server: ReferenceServer) -> None:
     server.begin(NS)
     before = publish(server, NS, 0.2)

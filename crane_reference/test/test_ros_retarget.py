@@ -78,8 +78,9 @@ def test_a_goal_gets_feedback_and_the_stamp_from_which_the_published_path_is_the
     assert np.abs(new[before]).min() > 1e-3 and np.abs(old[after]).min() > 1e-3
     middle = (stamps > blend_stamp + NS * blend / 4) & (stamps < path_stamp - NS * blend / 4)
     assert np.abs(new[middle]).min() > 1e-4 and np.abs(old[middle]).min() > 1e-4  # blending: on neither
-    # feedback every 0.1 s: progress from 0 towards 1, E's distance to the new ellipse shrinking
-    ros.wait_for(lambda: len(feedback) >= blend / 0.1 - 2, "the goal's feedback")
+    # feedback at the monitor rate: progress from 0 towards 1, E's distance to the new ellipse shrinking
+    monitor_period = 1.0 / node.get_parameter("action_monitor_rate").value
+    ros.wait_for(lambda: len(feedback) >= blend / monitor_period - 2, "the goal's feedback")
     progress = [f.progress for f in feedback]
     assert progress == sorted(progress) and 0.0 <= progress[0] < 0.5 and 0.5 < progress[-1] <= 1.0
     assert abs(feedback[0].ellipse_error) > 1e-3 and abs(feedback[-1].ellipse_error) < abs(feedback[0].ellipse_error)
@@ -114,6 +115,25 @@ def test_a_newer_goal_preempts_and_a_cancel_blends_the_old_targets_back(ros: Har
     assert changed.successful, changed.reason
     answer = client.result(third)
     assert answer.status == GoalStatus.STATUS_ABORTED and answer.result.error_code == Retarget.Result.PREEMPTED
+
+
+def test_a_goal_reached_between_monitor_ticks_succeeds_when_a_newer_goal_comes(ros: Harness) -> None:
+    """Its new path published before the newer goal (the monitor, at 0.1 Hz, has not looked since), the first goal
+    succeeds with the stamp of the first sample on it."""
+    ros.start(publish_rate=RATE, model="rigid", action_monitor_rate=0.1)
+    client = Client(ros)
+    blend = 0.2
+    first = client.send(ellipse_a=3.2, blend_time=blend)
+    assert first.accepted
+    accepted = time.monotonic()
+    ros.wait_for(lambda: ros.received["pose"][-1][0] > accepted + blend + 0.5, "the first goal's new path")
+    client.send(ellipse_a=3.4, blend_time=3.0)
+    answer = client.result(first)
+    assert answer.status == GoalStatus.STATUS_SUCCEEDED, answer.result.error_string
+    path_stamp = ns(answer.result.path_stamp)
+    stamps, new = ellipse_residuals(ros, 3.2, 2.0)
+    assert path_stamp > ns(answer.result.blend_stamp) > 0
+    assert np.abs(new[stamps >= path_stamp][:10]).max() < ON_PATH < np.abs(new[stamps < path_stamp][-1])
 
 
 def test_invalid_goals_are_aborted_naming_the_field_and_the_stream_goes_on(ros: Harness) -> None:

@@ -10,7 +10,8 @@ and result, served as joint_trajectory_controller serves ``follow_joint_trajecto
   sample published, the blend's progress and E's distance to the new path.
 * The result, once the first sample on the new path is published: its stamp and that of the blend's first sample.
 * A newer goal, or a change of the target parameters, pre-empts a goal (aborted, ``PREEMPTED``: rclpy ends a goal
-  as canceled only after a cancel request, where joint_trajectory_controller cancels it); a cancel sets the
+  as canceled only after a cancel request, where joint_trajectory_controller cancels it), unless its first sample
+  on the new path was published before (then it succeeds, also between two monitor ticks); a cancel sets the
   target parameters back to those before the goal (their blend, over ``blend_time``, brings the old path back); a
   goal is aborted (``STOPPED``) if the node stops publishing, its solver stops or its stream goes to ERROR first,
   or the node is destroyed.  While the stream is paused (speed 0) a goal waits.
@@ -32,7 +33,7 @@ from ..interface import messages
 from ..interface.messages import MessageTypes
 from ..motion.simulation import SOLVER_FAILURES
 from ..stream.reference_stream import ERROR
-from ..stream.retarget_goal import PREEMPTED, REACHED, STOPPED, RetargetGoal
+from ..stream.retarget_goal import PREEMPTED, REACHED, STOPPED, GoalEnd, RetargetGoal
 from ..stream.server import CommandRefusedError, ReferenceServer
 from .parameters import TARGET_PARAMETERS, NodeParameters, field_name
 from .settings import refusal
@@ -116,11 +117,9 @@ class RetargetActionServer:
         if self._goal is None:
             return
         goal_handle, goal, _ = self._goal
-        end = goal.end(serving=self._server() is goal.server and self._active())
+        end = goal.end(self._serving(goal))
         if end is not None:
-            succeeded = end.outcome == REACHED
-            self._finish(goal_handle.succeed if succeeded else goal_handle.abort,
-                         OUTCOME_CODES[end.outcome], end.message)
+            self._conclude(end)
         elif goal_handle.is_cancel_requested:
             result = self._node.set_parameters_atomically([Parameter(name, value=getattr(goal.previous, field))
                                                            for name, field in TARGET_PARAMETERS.items()])
@@ -135,8 +134,21 @@ class RetargetActionServer:
                     ellipse_error=feedback.ellipse_error, height_error=feedback.height_error))
 
     def _preempt(self, why: str) -> None:
+        """End the active goal as a newer command takes over: reached if its new path was published, else
+        pre-empted for ``why``."""
         if self._goal is not None:
-            self._finish(self._goal[0].abort, Retarget.Result.PREEMPTED, why)
+            goal = self._goal[1]
+            self._conclude(goal.end(self._serving(goal), preempted_by=why))
+
+    def _serving(self, goal: RetargetGoal) -> bool:
+        """Whether the goal's server still publishes for it."""
+        return self._server() is goal.server and self._active()
+
+    def _conclude(self, end: GoalEnd) -> None:
+        """End the active goal as ``end`` says: succeeded if reached, else aborted with the outcome's code."""
+        goal_handle = self._goal[0]
+        self._finish(goal_handle.succeed if end.outcome == REACHED else goal_handle.abort, OUTCOME_CODES[end.outcome],
+                     end.message)
 
     def _finish(self, end: Callable[[], None], code: int, message: str) -> None:
         """End the active goal with ``end`` (succeed, abort, canceled), the result ``code`` and ``message``."""
@@ -150,8 +162,10 @@ class RetargetActionServer:
         """End ``goal_handle`` with ``end`` and its result: ``code``, ``message`` and the stamps (zero if not
         published)."""
         end()
-        log = self._node.get_logger().info if code == Retarget.Result.SUCCESSFUL else self._node.get_logger().warning
-        log(f"~/retarget goal {message or 'reached'}")
+        if code == Retarget.Result.SUCCESSFUL:  # a call site per severity: rclpy refuses to change it at one
+            self._node.get_logger().info(f"~/retarget goal {message or 'reached'}")
+        else:
+            self._node.get_logger().warning(f"~/retarget goal {message}")
         return Retarget.Result(error_code=code, error_string=message,
                                blend_stamp=messages.time_msg(self._types, blend_stamp_ns or 0),
                                path_stamp=messages.time_msg(self._types, path_stamp_ns or 0))

@@ -6,9 +6,9 @@ from those in force to the goal's over its blend time (in motion time) from the 
 For a published sample, :meth:`RetargetGoal.feedback` gives the blend's progress and E's distance to the new path;
 the goal is reached when the first sample at or after the blend's end is published, and
 :attr:`RetargetGoal.path_stamp_ns` is then that sample's stamp.  :meth:`RetargetGoal.end` says how it ended:
-reached; pre-empted once the stream's targets are no longer the goal's (a newer goal, a change of the target
-parameters: a re-target that begins before this blend's end drops its milestones, so a superseded goal is never
-reached); stopped when the server no longer serves it, its solver stopped or its stream is in ERROR.
+reached; pre-empted once the stream's targets are no longer the goal's or a newer command takes over (a newer goal,
+a change of the target parameters: a re-target that begins before this blend's end drops its milestones, so a
+superseded goal is never reached), unless it was reached first; stopped when the server no longer serves it, its solver stopped or its stream is in ERROR.
 """
 
 from __future__ import annotations
@@ -72,14 +72,16 @@ class RetargetGoal:
         """Whether the stream's targets are no longer the goal's (a newer re-target took over)."""
         return self.server.stream.targets != self.targets
 
-    def end(self, serving: bool) -> GoalEnd | None:
+    def end(self, serving: bool, preempted_by: str = "") -> GoalEnd | None:
         """How the goal has ended, or None while it goes on; ``serving``: whether its server still publishes for
-        the goal's owner (false once the node deactivates or replaces the server)."""
+        the goal's owner (false once the node deactivates or replaces the server); ``preempted_by``: why a newer
+        command takes over now, if one does (a goal whose new path was published before is reached all the
+        same)."""
         stream = self.server.stream
         if self.path_stamp_ns is not None:
             return GoalEnd(REACHED, "")
-        if self.superseded:
-            return GoalEnd(PREEMPTED, "a newer re-target took over")
+        if preempted_by or self.superseded:
+            return GoalEnd(PREEMPTED, preempted_by or "a newer re-target took over")
         if not (serving and self.server.computing and self.server.publishing):
             return GoalEnd(STOPPED, "publishing or the solver stopped before the new path")
         if stream.state == ERROR:
