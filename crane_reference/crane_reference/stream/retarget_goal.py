@@ -8,7 +8,8 @@ the goal is reached when the first sample at or after the blend's end is publish
 :attr:`RetargetGoal.path_stamp_ns` is then that sample's stamp.  :meth:`RetargetGoal.end` says how it ended:
 reached; pre-empted once the stream's targets are no longer the goal's or a newer command takes over (a newer goal,
 a change of the target parameters: a re-target that begins before this blend's end drops its milestones, so a
-superseded goal is never reached), unless it was reached first; stopped when the server no longer serves it, its solver stopped or its stream is in ERROR.
+superseded goal is never reached), unless it was reached first; stopped when the server no longer serves it, its
+solver stopped or its stream is in ERROR.
 """
 
 from __future__ import annotations
