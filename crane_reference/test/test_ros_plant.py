@@ -143,8 +143,8 @@ def _direct(params, commands) -> list[np.ndarray]:
     out = []
     for values in commands:
         with suppress(CommandRefusedError):
-            server.command(values, server.plant.t)
-        out.append(server.tick(server.plant.t).q)
+            server.command(values, server.t)
+        out.append(server.tick(server.t).q)
     return out
 
 

@@ -98,7 +98,6 @@ class Plant:
         self.keep = keep
         self._samples = [stack_samples([self.stepper.sample])]
         self._torque_rows = [np.zeros((1, len(ACTUATED_JOINTS)))]
-        self._open_loop: JointController | None = None  # apply's controller: all gains zero
 
     def actuate(self, end: float, torque_start: np.ndarray, torque_end: np.ndarray) -> None:
         """Command the joint drives [N m] from now to ``end`` [s] (on the step grid), linear from
@@ -153,20 +152,6 @@ class Plant:
         last_start = plan.first[-2]
         self.drive.command(float(plan.times[last_start - 1]) if last_start else state.t, float(ends[-1]),
                            *(self._forces(torques) for torques in run.command))
-
-    def apply(self, ends: np.ndarray, efforts: np.ndarray) -> None:
-        """Hold the efforts u [N m] (K, 3) (order of :data:`ACTUATED_JOINTS`), each from now (then from ``ends``
-        [k - 1]) to ``ends`` [k] (K,) [s, on the step grid]; the torques are u - kd qd: the ticks of
-        :meth:`follow` with no feedback (a controller whose gains are all zero, so that u_k is its
-        feedforward)."""
-        efforts = np.asarray(efforts, dtype=float)
-        count, joints = efforts.shape
-        starts, finals = np.empty((count + 1, joints)), np.empty((count + 1, joints))
-        starts[:-1], starts[-1], finals[0], finals[1:] = efforts, efforts[-1], efforts[0], efforts
-        zeros = np.zeros_like(efforts)
-        if self._open_loop is None:  # all gains zero: its period does not act
-            self._open_loop = JointController([JointGains(0.0, 0.0)] * len(ACTUATED_JOINTS), float(ends[0]) - self.t)
-        self.follow(ends, zeros, zeros, starts, finals, self._open_loop)
 
     def _keep(self, times: np.ndarray, rows: LoopRows) -> None:
         """Keep the rows of a :meth:`follow` (from its start, at ``times``) for :meth:`trajectory`."""

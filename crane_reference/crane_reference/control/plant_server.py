@@ -44,6 +44,7 @@ from ..model.config import load_config
 from ..model.parameters import CraneParameters
 from ..motion.simulation import Scenario
 from ..motion.steps import PLANT_STEP
+from .held_periods import HeldPeriods
 from .plant import Plant, default_gains, held_start
 
 
@@ -132,6 +133,9 @@ class PlantServer:
         actuated_damping = np.empty(len(ACTUATED_JOINTS))
         actuated_damping[self.order] = self.drive_damping
         self.plant = Plant(params, settings.variant, start, settings.step, actuated_damping, keep=False)
+        """The crane at its start (:attr:`periods` carries it on)."""
+        self.periods = HeldPeriods(self.plant, settings.period)
+        """The control periods done and the crane's state after them."""
         model = self.plant.model
         self.published = model.joint_names if settings.all_coordinates else settings.joints
         """The coordinates of :class:`PlantState` (q, qd, effort), by name."""
@@ -142,7 +146,6 @@ class PlantServer:
         self._deflection = TipDeflection(model, self.plant.dynamics.chain) if settings.variant == "flexible" else None
         self._command = start.torques.copy()  # u in the order of ACTUATED_JOINTS
         self._last_command = -math.inf  # when the last command was accepted [s, the caller's clock]
-        self._ticks = 0
         self._held: np.ndarray | None = None  # q_h while the hold command acts
         self.accepted = 0
         self.refused = 0
@@ -178,7 +181,22 @@ class PlantServer:
     @property
     def ticks(self) -> int:
         """Control periods done."""
-        return self._ticks
+        return self.periods.count
+
+    @property
+    def t(self) -> float:
+        """[s] the plant's time."""
+        return self.periods.t
+
+    @property
+    def q(self) -> np.ndarray:
+        """q now (every coordinate)."""
+        return self.periods.carry.q
+
+    @property
+    def qd(self) -> np.ndarray:
+        """qd now (every coordinate)."""
+        return self.periods.carry.qd
 
     def timed_out(self, now: float) -> bool:
         """No command accepted within ``command_timeout`` of ``now`` [s] (and at least one before)."""
@@ -188,13 +206,11 @@ class PlantServer:
         """Advance one control period under the command in force at ``now`` [s, the caller's clock]: the last
         accepted one, or the hold command once it :meth:`timed_out` (starting it counts a timeout)."""
         if self.timed_out(now) and self._held is None:
-            self._held = self.plant.q.copy()
+            self._held = self.q.copy()
             self.timeouts += 1
         if self._held is not None:
             self._command = self.hold_efforts(self._held)
-        self._ticks += 1
-        end = self._ticks * self.settings.period
-        self.plant.apply(np.array([end]), self._command[None, :])
+        self.periods.advance(self._command)
         return self.state()
 
     @property
@@ -207,19 +223,18 @@ class PlantServer:
         that hold the configuration q at rest."""
         plant = self.plant
         q = np.ascontiguousarray(q, dtype=float)[None, :]
-        drives = plant.drive.drive.kernel_parameters(np.array([plant.t]))
+        drives = plant.drive.drive.kernel_parameters(np.array([self.t]))
         return imbalance_rows(q, np.zeros_like(q), np.zeros_like(q), drives, plant.dynamics.chain)[0, plant.actuated]
 
     def state(self) -> PlantState:
         """The plant now (:class:`PlantState`)."""
-        plant = self.plant
-        sample = plant.stepper.sample
+        plant, carry = self.plant, self.periods.carry
         effort = np.zeros(plant.model.dof)
-        effort[plant.actuated] = self._command - plant.joint_damping * plant.qd[plant.actuated]
-        deflection = self._deflection(plant.q)[0] if self._deflection is not None else np.zeros(3)
+        effort[plant.actuated] = self._command - plant.joint_damping * carry.qd[plant.actuated]
+        deflection = self._deflection(carry.q)[0] if self._deflection is not None else np.zeros(3)
         rows = self._published
-        return PlantState(plant.t, plant.q[rows], plant.qd[rows], effort[rows], np.asarray(sample.ee_position).copy(),
-                          quaternion(sample.ee_rotation), deflection, self.holding)
+        return PlantState(self.t, carry.q[rows], carry.qd[rows], effort[rows], carry.ee_position.copy(),
+                          quaternion(carry.ee_rotation), deflection, self.holding)
 
 
 @dataclass(frozen=True)
@@ -238,7 +253,7 @@ def plant_health(server: PlantServer, doing: str, failure: str, late_ticks: int,
     the last command was refused (WARN); periods started late in real time since the last report
     (``newly_late`` of ``late_ticks`` in all: WARN); else OK with what the node is ``doing``.  The values: plant
     time, ticks, commands accepted and refused, the last refusal, timeouts, late ticks."""
-    values = {"time_s": f"{server.plant.t:.6f}", "ticks": str(server.ticks), "commands_accepted": str(server.accepted),
+    values = {"time_s": f"{server.t:.6f}", "ticks": str(server.ticks), "commands_accepted": str(server.accepted),
               "commands_refused": str(server.refused), "last_refusal": server.last_refusal,
               "timeouts": str(server.timeouts), "late_ticks": str(late_ticks)}
     if failure:
@@ -261,7 +276,7 @@ def warm_up_plant() -> WarmUp:
     start = time.perf_counter()
     compiled, loaded = cache_counts()
     server = PlantServer(load_config(), PlantSettings())
-    server.command(server.hold_efforts(server.plant.q)[server.order], 0.0)
+    server.command(server.hold_efforts(server.q)[server.order], 0.0)
     server.tick(0.0)
     now_compiled, now_loaded = cache_counts()
     return WarmUp(time.perf_counter() - start, now_compiled - compiled, now_loaded - loaded)

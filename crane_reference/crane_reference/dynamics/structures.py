@@ -307,3 +307,20 @@ class LoopRun(NamedTuple):
     correction: ModalCorrection
     earlier: np.ndarray
     command: np.ndarray
+
+
+class PlantCarry(NamedTuple):
+    """The actuated plant's state carried from one control period to the next in arrays that
+    :func:`~.closed_loop.held_period` updates in place: the time ``clock`` (1,) [s], q and qd, the work accounts
+    (3,) [J], the modal correction (:class:`ModalCorrection`: ``inertia``, ``damping``, ``modal`` (2,) its time
+    and step [s]) and E's position (3,) [m] and rotation (3, 3) in the world frame."""
+
+    clock: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    work: np.ndarray
+    inertia: np.ndarray
+    damping: np.ndarray
+    modal: np.ndarray
+    ee_position: np.ndarray
+    ee_rotation: np.ndarray

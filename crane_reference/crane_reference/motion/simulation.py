@@ -85,11 +85,13 @@ class StepperSnapshot(NamedTuple):
 
 class StepPlan(NamedTuple):
     """Steps planned by :meth:`MotionStepper.step_plan`: their end times [s], whether each ends on a drive jump,
-    the index of the first step towards each end (and their count last), and the grid index after them."""
+    the index of the first step towards each end (and their count last), and the time [s] and grid index after
+    them."""
 
     times: np.ndarray
     on_jump: np.ndarray
     first: np.ndarray
+    t: float
     k: int
 
 
@@ -135,19 +137,36 @@ class MotionStepper:
         covered = before.size + int(before.size < grid.size and grid[before.size] <= jump + slack)
         return np.append(before, jump), True, covered
 
-    def step_plan(self, ends: np.ndarray) -> StepPlan:
-        """The steps :meth:`advance_until` would take from the current state through each of ``ends`` (increasing
-        [s]) in turn, without taking them."""
-        t, k, times, jumps, first = self.state.t, self._k, [], [], [0]
-        for t_end in ends:
-            count = first[-1]
-            while t < t_end - 1e-9 * self.step_size:
+    def step_plan(self, ends: np.ndarray, after: StepPlan | None = None) -> StepPlan:
+        """The steps :meth:`advance_until` would take from the current state (or from the end of the plan
+        ``after``) through each of ``ends`` (increasing [s]) in turn, without taking them."""
+        t, k = (self.state.t, self._k) if after is None else (after.t, after.k)
+        ends = np.asarray(ends, dtype=float)
+        h, slack = self.step_size, 1e-9 * self.step_size
+        times, jumps, first, i = [], [], [0], 0
+        while i < ends.size:
+            # the ends ahead whose steps end on the grid before the next drive jump: at once, the last grid time
+            # at or after each (later than the one before, or no step for it)
+            lasts = np.ceil((ends[i:] - self._t0) / h - 1e-9)
+            jump = min((b for b in self._breakpoints if b > t), default=np.inf)
+            count = int(np.count_nonzero(self._t0 + lasts * h + slack < jump)) if ends[i] > t + slack else 0
+            if count:
+                grid = self._t0 + np.arange(k + 1, int(lasts[count - 1]) + 1) * h
+                times.append(grid)
+                jumps.append(np.zeros(grid.size, bool))
+                first.extend((first[-1] + lasts[:count] - k).astype(np.int64))
+                t, k, i = float(grid[-1]), int(lasts[count - 1]), i + count
+                continue
+            t_end, total = ends[i], first[-1]
+            while t < t_end - slack:
                 block, on_jump, covered = self._next_times(t_end, t, k)
                 times.append(block)
                 jumps.append(np.arange(block.size) == block.size - 1 if on_jump else np.zeros(block.size, bool))
-                t, k, count = float(block[-1]), k + covered, count + block.size
-            first.append(count)
-        return StepPlan(np.concatenate(times), np.concatenate(jumps), np.array(first, dtype=np.int64), k)
+                t, k, total = float(block[-1]), k + covered, total + block.size
+            first.append(total)
+            i += 1
+        return StepPlan(np.concatenate([np.empty(0), *times]), np.concatenate([np.zeros(0, bool), *jumps]),
+                        np.array(first, dtype=np.int64), t, k)
 
     def continue_from(self, state: StepState, k: int, work: np.ndarray, sample: Sample) -> None:
         """Continue from ``state`` at grid index k with the work accounts and sample there (steps taken

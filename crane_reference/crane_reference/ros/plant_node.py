@@ -211,7 +211,7 @@ class CranePlantNode(LifecycleNode):
         lockstep = self._params.clock_mode == "lockstep"
         self._heard = True
         with self._lock:
-            now = self._server.plant.t if lockstep else self._seconds()
+            now = self._server.t if lockstep else self._seconds()
             try:
                 self._server.command(msg.data, now)
             except CommandRefusedError as error:

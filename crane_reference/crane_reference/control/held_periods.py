@@ -1,0 +1,77 @@
+"""The plant node's control periods: efforts held over each period, one compiled call per period.
+
+A period of :class:`HeldPeriods` is a tick of :meth:`.plant.Plant.follow` with no feedback (the controller
+commands the efforts u; the actuator torques are u - kd qd), stepped by
+:func:`~crane_reference.dynamics.closed_loop.held_period`, which carries the plant's state from one period to
+the next in arrays (:class:`~crane_reference.dynamics.structures.PlantCarry`).  The steps and the column drive's
+parameters on them are planned for :data:`PLANNED_PERIODS` periods at a time
+(:meth:`~crane_reference.motion.simulation.MotionStepper.step_plan`), so that a period costs its compiled steps
+and little else.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..dynamics.closed_loop import held_period
+from ..dynamics.structures import CONVERGED, PlantCarry
+from ..motion.simulation import StepPlan
+from .plant import Plant
+
+PLANNED_PERIODS = 1000
+"""Periods whose steps are planned at a time."""
+
+
+class HeldPeriods:
+    """Control periods of ``period`` [s] of ``plant`` from its state now (the plant itself stays there), each
+    under efforts held over it."""
+
+    def __init__(self, plant: Plant, period: float):
+        stepper = plant.stepper
+        state, sample = stepper.state, stepper.sample
+        self.period = period
+        self.count = 0
+        """Periods done."""
+        self.carry = PlantCarry(np.array([state.t]), state.q.copy(), state.qd.copy(), stepper.snapshot().work.copy(),
+                                state.correction.inertia.copy(), state.correction.damping.copy(),
+                                np.array([state.correction.time, state.correction.step]),
+                                np.array(sample.ee_position, dtype=float), np.array(sample.ee_rotation, dtype=float))
+        """The plant's state after the periods done."""
+        self._t0 = state.t
+        self._stepper = stepper
+        self._drive = plant.drive.drive
+        self._model = (stepper.motion.constraints.coefficients(state.t), stepper.motion.partition, plant.dynamics.chain,
+                       stepper.integrator.settings, plant.actuated, plant.joint_damping)
+        self._plan: StepPlan | None = None
+        self._planned = 0  # the first period of the plan
+        self._left = self._after = np.empty((0, 4))
+
+    @property
+    def t(self) -> float:
+        """[s] the plant's time."""
+        return float(self.carry.clock[0])
+
+    def advance(self, efforts: np.ndarray) -> None:
+        """Hold the efforts u [N m] (order of :data:`~crane_reference.model.chain.ACTUATED_JOINTS`) over the next
+        period; an :class:`~crane_reference.motion.integration.IntegrationError` (or ProjectionError) if a step
+        fails, the plant then staying where it was."""
+        i = self.count - self._planned
+        if self._plan is None or i + 1 >= self._plan.first.size:
+            self._make_plan()
+            i = 0
+        plan = self._plan
+        status, t, failed_at = held_period(self.carry, self._t0 + (self.count + 1) * self.period, plan.first[i],
+                                           plan.first[i + 1], plan.times, plan.on_jump, self._left, self._after,
+                                           *self._model, np.asarray(efforts, dtype=float))
+        if status != CONVERGED:
+            raise self._stepper.integrator.failure(status, t, failed_at)
+        self.count += 1
+
+    def _make_plan(self) -> None:
+        """The steps of the next :data:`PLANNED_PERIODS` periods and the column drive's parameters at their ends
+        (left limits) and at their starts (right limits, where the integrator restarts)."""
+        ends = self._t0 + np.arange(self.count + 1, self.count + PLANNED_PERIODS + 1) * self.period
+        self._plan = self._stepper.step_plan(ends, after=self._plan)
+        self._planned = self.count
+        self._left = self._drive.kernel_parameters(self._plan.times, left_limit=True)
+        self._after = self._drive.kernel_parameters(np.concatenate(([self.t], self._plan.times)))
