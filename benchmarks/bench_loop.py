@@ -36,7 +36,6 @@ import rclpy
 from common import aba_time, process_cpu_seconds
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -49,22 +48,30 @@ from crane_reference.model.config import load_config
 from crane_reference.motion.simulation import Scenario
 from crane_reference.ros.loop import closed_loop_processes
 from crane_reference.ros.message_types import rclpy_types
+from crane_reference.ros.running import events_executor
 
 SUBSCRIBER = """
+import signal
+import threading
 import rclpy
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
-rclpy.init()
+from crane_reference.ros.running import events_executor
+stop = threading.Event()
+signal.signal(signal.SIGINT, lambda *_: stop.set())
+rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
 node = Node("bench_loop_subscriber")
 for kind, topic in ((JointState, "/bench/joint_states"), (PoseStamped, "/bench/pose"),
                     (Vector3Stamped, "/bench/tip")):
     node.create_subscription(kind, topic, lambda msg: None, 1000)
-try:
-    rclpy.spin(node)
-except (KeyboardInterrupt, ExternalShutdownException):
-    pass
+executor = events_executor()
+executor.add_node(node)
+while not stop.is_set():
+    executor.spin_once(timeout_sec=0.1)
+node.destroy_node()
+rclpy.try_shutdown()
 """
 
 
@@ -146,7 +153,7 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
             node.create_subscription(DiagnosticArray, "/diagnostics", lambda msg: diagnostics.extend(
                 {kv.key: kv.value for kv in status.values} for status in msg.status
                 if status.name.startswith(f"{PLANT_NODE}:")), 100)
-            executor = SingleThreadedExecutor(context=context)
+            executor = events_executor(context)
             executor.add_node(node)
             deadline = time.monotonic() + 600.0
             while len(commands) < 100 and time.monotonic() < deadline:  # the loop closed (the reference is up)
@@ -188,7 +195,7 @@ def lockstep(rate: int, duration: float) -> None:
             node = rclpy.create_node("bench_loop_listener", context=context)
             node.create_subscription(JointState, f"/{PLANT_NODE}/joint_states", lambda msg: stamps.append(
                 msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec), 10000)
-            executor = SingleThreadedExecutor(context=context)
+            executor = events_executor(context)
             executor.add_node(node)
             deadline = time.monotonic() + 600.0
             while (not stamps or stamps[-1] - stamps[0] < 10**8) and time.monotonic() < deadline:  # 0.1 s run
