@@ -1,7 +1,7 @@
 """The closed loop over ROS (issue 31's figures): the plant node in real time and the loop in lock-step.
 
-    python benchmarks/bench_loop.py [--only tick realtime lockstep] [--duration 60] [--lockstep-duration 5]
-                                    [--rate 1000]
+    python benchmarks/bench_loop.py [--only tick realtime lockstep executors] [--duration 60]
+                                    [--lockstep-duration 5] [--rate 1000]
 
 1. [tick] In this process: the plant's control period (PlantServer.tick: the compiled period and the state) and
    filling its three serialized messages, per period, as a multiple of one Pinocchio ABA call on the same chain
@@ -16,6 +16,9 @@
 3. [lockstep] The three in lock-step (as ``crane-reference loop``) for ``--lockstep-duration`` s of the plant's
    time after its first 0.1 s: seconds of the plant per second of wall time, and each process's CPU share (the
    reference node with its solver's process).
+4. [executors] Why the plant and controller nodes spin with rclpy's EventsExecutor: this process takes the commands
+   a paced process publishes at ``--rate`` (std_msgs/Float64MultiArray of three efforts) for 10 s, with the
+   SingleThreadedExecutor and with the EventsExecutor in turn: its CPU share [%] with each.
 
 ROS_DOMAIN_ID is this process's (set it apart from other ROS traffic), the next one for [lockstep]; discovery on
 localhost.
@@ -36,6 +39,7 @@ import rclpy
 from common import aba_time, process_cpu_seconds
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -70,6 +74,28 @@ executor = events_executor()
 executor.add_node(node)
 while not stop.is_set():
     executor.spin_once(timeout_sec=0.1)
+node.destroy_node()
+rclpy.try_shutdown()
+"""
+
+
+PUBLISHER = """
+import sys
+import time
+import rclpy
+from std_msgs.msg import Float64MultiArray
+rclpy.init()
+node = rclpy.create_node("bench_loop_commands")
+publisher = node.create_publisher(Float64MultiArray, "/bench/commands", 10)
+while publisher.get_subscription_count() == 0:
+    time.sleep(0.01)
+rate, seconds = float(sys.argv[1]), float(sys.argv[2])
+message = Float64MultiArray(data=[0.0, 0.0, 0.0])
+start, k = time.monotonic(), 0
+while (now := time.monotonic()) - start < seconds:
+    publisher.publish(message)
+    k += 1
+    time.sleep(max(0.0, start + k / rate - now))
 node.destroy_node()
 rclpy.try_shutdown()
 """
@@ -220,6 +246,32 @@ def lockstep(rate: int, duration: float) -> None:
           ", ".join(f"{name} {share:.0f} %" for name, share in shares.items()) + " of a core")
 
 
+def executors(rate: int, seconds: float = 10.0) -> None:
+    """[executors]: prints this process's CPU share taking ``rate`` Hz of commands with each executor."""
+    for name, make in (("SingleThreadedExecutor", lambda context: SingleThreadedExecutor(context=context)),
+                       ("EventsExecutor", events_executor)):
+        context = rclpy.Context()
+        rclpy.init(context=context)
+        received: list[Float64MultiArray] = []
+        try:
+            node = rclpy.create_node("bench_loop_executor", context=context)
+            node.create_subscription(Float64MultiArray, "/bench/commands", received.append, 1000)
+            executor = make(context)
+            executor.add_node(node)
+            publisher = subprocess.Popen([sys.executable, "-c", PUBLISHER, str(rate), str(seconds)])
+            deadline = time.monotonic() + 30.0
+            while not received and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+            count, cpu, start = len(received), time.process_time(), time.monotonic()
+            while publisher.poll() is None:
+                executor.spin_once(timeout_sec=0.05)
+            share = 100.0 * (time.process_time() - cpu) / (time.monotonic() - start)
+            print(f"[executors] {name}: {len(received) - count} commands taken at {rate} Hz, {share:.1f} % of a core")
+            node.destroy_node()
+        finally:
+            context.try_shutdown()
+
+
 def descendants(pid: int) -> list[int]:
     """The processes started by ``pid`` (the reference node's solver process), from /proc."""
     children = []
@@ -231,7 +283,7 @@ def descendants(pid: int) -> list[int]:
     return children
 
 
-SECTIONS = ("tick", "realtime", "lockstep")
+SECTIONS = ("tick", "realtime", "lockstep", "executors")
 
 
 def main() -> int:
@@ -249,6 +301,8 @@ def main() -> int:
         realtime(args.rate, args.duration, share)
     if "lockstep" in args.only:
         lockstep(args.rate, args.lockstep_duration)
+    if "executors" in args.only:
+        executors(args.rate)
     return 0
 
 
