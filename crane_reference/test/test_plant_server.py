@@ -81,6 +81,15 @@ def test_held_commands_are_the_per_tick_python_path(still):
     assert np.abs(python.q - start.q).max() > 1e-3  # the commands moved it
 
 
+def test_a_follow_without_ticks_is_refused(still):
+    plant = Plant(still, "flexible", held_start(Scenario(still, "flexible")), 1e-3)
+    controller = JointController([JointGains(1.0, 0.0)] * 3, 1e-3)
+    none = np.empty((0, 3))
+    with pytest.raises(ValueError, match="ends: no tick"):
+        plant.follow(np.empty(0), none, none, none, none, controller)
+    assert plant.t == 0.0
+
+
 def _run(server, commands):
     states = []
     for k, command in enumerate(commands):

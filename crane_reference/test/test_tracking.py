@@ -9,6 +9,7 @@ simulated digital loop; the work-energy theorem with the actuators' work.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import replace
 
 import numpy as np
@@ -269,6 +270,25 @@ def test_references_computed_ahead_are_simulates_and_hand_on_a_failure(params):
         np.testing.assert_array_equal(trajectory.q, expected.q)
         np.testing.assert_array_equal(trajectory.qd, expected.qd)
         np.testing.assert_array_equal(trajectory.qdd, expected.qdd)
+
+    def held_back(runs, go: threading.Event):
+        yield next(runs)  # the start
+        yield next(runs)  # the first run
+        go.wait()
+        yield from runs
+
+    go = threading.Event()
+    ahead = ComputedAhead([s.motion for s in motions], [
+        simulated_runs(motions[0].motion, motions[0].equilibrium.q, 0.3, step=1e-3, chunk=0.1, every_row=False),
+        held_back(simulated_runs(motions[1].motion, motions[1].equilibrium.q, 0.3, step=1e-3, chunk=0.04,
+                                 every_row=False), go)])
+    try:
+        first, _ = ahead.through(0.04 - 1e-9)  # the first motion is a run of 0.1 s ahead of the second's 0.04 s
+        np.testing.assert_array_equal(first[0].t, computed[0].t[:first[1].t.size])
+        assert first[0].t[-1] == first[1].t[-1] == pytest.approx(0.04)
+    finally:
+        go.set()
+        ahead.close()
 
     def failing():
         yield from simulated_runs(motions[1].motion, motions[1].equilibrium.q, 0.1, step=1e-3, every_row=False)

@@ -124,6 +124,8 @@ class Plant:
         feedforward ``feedforward_start`` [k], linear to u_k + feedforward_end[k + 1] - feedforward_start[k]
         (within the limits) at its end: the ticks of :meth:`actuate` with a :class:`JointController`, steps and
         accounts the same."""
+        if len(ends) == 0:
+            raise ValueError("ends: no tick; follow takes one end time [s] per tick, at least one")
         stepper, motion = self.stepper, self.stepper.motion
         plan = stepper.step_plan(ends)
         inner = self.drive.drive

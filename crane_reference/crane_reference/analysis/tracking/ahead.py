@@ -56,16 +56,27 @@ class ComputedAhead:
                 self._changed.notify_all()
 
     def through(self, t: float) -> tuple[list[Trajectory], bool]:
-        """Each motion as computed once all are computed through motion time t [s] (or are complete), and whether
-        all are complete; raises what stopped the computing."""
+        """Each motion once all are computed through motion time t [s] (or are complete), as far as all are
+        computed (one may be a run ahead of another), and whether all are complete; raises what stopped the
+        computing."""
         with self._changed:
             self._changed.wait_for(lambda: self._finished or min(self._computed) >= t)
             if self._failure is not None:
                 raise self._failure
             parts, finished = [list(p) for p in self._parts], self._finished
-        return [joined(m, p) for m, p in zip(self._motions, parts, strict=True)], finished
+            common = np.inf if finished else min(self._computed)
+        return [joined(m, _through(p, common)) for m, p in zip(self._motions, parts, strict=True)], finished
 
     def close(self) -> None:
         """Stop computing after the run in progress and wait for the thread (the reader is done, or failed)."""
         self._closed = True
         self._thread.join()
+
+
+def _through(parts: list[dict[str, np.ndarray]], t: float) -> list[dict[str, np.ndarray]]:
+    """The samples of the consecutive runs ``parts`` at motion times <= t [s]."""
+    kept = [part for part in parts if part["t"][0] <= t]
+    if kept[-1]["t"][-1] > t:
+        count = int(np.searchsorted(kept[-1]["t"], t, side="right"))
+        kept[-1] = {name: values[:count] for name, values in kept[-1].items()}
+    return kept

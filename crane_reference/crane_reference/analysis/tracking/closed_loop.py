@@ -211,7 +211,7 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
                 references, finished = ahead.through(end * spec.step * (1.0 - 1e-9))
                 reference, feedforward_reference = (_every(r, spec.reference_stride) for r in (references[0],
                                                                                                 references[-1]))
-                samples = min(len(reference.t), len(feedforward_reference.t))  # one may be a run ahead of the other
+                samples = len(reference.t)  # the feedforward's reference holds as many
             k = np.arange(first, min(first + chunk, (samples - 1) // per))
             if k.size == 0:
                 if finished:
