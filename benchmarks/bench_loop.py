@@ -12,7 +12,8 @@
    command-to-state latency (in this process: from a command's arrival to the arrival of the next state, which
    is the first under it; p50, p99, largest), the plant process's CPU share beside its floor measured in this
    run: a paced process that only publishes the plant's three serialized messages at the rate (a subscriber in
-   another process) plus the periods alone ([tick]).
+   another process) plus the periods alone ([tick]); the CPU share of every process of the loop (the reference
+   node with its solver's process) and of this one.
 3. [lockstep] The three in lock-step (as ``crane-reference loop``) for ``--lockstep-duration`` s of the plant's
    time after its first 0.1 s: seconds of the plant per second of wall time, and each process's CPU share (the
    reference node with its solver's process).
@@ -186,12 +187,16 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
                 executor.spin_once(timeout_sec=0.05)
             before = next(d for d in reversed(diagnostics)) if diagnostics else {}
             states.clear(), commands.clear()
-            pid = processes[PLANT_NODE].pid
-            cpu, start = process_cpu_seconds(pid), time.monotonic()
+            pids = {name: [process.pid, *descendants(process.pid)] for name, process in processes.items()}
+            cpu = {name: sum(map(process_cpu_seconds, group)) for name, group in pids.items()}
+            cpu["this listener"] = time.process_time()
+            start = time.monotonic()
             while time.monotonic() - start < duration:
                 executor.spin_once(timeout_sec=0.05)
             wall = time.monotonic() - start
-            share = 100.0 * (process_cpu_seconds(pid) - cpu) / wall
+            now = {name: sum(map(process_cpu_seconds, group)) for name, group in pids.items()}
+            now["this listener"] = time.process_time()
+            shares = {name: 100.0 * (now[name] - cpu[name]) / wall for name in cpu}
             for _ in range(40):  # the next diagnostics
                 executor.spin_once(timeout_sec=0.05)
             node.destroy_node()
@@ -206,8 +211,12 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
     print(f"[realtime] {rate} Hz for {wall:.0f} s: {ticks} periods, {late} started late (> 1 period); "
           f"{len(commands)} commands answered; command-to-state latency p50 {np.median(latency) * 1e3:.2f} ms, "
           f"p99 {np.quantile(latency, 0.99) * 1e3:.2f} ms, largest {latency.max() * 1e3:.2f} ms")
+    share = shares[PLANT_NODE]
     print(f"[realtime] plant process CPU {share:.1f} % of a core; floor {floor + periods_share:.1f} % (publishing "
           f"only {floor:.1f} % + the periods alone {periods_share:.1f} %), ratio {share / (floor + periods_share):.2f}")
+    print("[realtime] CPU of each process [% of a core]: " + ", ".join(f"{name} {value:.0f}" for name, value in
+                                                                       shares.items())
+          + f"; {sum(shares.values()):.0f} in all of {100 * os.cpu_count()}")
 
 
 def lockstep(rate: int, duration: float) -> None:
