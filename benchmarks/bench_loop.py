@@ -17,9 +17,9 @@
 3. [lockstep] The three in lock-step (as ``crane-reference loop``) for ``--lockstep-duration`` s of the plant's
    time after its first 0.1 s: seconds of the plant per second of wall time, and each process's CPU share (the
    reference node with its solver's process).
-4. [executors] Why the plant and controller nodes spin with rclpy's EventsExecutor: this process takes the commands
-   a paced process publishes at ``--rate`` (std_msgs/Float64MultiArray of three efforts) for 10 s, with the
-   SingleThreadedExecutor and with the EventsExecutor in turn: its CPU share [%] with each.
+4. [executors] What taking a topic costs with rclpy's executors: this process takes the commands a paced process
+   publishes at ``--rate`` (std_msgs/Float64MultiArray of three efforts) for 10 s, with the SingleThreadedExecutor
+   and with the EventsExecutor (``rclpy.experimental``) in turn: its CPU share [%] with each.
 
 ROS_DOMAIN_ID is this process's (set it apart from other ROS traffic), the next one for [lockstep]; discovery on
 localhost.
@@ -41,6 +41,7 @@ from common import aba_time, process_cpu_seconds
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.experimental import EventsExecutor
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -53,7 +54,6 @@ from crane_reference.model.config import load_config
 from crane_reference.motion.simulation import Scenario
 from crane_reference.ros.loop import closed_loop_processes
 from crane_reference.ros.message_types import rclpy_types
-from crane_reference.ros.running import events_executor
 
 SUBSCRIBER = """
 import signal
@@ -63,7 +63,6 @@ from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
-from crane_reference.ros.running import events_executor
 stop = threading.Event()
 signal.signal(signal.SIGINT, lambda *_: stop.set())
 rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
@@ -71,7 +70,7 @@ node = Node("bench_loop_subscriber")
 for kind, topic in ((JointState, "/bench/joint_states"), (PoseStamped, "/bench/pose"),
                     (Vector3Stamped, "/bench/tip")):
     node.create_subscription(kind, topic, lambda msg: None, 1000)
-executor = events_executor()
+executor = SingleThreadedExecutor()
 executor.add_node(node)
 while not stop.is_set():
     executor.spin_once(timeout_sec=0.1)
@@ -180,7 +179,7 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
             node.create_subscription(DiagnosticArray, "/diagnostics", lambda msg: diagnostics.extend(
                 {kv.key: kv.value for kv in status.values} for status in msg.status
                 if status.name.startswith(f"{PLANT_NODE}:")), 100)
-            executor = events_executor(context)
+            executor = SingleThreadedExecutor(context=context)
             executor.add_node(node)
             deadline = time.monotonic() + 600.0
             while len(commands) < 100 and time.monotonic() < deadline:  # the loop closed (the reference is up)
@@ -230,7 +229,7 @@ def lockstep(rate: int, duration: float) -> None:
             node = rclpy.create_node("bench_loop_listener", context=context)
             node.create_subscription(JointState, f"/{PLANT_NODE}/joint_states", lambda msg: stamps.append(
                 msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec), 10000)
-            executor = events_executor(context)
+            executor = SingleThreadedExecutor(context=context)
             executor.add_node(node)
             deadline = time.monotonic() + 600.0
             while (not stamps or stamps[-1] - stamps[0] < 10**8) and time.monotonic() < deadline:  # 0.1 s run
@@ -258,7 +257,7 @@ def lockstep(rate: int, duration: float) -> None:
 def executors(rate: int, seconds: float = 10.0) -> None:
     """[executors]: prints this process's CPU share taking ``rate`` Hz of commands with each executor."""
     for name, make in (("SingleThreadedExecutor", lambda context: SingleThreadedExecutor(context=context)),
-                       ("EventsExecutor", events_executor)):
+                       ("EventsExecutor", lambda context: EventsExecutor(context=context))):
         context = rclpy.Context()
         rclpy.init(context=context)
         received: list[Float64MultiArray] = []

@@ -24,13 +24,13 @@ import yaml
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetState
-from rclpy.executors import Executor
+from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
 
 from ..interface.bringup import CONTROLLER_NODE, PLANT_NODE, LoopRecording, closed_loop_parameters
 from ..interface.messages import NODE_NAME
 from ..model.units import NANOSECONDS
-from .running import events_executor, spin_once
+from .running import spin_once
 
 MODULES = {NODE_NAME: "crane_reference.ros.node", PLANT_NODE: "crane_reference.ros.plant_node",
            CONTROLLER_NODE: "crane_reference.ros.controller_node"}
@@ -105,7 +105,7 @@ def _end(processes: dict[str, subprocess.Popen]) -> dict[str, int]:
     return codes
 
 
-def _start_plant(executor: Executor, node, processes: dict[str, subprocess.Popen],
+def _start_plant(executor: SingleThreadedExecutor, node, processes: dict[str, subprocess.Popen],
                  start_by: float) -> None:
     """Configure the plant (started with ``autostart`` false) through its lifecycle service, wait until the
     recorder ``node`` sees its publishers (so that it hears the first state: DDS discovery takes its time,
@@ -185,7 +185,7 @@ def _record(duration: float, parameters: dict[str, dict[str, object]],
             references.setdefault(_stamp_ns(msg), (msg.position, msg.velocity))
 
         node.create_subscription(JointState, f"/{NODE_NAME}/joint_states", on_reference, 100000)
-        executor = events_executor(context)
+        executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         held_plant = {**parameters, PLANT_NODE: {**parameters[PLANT_NODE], "autostart": False}}
         with closed_loop_processes(held_plant) as processes:

@@ -3,8 +3,6 @@
 rclpy's own signal handlers are off: a signal only ends the spin loop, in the main thread, and the node is
 destroyed and the context shut down after it, so that nothing is taken from the middleware while the context
 shuts down (rclpy's handler shuts it down from under an executor that may be taking a message).
-
-They spin with :func:`events_executor`.
 """
 
 from __future__ import annotations
@@ -14,13 +12,7 @@ import threading
 from collections.abc import Callable
 
 import rclpy
-from rclpy.context import Context
 from rclpy.executors import Executor, SingleThreadedExecutor
-
-try:
-    from rclpy.experimental import EventsExecutor
-except ImportError:  # rclpy < 7.1.4
-    EventsExecutor = None
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
@@ -34,15 +26,6 @@ LOST_MESSAGE = "Unable to convert call argument"
 """The start of rclpy's error when a message it took from the middleware cannot be made into its Python object
 (pybind11's; seen here under load about once in six runs of the lock-step loop, on /clock, and in other
 packages' nodes, e.g. ros/joint_state_publisher#117): that message is lost."""
-
-
-def events_executor(context: Context | None = None) -> Executor:
-    """rclpy's EventsExecutor (``rclpy.experimental``, in Jazzy since rclpy 7.1.4), which takes a message to its
-    callback for a fraction of what the SingleThreadedExecutor spends on it (at a 1 kHz control rate, most of a
-    node's time otherwise); with an older rclpy the SingleThreadedExecutor.  For nodes whose callbacks are plain
-    functions (no coroutines: rclpy < 7.1.11 runs async callbacks of subscriptions and services in the
-    SingleThreadedExecutor only)."""
-    return SingleThreadedExecutor(context=context) if EventsExecutor is None else EventsExecutor(context=context)
 
 
 def spin_once(executor: Executor, node: Node, timeout_sec: float | None = None) -> None:
@@ -71,7 +54,7 @@ def run_node(make: Callable[[], Node], name: str, args: list[str] | None = None)
             rclpy.logging.get_logger(name).fatal(f"{CANNOT} start: {error}")
             return 1
         try:
-            executor = events_executor()
+            executor = SingleThreadedExecutor()
             executor.add_node(node)
             while not stop.is_set():
                 spin_once(executor, node, SPIN_PERIOD)
