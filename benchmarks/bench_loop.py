@@ -60,6 +60,7 @@ import signal
 import threading
 import rclpy
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
