@@ -63,6 +63,10 @@ END_EFFECTOR_POSE_TOPIC = "~/end_effector_pose"
 TIP_DEFLECTION_TOPIC = "~/tip_deflection"
 CLOCK_TOPIC = "/clock"
 HEARTBEAT = 0.5  # [s] of wall time between repetitions of an unanswered lock-step state
+SWITCH_INTERVAL = 1e-4
+"""[s] Python's thread switch interval in real time: a period's compiled call releases the GIL, and the executor's
+thread, running Python while messages come, gives it back only after the switch interval (5 ms by default,
+five 1 kHz periods)."""
 
 
 class CranePlantNode(LifecycleNode):
@@ -179,6 +183,7 @@ class CranePlantNode(LifecycleNode):
         """The real-time periods (a thread): each waits until due, then advances and publishes; until the first
         command the plant is held at its start (its time stands still) and its state is published each period."""
         period = self._server.settings.period
+        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL))
         due = self._seconds() + period
         while self._running.is_set():
             wait = due - self._seconds()
