@@ -33,7 +33,7 @@ import signal
 import subprocess
 import sys
 import time
-from contextlib import suppress
+from contextlib import ExitStack, suppress
 
 import numpy as np
 import rclpy
@@ -41,7 +41,6 @@ from common import aba_time, process_cpu_seconds
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.experimental import EventsExecutor
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -257,17 +256,21 @@ def lockstep(rate: int, duration: float) -> None:
 
 def executors(rate: int, seconds: float = 10.0) -> None:
     """[executors]: prints this process's CPU share taking ``rate`` Hz of commands with each executor."""
+    from rclpy.experimental import EventsExecutor  # rclpy >= 7.1.4
+
     for name, make in (("SingleThreadedExecutor", lambda context: SingleThreadedExecutor(context=context)),
                        ("EventsExecutor", lambda context: EventsExecutor(context=context))):
         context = rclpy.Context()
         rclpy.init(context=context)
         received: list[Float64MultiArray] = []
-        try:
+        with ExitStack() as stack:
+            stack.callback(context.try_shutdown)
             node = rclpy.create_node("bench_loop_executor", context=context)
             node.create_subscription(Float64MultiArray, "/bench/commands", received.append, 1000)
             executor = make(context)
             executor.add_node(node)
             publisher = subprocess.Popen([sys.executable, "-c", PUBLISHER, str(rate), str(seconds)])
+            stack.callback(publisher.kill)
             deadline = time.monotonic() + 30.0
             while not received and time.monotonic() < deadline:
                 executor.spin_once(timeout_sec=0.05)
@@ -277,8 +280,6 @@ def executors(rate: int, seconds: float = 10.0) -> None:
             share = 100.0 * (time.process_time() - cpu) / (time.monotonic() - start)
             print(f"[executors] {name}: {len(received) - count} commands taken at {rate} Hz, {share:.1f} % of a core")
             node.destroy_node()
-        finally:
-            context.try_shutdown()
 
 
 def descendants(pid: int) -> list[int]:

@@ -25,6 +25,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from crane_reference.control.controller import JointController, JointGains
+from crane_reference.control import held_periods
 from crane_reference.control.held_periods import HeldPeriods
 from crane_reference.control.plant import Plant, held_start
 from crane_reference.control.plant_server import CommandRefusedError, PlantServer, PlantSettings, warm_up_plant
@@ -79,6 +80,26 @@ def test_held_commands_are_the_per_tick_python_path(still):
     assert np.abs(carry.ee_position - sample.ee_position).max() < 1e-9
     assert np.abs(carry.ee_rotation - sample.ee_rotation).max() < 1e-9
     assert np.abs(python.q - start.q).max() > 1e-3  # the commands moved it
+
+
+def test_held_periods_across_plans_and_drive_jumps_are_the_per_tick_python_path(params, monkeypatch):
+    """Two periods planned at a time, the column torque jumping within a period (off the step grid) and at a
+    period's end: the periods step as Plant.actuate does, restarting at the jumps."""
+    monkeypatch.setattr(held_periods, "PLANNED_PERIODS", 2)
+    crane = replace(params, drive=TorqueDrive(torque=800.0, start=0.0235, end=0.05))
+    start = held_start(Scenario(crane, "flexible"))
+    kd = np.array([4e4, 4e4, 1.3e4])
+    period, count = 0.01, 7
+    efforts = start.torques + np.outer(np.sin(np.arange(count)), [1e3, -5e2, 30.0])
+    compiled = HeldPeriods(Plant(crane, "flexible", start, 1e-3, kd), period)
+    python = Plant(crane, "flexible", start, 1e-3, kd)
+    for k, u in enumerate(efforts):
+        compiled.advance(u)
+        python.actuate((k + 1) * period, u, u)
+        assert compiled.t == python.t
+        assert np.abs(compiled.carry.q - python.q).max() < 1e-9
+        assert np.abs(compiled.carry.qd - python.qd).max() < 1e-7
+    assert 0.0235 in python.trajectory()[0].t  # the Python path stepped onto the jump
 
 
 def test_a_follow_without_ticks_is_refused(still):

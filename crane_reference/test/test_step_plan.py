@@ -26,10 +26,11 @@ def test_a_step_plan_is_the_steps_advance_until_takes(params, drive: str) -> Non
     crane = replace(params, drive=DRIVES[drive])
     start = held_start(Scenario(crane, "rigid"))
     planned, stepped = (Plant(crane, "rigid", start, STEP).stepper for _ in range(2))
-    plan, last = None, []
+    plan, last, on_jump = None, [], []
     for ends in ENDS:
         plan = planned.step_plan(ends, after=plan)
         last.append(plan.times)
+        on_jump.append(plan.on_jump)
         times, counts = [], [0]
         for end in ends:
             rows = stepped.advance_until(end)
@@ -37,7 +38,8 @@ def test_a_step_plan_is_the_steps_advance_until_takes(params, drive: str) -> Non
             counts.append(counts[-1] + times[-1].size)
         assert np.array_equal(plan.times, np.concatenate(times))
         assert np.array_equal(plan.first, counts)
-        assert plan.t == stepped.state.t
+        assert plan.t == stepped.state.t and plan.k == stepped.snapshot().k
     column = DRIVES[drive]
     jumps = {b for b in (column.start, column.end) if b > 0.0} if isinstance(column, TorqueDrive) else set()
-    assert jumps <= set(np.concatenate(last))  # the plan steps onto the jumps
+    times = np.concatenate(last)
+    assert np.array_equal(np.concatenate(on_jump), np.isin(times, sorted(jumps)))  # steps ending on the jumps

@@ -44,7 +44,7 @@ class HeldPeriods:
                        stepper.integrator.settings, plant.actuated, plant.joint_damping)
         self._plan: StepPlan | None = None
         self._planned = 0  # the first period of the plan
-        self._left = self._after = np.empty((0, 4))
+        self._left = self._right = np.empty((0, 4))  # the column drive's parameters: left, right limits
 
     @property
     def t(self) -> float:
@@ -61,7 +61,7 @@ class HeldPeriods:
             i = 0
         plan = self._plan
         status, t, failed_at = held_period(self.carry, self._t0 + (self.count + 1) * self.period, plan.first[i],
-                                           plan.first[i + 1], plan.times, plan.on_jump, self._left, self._after,
+                                           plan.first[i + 1], plan.times, plan.on_jump, self._left, self._right,
                                            *self._model, np.asarray(efforts, dtype=float))
         if status != CONVERGED:
             raise self._stepper.integrator.failure(status, t, failed_at)
@@ -71,7 +71,7 @@ class HeldPeriods:
         """The steps of the next :data:`PLANNED_PERIODS` periods and the column drive's parameters at their ends
         (left limits) and at their starts (right limits, where the integrator restarts)."""
         ends = self._t0 + np.arange(self.count + 1, self.count + PLANNED_PERIODS + 1) * self.period
-        self._plan = self._stepper.step_plan(ends, after=self._plan)
-        self._planned = self.count
-        self._left = self._drive.kernel_parameters(self._plan.times, left_limit=True)
-        self._after = self._drive.kernel_parameters(np.concatenate(([self.t], self._plan.times)))
+        plan = self._stepper.step_plan(ends, after=self._plan)
+        left = self._drive.kernel_parameters(plan.times, left_limit=True)
+        right = self._drive.kernel_parameters(np.concatenate(([self.t], plan.times)))
+        self._plan, self._planned, self._left, self._right = plan, self.count, left, right

@@ -190,12 +190,12 @@ class PlantServer:
 
     @property
     def q(self) -> np.ndarray:
-        """q now (every coordinate)."""
+        """q now (every coordinate; the next tick overwrites it: copy to keep)."""
         return self.periods.carry.q
 
     @property
     def qd(self) -> np.ndarray:
-        """qd now (every coordinate)."""
+        """qd now (every coordinate; the next tick overwrites it: copy to keep)."""
         return self.periods.carry.qd
 
     def timed_out(self, now: float) -> bool:

@@ -145,24 +145,25 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
 
 
 @njit(cache=True, nogil=True)
-def held_period(carry: PlantCarry, end, first, last, step_times, on_jump, inner, inner_after, k: Coefficients,
-                partition: Partition, chain: ChainData, settings: StepSettings, actuated, joint_damping, efforts):
+def held_period(carry: PlantCarry, end, start_step, end_step, step_times, on_jump, inner, inner_after,
+                k: Coefficients, partition: Partition, chain: ChainData, settings: StepSettings, actuated,
+                joint_damping, efforts):
     """One control period of the plant from its ``carry`` to ``end`` [s] under the efforts u [N m] (n_a,) held
     over it (the actuator torques u - ``joint_damping`` qd): a tick of :func:`closed_loop_run` whose controller
-    commands u (no feedback), over the steps ``first`` .. ``last`` - 1 of a plan of steps (``step_times``,
-    ``on_jump``, ``inner`` (S, 4) and ``inner_after`` (S + 1, 4) as there, the latter's row ``first`` at the
-    period's start).  The carry is updated in place when every step converged; returns the status, the time
-    reached and the end of the step that failed (that of the last step if none did)."""
-    na = actuated.size
-    zeros, ends = np.zeros(na), np.full((2, na), 0.0)
-    ends[0], ends[1] = efforts, efforts
+    commands u (no feedback), over the steps ``start_step`` .. ``end_step`` - 1 of a plan of steps
+    (``step_times``, ``on_jump``, ``inner`` (S, 4) and ``inner_after`` (S + 1, 4) as there, the latter's row
+    ``start_step`` at the period's start).  The carry is updated in place when every step converged; returns the
+    status, the time reached and the end of the step that failed (that of the last step if none did)."""
+    na, s0, s1 = actuated.size, start_step, end_step
+    zeros, held = np.zeros(na), np.empty((2, na))
+    held[0], held[1] = efforts, efforts  # the feedforward at the period's start and at the next one's
     correction = ModalCorrection(carry.inertia, carry.damping, carry.modal[0], carry.modal[1])
     run = closed_loop_run(carry.q, carry.qd, correction, carry.work, carry.clock[0], np.array([end]),
-                          np.array([0, last - first]), step_times[first:last], on_jump[first:last],
-                          inner[first:last], inner_after[first:last + 1], k, partition, chain, settings, actuated,
-                          joint_damping, 1.0, zeros.reshape(1, na), zeros.reshape(1, na), ends, ends, zeros, zeros,
-                          zeros, np.full(na, np.inf), zeros.copy(), np.zeros(na, np.int64))
-    failed_at = step_times[min(first + run.steps, last - 1)]
+                          np.array([0, s1 - s0]), step_times[s0:s1], on_jump[s0:s1], inner[s0:s1],
+                          inner_after[s0:s1 + 1], k, partition, chain, settings, actuated, joint_damping, 1.0,
+                          zeros.reshape(1, na), zeros.reshape(1, na), held, held, zeros, zeros, zeros,
+                          np.full(na, np.inf), zeros.copy(), np.zeros(na, np.int64))
+    failed_at = step_times[min(s0 + run.steps, s1 - 1)]
     if run.status != CONVERGED:
         return run.status, run.t, failed_at
     rows = run.rows

@@ -13,9 +13,10 @@ hold command on a timeout); the parameters are :mod:`.plant_parameters`.
   E in ``frame_id``) and ``~/tip_deflection`` (geometry_msgs/Vector3Stamped, the boom tip's deflection from
   its rigid chord in the first boom element's link), stamped with the end of the period.
 * ``clock_mode`` realtime: a period every period of the steady clock (a thread of its own paces them; a period
-  that starts more than a period late counts as late, and the next is due a period after it), stamped with
-  the node's clock; the plant's time (and its column drive's program) starts with the first command, until
-  which its held start is published every period;
+  that starts more than a period late counts as late, and the next is due a period after it; while they run,
+  Python's thread switch interval is :data:`SWITCH_INTERVAL`), stamped with the node's clock; the plant's time
+  (and its column drive's program) starts with the first command, until which its held start is published
+  every period;
   lockstep: the node publishes /clock (``clock_start`` plus the plant's time) and advances one period per
   command received, so nodes with ``use_sim_time`` run in step with it, deterministically; while no command
   comes, it publishes /clock and the state again every :data:`HEARTBEAT` s of wall time (for nodes that
@@ -183,29 +184,32 @@ class CranePlantNode(LifecycleNode):
         """The real-time periods (a thread): each waits until due, then advances and publishes; until the first
         command the plant is held at its start (its time stands still) and its state is published each period."""
         period = self._server.settings.period
-        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL))
-        due = self._seconds() + period
-        while self._running.is_set():
-            wait = due - self._seconds()
-            if wait > 0.0:
-                time.sleep(wait)  # at most a period: a deactivation is noticed within one
-                continue
-            if -wait > period:
-                self._late += 1
-                due = self._seconds()
-            try:
-                if self._server.accepted:
-                    self._advance(self._seconds())
-                else:
-                    with self._lock:
-                        state = self._server.state()
-                    self._publish(state)
-            except Exception as error:  # anything else that goes wrong stops the plant, at ERROR
-                if not self.context.ok():
+        previous = sys.getswitchinterval()
+        sys.setswitchinterval(min(previous, SWITCH_INTERVAL))
+        try:
+            due = self._seconds() + period
+            while self._running.is_set():
+                wait = due - self._seconds()
+                if wait > 0.0:
+                    time.sleep(wait)  # at most a period: a deactivation is noticed within one
+                    continue
+                if -wait > period:
+                    self._late += 1
+                    due = self._seconds()
+                try:
+                    if self._server.accepted:
+                        self._advance(self._seconds())
+                    else:
+                        with self._lock:
+                            state = self._server.state()
+                        self._publish(state)
+                except Exception as error:  # anything else that goes wrong stops the plant, at ERROR
+                    if self.context.ok():
+                        self._fail(f"{type(error).__name__}: {error}")
                     return
-                self._fail(f"{type(error).__name__}: {error}")
-                return
-            due += period
+                due += period
+        finally:
+            sys.setswitchinterval(previous)
 
     def _on_command(self, msg: Float64MultiArray) -> None:
         """~/commands: accepted or refused (counted, WARN); in lock-step a period follows either way (under the

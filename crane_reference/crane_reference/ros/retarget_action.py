@@ -138,7 +138,7 @@ class RetargetActionServer:
         pre-empted for ``why``."""
         if self._goal is not None:
             goal = self._goal[1]
-            self._conclude(goal.end(self._serving(goal), preempted_by=why))
+            self._conclude(goal.end(self._serving(goal), preempted_by=why) or GoalEnd(PREEMPTED, why))
 
     def _serving(self, goal: RetargetGoal) -> bool:
         """Whether the goal's server still publishes for it."""

@@ -211,7 +211,9 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
                 references, finished = ahead.through(end * spec.step * (1.0 - 1e-9))
                 reference, feedforward_reference = (_every(r, spec.reference_stride) for r in (references[0],
                                                                                                 references[-1]))
-                samples = len(reference.t)  # the feedforward's reference holds as many
+                samples = len(reference.t)
+                if len(feedforward_reference.t) != samples:  # both on one grid, computed as far
+                    raise RuntimeError("the feedforward's reference and the task's do not share their samples")
             k = np.arange(first, min(first + chunk, (samples - 1) // per))
             if k.size == 0:
                 if finished:
