@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from crane_reference.control.controller import JointController, JointGains
 from crane_reference.control import held_periods
+from crane_reference.control.controller import JointController, JointGains
 from crane_reference.control.held_periods import HeldPeriods
 from crane_reference.control.plant import Plant, held_start
 from crane_reference.control.plant_server import CommandRefusedError, PlantServer, PlantSettings, warm_up_plant
