@@ -2,6 +2,7 @@
 
 * qdd and lambda of :meth:`ProgrammedMotion.solve` (the B^T M / A formulation of (8)) against the
   Lagrange-multiplier (KKT) system [[M, -A^T], [A, 0]] [qdd; lambda] = [Q - h; c] solved here.
+* (8) solved again where only the forces jumped (``forces_jumped``) against (8) evaluated afresh there.
 * The acceleration-level constraints (6.3)-(6.4) are the second time derivatives of (5.1)-(5.2):
   integrating the full-coordinate ODE qdd = solve(t, q, qd).qdd without any projection keeps the
   position residuals Phi and the velocity residuals A qd - b at the integration-error level.
@@ -18,7 +19,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from crane_reference.dynamics import kernels
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
+from crane_reference.dynamics.structures import Evaluation
 from crane_reference.model.chain import VARIANTS, build_model
 from crane_reference.model.config import load_config
 from crane_reference.model.drive import make_drive
@@ -112,6 +115,32 @@ def test_solution_equals_kkt_system(cases, variant):
         assert lambda_error <= KKT_TOLERANCE, f"lambda: relative error {lambda_error:.3g} at t = {t:.3f}"
         force_error = np.linalg.norm(solution.constraint_forces - con.A.T @ multipliers)
         assert force_error <= KKT_TOLERANCE * np.linalg.norm(con.A.T @ multipliers)
+
+
+@pytest.mark.parametrize("realisation", ["ideal", "servo"])
+def test_forces_jumped_is_a_fresh_evaluation_under_the_new_drive(cases, realisation):
+    """The closed loop's restart where only the forces jump (a new command, the drive's torque jump) keeps
+    the position and velocity terms of the step's evaluation: it equals, bit for bit, (8) evaluated afresh
+    at the same state under the new drive (the column drive's parameters and actuator torques changed)."""
+    case = cases["flexible"]
+    motion = ProgrammedMotion(case.dynamics, task(case.z_static, a_blend=True), realisation=realisation)
+    rng = np.random.default_rng(SEED)
+    chain, partition = case.dynamics.chain, motion.partition
+    n = case.dynamics.model.dof
+    for _ in range(3):
+        t, q, qd = random_consistent_state(motion, rng)
+        k = motion.constraints.coefficients(t)
+        before = np.concatenate((case.dynamics.drive.kernel_parameters(t, True), rng.normal(0.0, 1e3, n)))
+        after = np.concatenate((before[:4] + rng.normal(0.0, 1e2, 4), rng.normal(0.0, 1e3, n)))
+        step = kernels.step_evaluation(q, qd, rng.normal(0.0, 1.0, n), k, before, partition, chain)
+        jumped = kernels.forces_jumped(step, q, qd, k, after, partition, chain)
+        fresh = kernels.evaluate(q, qd, k, after, partition, chain)
+        for name in Evaluation._fields:
+            got, expected = getattr(jumped, name), getattr(fresh, name)
+            for field, a, b in zip(expected._fields, got, expected, strict=True) if name == "terms" else [(name, got,
+                                                                                                            expected)]:
+                np.testing.assert_array_equal(a, b, err_msg=field)
+        assert not np.array_equal(jumped.terms.qdd, kernels.evaluate(q, qd, k, before, partition, chain).terms.qdd)
 
 
 @pytest.mark.parametrize("a_blend", [False, True], ids=["paper-task", "blended-a"])

@@ -5,7 +5,8 @@ which the Python controller calls too); the plant is the crane without programme
 :class:`~crane_reference.model.drive.Actuated` drive (:mod:`crane_reference.control.plant`), stepped
 by :func:`~.kernels.integration_step` exactly as :class:`~crane_reference.motion.simulation.MotionStepper`
 steps it: at each tick the command's forces jump and (8) is solved again there keeping the modal correction
-(:func:`~.kernels.corrected_accelerations`); at a jump of the column drive's torque the step ends on it and
+(:func:`~.kernels.corrected_accelerations`), on the position and velocity terms of the step that ended there
+(:func:`~.kernels.forces_jumped`: the state did not move); at a jump of the column drive's torque the step ends on it and
 the integrator restarts there; every step is evaluated in full and its powers integrated by the trapezoidal
 rule into the work accounts.
 """
@@ -15,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .kernels import corrected_accelerations, evaluate, integration_step, step_evaluation
+from .kernels import corrected_accelerations, evaluate, forces_jumped, integration_step, step_evaluation
 from .structures import (
     ACCOUNTS,
     CONVERGED,
@@ -88,6 +89,9 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
     work, t, done = work.copy(), t0, 0
     earlier = np.full((2, partition.integrated.size), np.nan)
     command = np.zeros((2, na))
+    # the position and velocity terms at the start, under which each tick's forces are put (forces_jumped)
+    e = evaluate(q, qd, k, _drive_at(inner_after[0], t0, t0, tick_ends[0], command[0], command[1], actuated, n),
+                 partition, chain)
     for tick in range(tick_ends.size):
         start, end = t, tick_ends[tick]
         error, rate = np.empty(na), np.empty(na)
@@ -102,8 +106,8 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
         command[0], command[1] = first, last
         # the forces jump: (8) solved again at the tick's start, the modal correction kept
         s0 = first_step[tick]
-        e = evaluate(q, qd, k, _drive_at(inner_after[s0], start, start, end, first, last, actuated, n), partition,
-                     chain)
+        e = forces_jumped(e, q, qd, k, _drive_at(inner_after[s0], start, start, end, first, last, actuated, n),
+                          partition, chain)
         qdd, B = e.terms.qdd, e.terms.velocity_map
         if np.isfinite(correction.time):
             qdd = corrected_accelerations(e.terms.M, B, qdd, qd, correction, partition)
@@ -133,8 +137,8 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
             for j in range(na):
                 rows.torques[s + 1, j] = drive[inner.shape[1] + actuated[j]] - joint_damping[j] * qd[actuated[j]]
             if on_jump[s]:  # restart at the drive's jump: the motion from it on, a fresh modal correction
-                e = evaluate(q, qd, k, _drive_at(inner_after[s + 1], t, start, end, first, last, actuated, n),
-                             partition, chain)
+                e = forces_jumped(e, q, qd, k, _drive_at(inner_after[s + 1], t, start, end, first, last, actuated,
+                                                         n), partition, chain)
                 qdd, B, correction = e.terms.qdd, e.terms.velocity_map, fresh
                 earlier = np.full((2, partition.integrated.size), np.nan)
                 powers = e.accounts[POWERS]

@@ -202,7 +202,7 @@ def _terms_at(q, qd, T, S, k: Coefficients, drive, partition: Partition, chain: 
     forces = generalized_forces(q, qd, Qg, chain, drive)
     A, c_acc = acceleration_terms(p, matvec(C, qd), C, d, k)
     B, e_dc = constraint_map(A, c_acc, partition.independent, partition.dependent)
-    return StateTerms(M, h, forces, Vg, p, R, C, d, A, c_acc, B, e_dc)
+    return StateTerms(M, h, forces, Qg, Vg, p, R, C, d, A, c_acc, B, e_dc)
 
 
 @njit(cache=True, nogil=True)
@@ -217,8 +217,8 @@ def accelerations_at(q, qd, k: Coefficients, drive, partition: Partition, chain:
 @njit(cache=True, nogil=True, inline='always')
 def _with_accelerations(s: StateTerms, qdd):
     """:class:`Accelerations` from :class:`StateTerms` and qdd."""
-    return Accelerations(s.M, s.h, s.forces, s.gravity_potential, s.ee_position, s.ee_rotation, s.ee_jacobian,
-                         s.ee_bias, s.A, s.c, s.velocity_map, qdd)
+    return Accelerations(s.M, s.h, s.forces, s.gravity_forces, s.gravity_potential, s.ee_position, s.ee_rotation,
+                         s.ee_jacobian, s.ee_bias, s.A, s.c, s.velocity_map, qdd)
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -255,6 +255,20 @@ def evaluate(q, qd, k: Coefficients, drive, partition: Partition, chain: ChainDa
     servo-constraints), the generalized force they exert, M qdd + h - Q (= A^T lambda, or E_dc tau), and
     the accounts (powers: what each source feeds in)."""
     return _evaluation(q, qd, accelerations_at(q, qd, k, drive, partition, chain), k, drive, partition, chain)
+
+
+@njit(cache=True, nogil=True)
+def forces_jumped(e: Evaluation, q, qd, k: Coefficients, drive, partition: Partition, chain: ChainData):
+    """:func:`evaluate` at the (q, qd) of the evaluation ``e`` under another ``drive`` (the forces jumped there:
+    a new command, a jump of the column drive's torque): the position and velocity terms of ``e`` kept, Q
+    formed again from its Q_g and (8) solved again."""
+    s = e.terms
+    forces = generalized_forces(q, qd, s.gravity_forces, chain, drive)
+    e_dc = constraint_map(s.A, s.c, partition.independent, partition.dependent)[1]
+    qdd = _solve_accelerations(s.M, forces - s.h, s.A, s.velocity_map, e_dc, s.c, partition)
+    terms = Accelerations(s.M, s.h, forces, s.gravity_forces, s.gravity_potential, s.ee_position, s.ee_rotation,
+                          s.ee_jacobian, s.ee_bias, s.A, s.c, s.velocity_map, qdd)
+    return _evaluation(q, qd, terms, k, drive, partition, chain)
 
 
 @njit(cache=True, nogil=True)

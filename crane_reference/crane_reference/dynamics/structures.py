@@ -142,6 +142,7 @@ class StateTerms(NamedTuple):
     M: np.ndarray
     h: np.ndarray
     forces: np.ndarray
+    gravity_forces: np.ndarray
     gravity_potential: float
     ee_position: np.ndarray
     ee_rotation: np.ndarray
@@ -154,14 +155,15 @@ class StateTerms(NamedTuple):
 
 
 class Accelerations(NamedTuple):
-    """What (8) needs and gives at (q, qd): mass matrix M, velocity terms h, generalized forces (gravity,
-    springs, dampers, drive), total gravity potential, E's position, frame rotation, Jacobian C (3, n) and
-    bias d (p'' = C qdd + d), the constraint rows A (m, n) and right-hand side
-    c of A qdd = c, the velocity map B (n, n_ic) and qdd."""
+    """What (8) needs and gives at (q, qd): mass matrix M, velocity terms h, generalized forces Q (gravity,
+    springs, dampers, drive) and the gravity forces Q_g among them, total gravity potential, E's position,
+    frame rotation, Jacobian C (3, n) and bias d (p'' = C qdd + d), the constraint rows A (m, n) and
+    right-hand side c of A qdd = c, the velocity map B (n, n_ic) and qdd."""
 
     M: np.ndarray
     h: np.ndarray
     forces: np.ndarray
+    gravity_forces: np.ndarray
     gravity_potential: float
     ee_position: np.ndarray
     ee_rotation: np.ndarray
