@@ -359,16 +359,16 @@ def converted_accelerations(reduced_mass, a, v, old: ModalCorrection, new: Modal
 def corrected_accelerations(M, B, qdd, qd, correction: ModalCorrection, partition: Partition):
     """qdd of the equation corrected by ``correction`` at a state where qdd solves (8) itself (a restart that
     keeps the modal correction, e.g. after the forces jumped): the independent part converted from no
-    correction (:func:`converted_accelerations`), the dependent part following through B (qdd = B a + e).
-    Servo-constraints have no correction: qdd as it is."""
+    correction (as :func:`converted_accelerations` with zero old terms: (M_r - Delta M) a + D_u v = M_r a_exact),
+    the dependent part following through B (qdd = B a + e).  Servo-constraints have no correction: qdd as it
+    is."""
     independent = partition.independent
     if partition.servo:
         return qdd.copy()
-    n_ic = independent.size
-    none = ModalCorrection(np.zeros((n_ic, n_ic)), np.zeros((n_ic, n_ic)), correction.time, correction.step)
     reduced_mass = _reduced_mass(M, B, partition)
     exact = qdd[independent]
-    return qdd + matvec(B, converted_accelerations(reduced_mass, exact, qd[independent], none, correction) - exact)
+    force = matvec(reduced_mass, exact) - matvec(correction.damping, qd[independent])
+    return qdd + matvec(B, cholesky_solve(cholesky(reduced_mass - correction.inertia), force) - exact)
 
 
 @njit(cache=True, nogil=True)
