@@ -65,9 +65,10 @@ BANDWIDTH = 2.0
 DAMPING_RATIO = 0.7
 
 
-def held_inertia(scenario: Scenario, joints: Sequence[str]) -> np.ndarray:
-    """J per joint of ``joints``: the diagonal of M at the held start (:func:`held_start`) [kg m^2]."""
-    q = held_start(scenario).q
+def held_inertia(scenario: Scenario, joints: Sequence[str], start: HeldStart | None = None) -> np.ndarray:
+    """J per joint of ``joints``: the diagonal of M at the held start (``start``, default :func:`held_start`)
+    [kg m^2]."""
+    q = (start or held_start(scenario)).q
     inertia = scenario.dynamics.terms(0.0, q, np.zeros_like(q)).M
     return np.array([inertia[j, j] for j in map(scenario.model.index, joints)])
 

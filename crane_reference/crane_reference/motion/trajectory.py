@@ -131,6 +131,18 @@ class Trajectory:
         arrays["ee_quaternion"] = Rotation.from_matrix(arrays.pop("ee_rotation")).as_quat()
         return cls(variant=variant, joint_names=tuple(joint_names), drive_joint=drive_joint, **arrays)
 
+    @classmethod
+    def concatenated(cls, parts: list[Trajectory]) -> Trajectory:
+        """The samples of consecutive runs of one model, in order."""
+        first = parts[0]
+        return cls(first.variant, first.joint_names, first.drive_joint,
+                   *(np.concatenate([getattr(part, name) for part in parts]) for name in _SAMPLED))
+
+    def subsampled(self, stride: int = 1, count: int | None = None) -> Trajectory:
+        """Every ``stride``-th sample (the first ``count`` of them)."""
+        return Trajectory(self.variant, self.joint_names, self.drive_joint,
+                          *(getattr(self, name)[::stride][:count] for name in _SAMPLED))
+
     @property
     def total_energy(self) -> np.ndarray:
         return self.kinetic_energy + self.potential_energy
@@ -176,9 +188,7 @@ class Trajectory:
 
     def to_npz(self, path: str | Path) -> None:
         np.savez_compressed(path, joint_names=np.array(self.joint_names), variant=self.variant,
-                            drive_joint=self.drive_joint,
-                            **{f.name: getattr(self, f.name) for f in fields(self)
-                               if f.name not in ("variant", "joint_names", "drive_joint")})
+                            drive_joint=self.drive_joint, **{name: getattr(self, name) for name in _SAMPLED})
 
     @classmethod
     def from_npz(cls, path: str | Path) -> Trajectory:
@@ -186,3 +196,7 @@ class Trajectory:
             arrays = {k: data[k] for k in data.files}
         return cls(variant=str(arrays.pop("variant")), joint_names=tuple(str(n) for n in arrays.pop("joint_names")),
                    drive_joint=int(arrays.pop("drive_joint")), **arrays)
+
+
+_SAMPLED = tuple(f.name for f in fields(Trajectory) if f.name not in ("variant", "joint_names", "drive_joint"))
+"""The fields of :class:`Trajectory` with one row per sample."""

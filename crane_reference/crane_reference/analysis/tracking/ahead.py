@@ -26,7 +26,7 @@ class ComputedAhead:
 
     def __init__(self, motions: Sequence[ProgrammedMotion], runs: Sequence[Iterator[dict[str, np.ndarray]]]):
         self._motions = tuple(motions)
-        self._parts: list[list[dict[str, np.ndarray]]] = [[] for _ in motions]
+        self._parts: list[list[Trajectory]] = [[] for _ in motions]
         self._computed = [-np.inf] * len(motions)  # motion time [s] each is computed through
         self._finished = False
         self._failure: BaseException | None = None
@@ -40,12 +40,13 @@ class ComputedAhead:
             while active and not self._closed:
                 for i in list(active):
                     part = next(runs[i], None)
+                    run = None if part is None else joined(self._motions[i], [part])
                     with self._changed:
-                        if part is None:
+                        if run is None:
                             active.remove(i)
                         else:
-                            self._parts[i].append(part)
-                            self._computed[i] = float(part["t"][-1])
+                            self._parts[i].append(run)
+                            self._computed[i] = float(run.t[-1])
                         self._changed.notify_all()
         except BaseException as failure:  # handed to the reader, which raises it
             with self._changed:
@@ -65,7 +66,7 @@ class ComputedAhead:
                 raise self._failure
             parts, finished = [list(p) for p in self._parts], self._finished
             common = np.inf if finished else min(self._computed)
-        return [joined(m, _through(p, common)) for m, p in zip(self._motions, parts, strict=True)], finished
+        return [Trajectory.concatenated(_through(p, common)) for p in parts], finished
 
     def close(self) -> None:
         """Stop computing after the run in progress and wait for the thread (the reader is done, or failed)."""
@@ -73,10 +74,9 @@ class ComputedAhead:
         self._thread.join()
 
 
-def _through(parts: list[dict[str, np.ndarray]], t: float) -> list[dict[str, np.ndarray]]:
+def _through(parts: list[Trajectory], t: float) -> list[Trajectory]:
     """The samples of the consecutive runs ``parts`` at motion times <= t [s]."""
-    kept = [part for part in parts if part["t"][0] <= t]
-    if kept[-1]["t"][-1] > t:
-        count = int(np.searchsorted(kept[-1]["t"], t, side="right"))
-        kept[-1] = {name: values[:count] for name, values in kept[-1].items()}
+    kept = [part for part in parts if part.t[0] <= t]
+    if kept[-1].t[-1] > t:
+        kept[-1] = kept[-1].subsampled(count=int(np.searchsorted(kept[-1].t, t, side="right")))
     return kept

@@ -195,7 +195,7 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
     ahead = ComputedAhead([motion for motion, _ in tasks],
                           [simulated_runs(motion, q0, spec.duration, step=spec.reference_step or spec.step,
                                           every_row=False) for motion, q0 in tasks])
-    gains = spec.joint_gains(held_inertia(scenario, ACTUATED_JOINTS))
+    gains = spec.joint_gains(held_inertia(scenario, ACTUATED_JOINTS, start))
     controller = JointController(gains, 1.0 / spec.rate)
     plant = Plant(params, spec.variant, start, spec.step, controller.damping)
     actuated = plant.actuated
@@ -209,8 +209,8 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
             end = (first + chunk) * per  # the sample this chunk's last tick ends on
             if reference is None or (samples <= end and not finished):  # all computed so far, joined once
                 references, finished = ahead.through(end * spec.step * (1.0 - 1e-9))
-                reference, feedforward_reference = (_every(r, spec.reference_stride) for r in (references[0],
-                                                                                                references[-1]))
+                reference, feedforward_reference = (r.subsampled(spec.reference_stride) for r in (references[0],
+                                                                                                    references[-1]))
                 samples = len(reference.t)
                 if len(feedforward_reference.t) != samples:  # both on one grid, computed as far
                     raise RuntimeError("the feedforward's reference and the task's do not share their samples")
@@ -232,7 +232,7 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
     finally:
         ahead.close()
     trajectory, torques = plant.trajectory()
-    reference = _every(reference, 1, len(trajectory.t))
+    reference = reference.subsampled(count=len(trajectory.t))
     reference_motion = tasks[0][0]
     constraints = ConstraintSet(tuple(c for c in reference_motion.constraints.constraints if c.order == 0))
     path_error = constraints.surface_offsets(trajectory.t, trajectory.ee_position)
@@ -293,21 +293,12 @@ def _feedforward(inverse: RigidInverseDynamics | None, step: float, reference: T
     starts = np.zeros((at.size, len(ACTUATED_JOINTS)))
     if inverse is None:
         return starts, starts
-    jumps = motion.dynamics.drive.breakpoints
+    jumps = np.asarray(motion.dynamics.drive.breakpoints, dtype=float)
     starts = inverse(reference.t[at], reference.q[at], reference.qd[at], reference.qdd[at])
     ends = starts.copy()
-    for k, i in enumerate(at):
+    on_jump = np.any(np.abs(reference.t[at, np.newaxis] - jumps) <= 1e-9 * step, axis=1)
+    for k in np.flatnonzero(on_jump):
+        i = at[k]
         t, q, qd = reference.t[i], reference.q[i], reference.qd[i]
-        if any(abs(t - jump) <= 1e-9 * step for jump in jumps):
-            ends[k] = inverse(t, q, qd, motion.solve(t, q, qd, left_limit=True).qdd, left_limit=True)
+        ends[k] = inverse(t, q, qd, motion.solve(t, q, qd, left_limit=True).qdd, left_limit=True)
     return starts, ends
-
-
-def _every(trajectory: Trajectory, stride: int, count: int | None = None) -> Trajectory:
-    """Every ``stride``-th sample of ``trajectory`` (the first ``count`` of them)."""
-    return Trajectory(trajectory.variant, trajectory.joint_names, trajectory.drive_joint,
-                      *(getattr(trajectory, name)[::stride][:count] for name in _ARRAYS))
-
-
-_ARRAYS = tuple(name for name in Trajectory.__dataclass_fields__ if name not in ("variant", "joint_names",
-                                                                                  "drive_joint"))
