@@ -89,9 +89,6 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
     work, t, done = work.copy(), t0, 0
     earlier = np.full((2, partition.integrated.size), np.nan)
     command = np.zeros((2, na))
-    # the position and velocity terms at the start, under which each tick's forces are put (forces_jumped)
-    e = evaluate(q, qd, k, _drive_at(inner_after[0], t0, t0, tick_ends[0], command[0], command[1], actuated, n),
-                 partition, chain)
     for tick in range(tick_ends.size):
         start, end = t, tick_ends[tick]
         error, rate = np.empty(na), np.empty(na)
@@ -106,8 +103,11 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
         command[0], command[1] = first, last
         # the forces jump: (8) solved again at the tick's start, the modal correction kept
         s0 = first_step[tick]
-        e = forces_jumped(e, q, qd, k, _drive_at(inner_after[s0], start, start, end, first, last, actuated, n),
-                          partition, chain)
+        drive = _drive_at(inner_after[s0], start, start, end, first, last, actuated, n)
+        if tick == 0:
+            e = evaluate(q, qd, k, drive, partition, chain)
+        else:  # on the terms of the step that ended here, the previous tick's last
+            e = forces_jumped(e, q, qd, k, drive, partition, chain)
         qdd, B = e.terms.qdd, e.terms.velocity_map
         if np.isfinite(correction.time):
             qdd = corrected_accelerations(e.terms.M, B, qdd, qd, correction, partition)
