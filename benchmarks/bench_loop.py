@@ -8,7 +8,8 @@
    measured in this run; the CPU share [%] of those periods alone at ``--rate``.
 2. [realtime] The reference node, the plant (``clock_mode`` realtime, ``--rate``) and the example controller as
    processes (``crane-reference loop``'s parameters), for ``--duration`` s of wall time after the first state:
-   the plant's periods, those that started more than a period late (its /diagnostics ``late_ticks``), the
+   the plant's periods, those missed (its /diagnostics ``missed_ticks``: a period whose start passed by more
+   than a period), the
    command-to-state latency (in this process: from a command's arrival to the arrival of the next state, which
    is the first under it; p50, p99, largest; this process takes them unread with the EventsExecutor, to leave the
    cores to the loop), the plant process's CPU share beside its floor measured in this
@@ -204,12 +205,12 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
     finally:
         context.try_shutdown()
     after = diagnostics[-1]
-    late = int(after["late_ticks"]) - int(before.get("late_ticks", 0))
+    missed = int(after["missed_ticks"]) - int(before.get("missed_ticks", 0))
     ticks = int(after["ticks"]) - int(before.get("ticks", 0))
     arrivals = np.array(states)
     following = np.searchsorted(arrivals, commands)
     latency = np.array([arrivals[i] - c for i, c in zip(following, commands, strict=True) if i < arrivals.size])
-    print(f"[realtime] {rate} Hz for {wall:.0f} s: {ticks} periods, {late} started late (> 1 period); "
+    print(f"[realtime] {rate} Hz for {wall:.0f} s: {ticks} periods, {missed} missed; "
           f"{len(commands)} commands answered; command-to-state latency p50 {np.median(latency) * 1e3:.2f} ms, "
           f"p99 {np.quantile(latency, 0.99) * 1e3:.2f} ms, largest {latency.max() * 1e3:.2f} ms")
     share = shares[PLANT_NODE]

@@ -248,14 +248,14 @@ class PlantHealth:
     values: dict[str, str]
 
 
-def plant_health(server: PlantServer, doing: str, failure: str, late_ticks: int, newly_late: int) -> PlantHealth:
+def plant_health(server: PlantServer, doing: str, failure: str, missed_ticks: int, newly_missed: int) -> PlantHealth:
     """The worst first: the integration failed (``failure``: ERROR); the hold command acts (a timeout: WARN);
-    the last command was refused (WARN); periods started late in real time since the last report
-    (``newly_late`` of ``late_ticks`` in all: WARN); else OK with what the node is ``doing``.  The values: plant
-    time, ticks, commands accepted and refused, the last refusal, timeouts, late ticks."""
+    the last command was refused (WARN); real-time periods missed since the last report (``newly_missed`` of
+    ``missed_ticks`` in all, :mod:`.pacing`: WARN); else OK with what the node is ``doing``.  The values: plant
+    time, ticks, commands accepted and refused, the last refusal, timeouts, missed ticks."""
     values = {"time_s": f"{server.t:.6f}", "ticks": str(server.ticks), "commands_accepted": str(server.accepted),
               "commands_refused": str(server.refused), "last_refusal": server.last_refusal,
-              "timeouts": str(server.timeouts), "late_ticks": str(late_ticks)}
+              "timeouts": str(server.timeouts), "missed_ticks": str(missed_ticks)}
     if failure:
         return PlantHealth(2, f"integration failed: {failure}; the plant stopped (cleanup and configure start it "
                               "again)", values)
@@ -264,9 +264,9 @@ def plant_health(server: PlantServer, doing: str, failure: str, late_ticks: int,
                               "acts", values)
     if server.refused and server.refused_last:
         return PlantHealth(1, f"{doing}: command refused: {server.last_refusal}", values)
-    if newly_late:
-        return PlantHealth(1, f"{doing}: {newly_late} periods started late (the machine is too slow for the "
-                              "control rate)", values)
+    if newly_missed:
+        return PlantHealth(1, f"{doing}: {newly_missed} periods missed (the machine is too slow for the control "
+                              "rate)", values)
     return PlantHealth(0, doing, values)
 
 

@@ -12,9 +12,10 @@ hold command on a timeout); the parameters are :mod:`.plant_parameters`.
   joints, or of every coordinate with ``all_coordinates``), ``~/end_effector_pose`` (geometry_msgs/PoseStamped,
   E in ``frame_id``) and ``~/tip_deflection`` (geometry_msgs/Vector3Stamped, the boom tip's deflection from
   its rigid chord in the first boom element's link), stamped with the end of the period.
-* ``clock_mode`` realtime: a period every period of the steady clock (a thread of its own paces them; a period
-  that starts more than a period late counts as late, and the next is due a period after it; while they run,
-  Python's thread switch interval is :data:`SWITCH_INTERVAL`), stamped with the node's clock; the plant's time
+* ``clock_mode`` realtime: a period every period of the steady clock (a thread of its own paces them,
+  :mod:`~crane_reference.control.pacing`: the periods whose start passed by more than a period are missed and
+  counted in /diagnostics' ``missed_ticks``; while they run, Python's thread switch interval is
+  :data:`SWITCH_INTERVAL`), stamped with the node's clock; the plant's time
   (and its column drive's program) starts with the first command, until which its held start is published
   every period;
   lockstep: the node publishes /clock (``clock_start`` plus the plant's time) and advances one period per
@@ -41,6 +42,7 @@ from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock as ClockMessage
 from std_msgs.msg import Float64MultiArray
 
+from ..control.pacing import Pacing
 from ..control.plant_server import CommandRefusedError, PlantServer, PlantState, plant_health
 from ..interface import messages
 from ..interface.serialized import SerializedJointState, SerializedPose, SerializedVector3
@@ -90,8 +92,8 @@ class CranePlantNode(LifecycleNode):
         self._made: dict[str, object] = {}  # the serialized messages' writers
         self._doing = "unconfigured"
         self._failure = ""
-        self._late = 0  # real-time periods that started more than a period late
-        self._late_reported = 0
+        self._missed = 0  # real-time periods missed (control/pacing.py) since configured
+        self._missed_reported = 0
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_subscription(Float64MultiArray, COMMANDS_TOPIC, self._on_command, messages.PUBLISHER_DEPTH)
         self._diagnostics = self.create_publisher(self._types.DiagnosticArray, messages.DIAGNOSTICS_TOPIC,
@@ -125,7 +127,7 @@ class CranePlantNode(LifecycleNode):
             self._outputs["clock"] = self.create_lifecycle_publisher(ClockMessage, CLOCK_TOPIC, depth)
         self._made = {}
         self._failure = ""
-        self._late = self._late_reported = 0
+        self._missed = self._missed_reported = 0
         self._doing = "inactive: configured; activate to run"
         self.get_logger().info(f"configured: the {v.model} crane as a plant, {v.control_rate} Hz {v.clock_mode}, "
                                f"commands for {', '.join(v.joints)}")
@@ -183,19 +185,16 @@ class CranePlantNode(LifecycleNode):
     def _run_periods(self) -> None:
         """The real-time periods (a thread): each waits until due, then advances and publishes; until the first
         command the plant is held at its start (its time stands still) and its state is published each period."""
-        period = self._server.settings.period
         previous = sys.getswitchinterval()
         sys.setswitchinterval(min(previous, SWITCH_INTERVAL))
         try:
-            due = self._seconds() + period
+            pacing, before = Pacing(self._server.settings.period, self._seconds()), self._missed
             while self._running.is_set():
-                wait = due - self._seconds()
+                wait = pacing.wait(self._seconds())
+                self._missed = before + pacing.missed
                 if wait > 0.0:
                     time.sleep(wait)  # at most a period: a deactivation is noticed within one
                     continue
-                if -wait > period:
-                    self._late += 1
-                    due = self._seconds()
                 try:
                     if self._server.accepted:
                         self._advance(self._seconds())
@@ -207,7 +206,7 @@ class CranePlantNode(LifecycleNode):
                     if self.context.ok():
                         self._fail(f"{type(error).__name__}: {error}")
                     return
-                due += period
+                pacing.ran()
         finally:
             sys.setswitchinterval(previous)
 
@@ -285,9 +284,9 @@ class CranePlantNode(LifecycleNode):
         if self._server is None:
             level, message, values = (2 if self._doing.startswith(CANNOT) else 0), self._doing, {}
         else:
-            late = self._late
-            health = plant_health(self._server, self._doing, self._failure, late, late - self._late_reported)
-            self._late_reported = late
+            missed = self._missed
+            health = plant_health(self._server, self._doing, self._failure, missed, missed - self._missed_reported)
+            self._missed_reported = missed
             level, message, values = health.level, health.message, health.values
         self._diagnostics.publish(messages.diagnostics(self._types, self.get_clock().now().nanoseconds,
                                                        f"{self.get_name()}: plant", self.get_fully_qualified_name(),
