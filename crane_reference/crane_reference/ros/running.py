@@ -3,6 +3,10 @@
 rclpy's own signal handlers are off: a signal only ends the spin loop, in the main thread, and the node is
 destroyed and the context shut down after it, so that nothing is taken from the middleware while the context
 shuts down (rclpy's handler shuts it down from under an executor that may be taking a message).
+
+The executor is rclpy's EventsExecutor where rclpy has it (``rclpy.experimental``, Jazzy's rclpy from 7.1.4;
+the SingleThreadedExecutor before): it takes a message at a fraction of the SingleThreadedExecutor's cost, which
+at a 1 kHz control rate is most of what these nodes spend (``benchmarks/bench_loop.py``, docs/performance.md).
 """
 
 from __future__ import annotations
@@ -13,6 +17,11 @@ from collections.abc import Callable
 
 import rclpy
 from rclpy.executors import Executor, SingleThreadedExecutor
+
+try:
+    from rclpy.experimental import EventsExecutor as NodeExecutor
+except ImportError:  # rclpy before 7.1.4
+    NodeExecutor = SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
@@ -54,7 +63,7 @@ def run_node(make: Callable[[], Node], name: str, args: list[str] | None = None)
             rclpy.logging.get_logger(name).fatal(f"{CANNOT} start: {error}")
             return 1
         try:
-            executor = SingleThreadedExecutor()
+            executor = NodeExecutor()
             executor.add_node(node)
             while not stop.is_set():
                 spin_once(executor, node, SPIN_PERIOD)
