@@ -9,7 +9,7 @@
 2. [realtime] The reference node, the plant (``clock_mode`` realtime, ``--rate``) and the example controller as
    processes (``crane-reference loop``'s parameters), for ``--duration`` s of wall time after the first state:
    the plant's periods, those missed (its /diagnostics ``missed_ticks``: a period whose start passed by more
-   than a period) and how far its time advanced against the wall clock between the diagnostics counted from, the
+   than a period) and how far its time advanced between the diagnostics counted from, against their stamps, the
    command-to-state latency (in this process: from a command's arrival to the arrival of the next state, which
    is the first under it; p50, p99, largest; this process takes them unread with the EventsExecutor, to leave the
    cores to the loop), the plant process's CPU share beside its floor measured in this
@@ -180,14 +180,17 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
             node.create_subscription(Float64MultiArray, f"/{PLANT_NODE}/commands",
                                      lambda msg: commands.append(time.monotonic()), 10000, raw=True)
             node.create_subscription(DiagnosticArray, "/diagnostics", lambda msg: diagnostics.extend(
-                dict({kv.key: kv.value for kv in status.values}, received=time.monotonic()) for status in msg.status
+                dict({kv.key: kv.value for kv in status.values}, stamp=msg.header.stamp.sec + msg.header.stamp.nanosec
+                     * 1e-9) for status in msg.status
                 if status.name.startswith(f"{PLANT_NODE}:")), 100)
             executor = EventsExecutor(context=context)  # this listener takes as little of the cores as it can
             executor.add_node(node)
             deadline = time.monotonic() + 600.0
-            while len(commands) < 100 and time.monotonic() < deadline:  # the loop closed (the reference is up)
+            # the loop closed: the plant took commands (its time runs) and its diagnostics say so
+            while ((len(commands) < 100 or not diagnostics or int(diagnostics[-1]["ticks"]) == 0)
+                   and time.monotonic() < deadline):
                 executor.spin_once(timeout_sec=0.05)
-            before = next(d for d in reversed(diagnostics)) if diagnostics else {}
+            before = diagnostics[-1]
             states.clear(), commands.clear()
             pids = {name: [process.pid, *descendants(process.pid)] for name, process in processes.items()}
             cpu = {name: sum(map(process_cpu_seconds, group)) for name, group in pids.items()}
@@ -205,18 +208,18 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
     finally:
         context.try_shutdown()
     after = diagnostics[-1]
-    advanced = float(after["time_s"]) - float(before.get("time_s", 0.0))
-    between = after["received"] - before.get("received", start)
-    missed = int(after["missed_ticks"]) - int(before.get("missed_ticks", 0))
-    ticks = int(after["ticks"]) - int(before.get("ticks", 0))
+    advanced = float(after["time_s"]) - float(before["time_s"])
+    between = after["stamp"] - before["stamp"]
+    missed = int(after["missed_ticks"]) - int(before["missed_ticks"])
+    ticks = int(after["ticks"]) - int(before["ticks"])
     arrivals = np.array(states)
     following = np.searchsorted(arrivals, commands)
     latency = np.array([arrivals[i] - c for i, c in zip(following, commands, strict=True) if i < arrivals.size])
     print(f"[realtime] {rate} Hz for {wall:.0f} s: {ticks} periods, {missed} missed; "
           f"{len(commands)} commands answered; command-to-state latency p50 {np.median(latency) * 1e3:.2f} ms, "
           f"p99 {np.quantile(latency, 0.99) * 1e3:.2f} ms, largest {latency.max() * 1e3:.2f} ms")
-    print(f"[realtime] the plant's time advanced {advanced:.2f} s in the {between:.2f} s of wall time between the "
-          f"two diagnostics counted from ({advanced / between:.3f} of real time)")
+    print(f"[realtime] between the two diagnostics counted from, {between:.2f} s apart by their stamps (the plant "
+          f"node's clock), its time advanced {advanced:.2f} s ({advanced / between:.3f} of real time)")
     share = shares[PLANT_NODE]
     print(f"[realtime] plant process CPU {share:.1f} % of a core; floor {floor + periods_share:.1f} % (publishing "
           f"only {floor:.1f} % + the periods alone {periods_share:.1f} %), ratio {share / (floor + periods_share):.2f}")
