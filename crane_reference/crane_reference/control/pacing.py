@@ -1,8 +1,9 @@
 """Real-time pacing of the plant node's control periods on a monotonic clock.
 
-Period k is due at start + k T.  A period runs when it is due; one found more than a period past its due time
-is run at once and the periods whose due times passed before it are missed: they are counted, not run, and
-the schedule goes on from now (the plant's time then falls behind the wall clock by the missed periods).
+Period k is due at start + k T.  A period runs when it is due; found more than a period past its due time, the
+periods due before the latest due time passed are missed: they are counted, not run, and the latest runs at
+once.  The schedule stays on its grid, so every period due is either run or counted missed (the plant's time
+then falls behind the wall clock by the missed periods).
 """
 
 from __future__ import annotations
@@ -25,12 +26,12 @@ class Pacing:
 
     def wait(self, now: float) -> float:
         """[s] until the next period is due at ``now`` (<= 0: run it).  More than a period past its due time, the
-        periods due before it, as many as whole periods passed, are counted :attr:`missed` and the next one is
-        due now."""
+        periods due before the latest due time passed are counted :attr:`missed` and that one is next."""
         lateness = now - self.due
         if lateness > self.period:
-            self.missed += int(lateness // self.period)
-            self.due = now
+            skipped = int(lateness // self.period)
+            self.missed += skipped
+            self.due += skipped * self.period
         return self.due - now
 
     def ran(self) -> None:
