@@ -7,9 +7,10 @@
    filling its three serialized messages, per period, as a multiple of one Pinocchio ABA call on the same chain
    measured in this run; the CPU share [%] of those periods alone at ``--rate``.
 2. [realtime] The reference node, the plant (``clock_mode`` realtime, ``--rate``) and the example controller as
-   processes (``crane-reference loop``'s parameters), for ``--duration`` s of wall time after the first state:
-   the plant's periods, those missed (its /diagnostics ``missed_ticks``: a period whose start passed by more
-   than a period) and how far its time advanced between the diagnostics counted from, against their stamps, the
+   processes (``crane-reference loop``'s parameters), for a window of ``--duration`` s of wall time that opens once
+   the plant's diagnostics show its time running: between the plant's diagnostics before and after the window
+   (by their stamps), its periods run and missed (/diagnostics ``ticks`` and ``missed_ticks``, see
+   control/pacing.py) and how far its time advanced; in the window, the commands answered and the
    command-to-state latency (in this process: from a command's arrival to the arrival of the next state, which
    is the first under it; p50, p99, largest; this process takes them unread with the EventsExecutor, to leave the
    cores to the loop), the plant process's CPU share beside its floor measured in this
@@ -43,7 +44,6 @@ from common import aba_time, process_cpu_seconds
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.experimental import EventsExecutor  # rclpy >= 7.1.4
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -166,7 +166,7 @@ def publish_floor(rate: int, seconds: float = 5.0) -> float:
 
 
 def realtime(rate: int, duration: float, periods_share: float) -> None:
-    """[realtime]: prints the plant's periods, late periods, latency and CPU beside its floor."""
+    """[realtime]: prints the plant's periods run and missed, latency and CPU beside its floor."""
     floor = publish_floor(rate)
     parameters = closed_loop_parameters("realtime", rate)
     context = rclpy.Context()
@@ -183,6 +183,8 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
                 dict({kv.key: kv.value for kv in status.values}, stamp=msg.header.stamp.sec + msg.header.stamp.nanosec
                      * 1e-9) for status in msg.status
                 if status.name.startswith(f"{PLANT_NODE}:")), 100)
+            from rclpy.experimental import EventsExecutor  # rclpy >= 7.1.4
+
             executor = EventsExecutor(context=context)  # this listener takes as little of the cores as it can
             executor.add_node(node)
             deadline = time.monotonic() + 600.0
@@ -190,6 +192,8 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
             while ((len(commands) < 100 or not diagnostics or int(diagnostics[-1]["ticks"]) == 0)
                    and time.monotonic() < deadline):
                 executor.spin_once(timeout_sec=0.05)
+            if not diagnostics or int(diagnostics[-1]["ticks"]) == 0:
+                raise RuntimeError("the plant did not run within 600 s of its start (no diagnostics with ticks)")
             before = diagnostics[-1]
             states.clear(), commands.clear()
             pids = {name: [process.pid, *descendants(process.pid)] for name, process in processes.items()}
@@ -202,8 +206,9 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
             now = {name: sum(map(process_cpu_seconds, group)) for name, group in pids.items()}
             now["this listener"] = time.process_time()
             shares = {name: 100.0 * (now[name] - cpu[name]) / wall for name in cpu}
-            for _ in range(40):  # the next diagnostics
-                executor.spin_once(timeout_sec=0.05)
+            ended = time.time()  # the plant's diagnostics are stamped with its node's (system) clock
+            while diagnostics[-1]["stamp"] < ended and time.monotonic() - start < duration + 10.0:
+                executor.spin_once(timeout_sec=0.05)  # the first diagnostics after the window
             node.destroy_node()
     finally:
         context.try_shutdown()
@@ -215,11 +220,11 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
     arrivals = np.array(states)
     following = np.searchsorted(arrivals, commands)
     latency = np.array([arrivals[i] - c for i, c in zip(following, commands, strict=True) if i < arrivals.size])
-    print(f"[realtime] {rate} Hz for {wall:.0f} s: {ticks} periods, {missed} missed; "
-          f"{len(commands)} commands answered; command-to-state latency p50 {np.median(latency) * 1e3:.2f} ms, "
-          f"p99 {np.quantile(latency, 0.99) * 1e3:.2f} ms, largest {latency.max() * 1e3:.2f} ms")
-    print(f"[realtime] between the two diagnostics counted from, {between:.2f} s apart by their stamps (the plant "
-          f"node's clock), its time advanced {advanced:.2f} s ({advanced / between:.3f} of real time)")
+    print(f"[realtime] {rate} Hz: {ticks} periods run and {missed} missed in the {between:.2f} s between the plant's "
+          f"diagnostics before and after the {wall:.0f} s window (by their stamps), the plant's time at "
+          f"{advanced / between:.3f} of real time; in the window {len(commands)} commands answered, command-to-state "
+          f"latency p50 {np.median(latency) * 1e3:.2f} ms, p99 {np.quantile(latency, 0.99) * 1e3:.2f} ms, largest "
+          f"{latency.max() * 1e3:.2f} ms")
     share = shares[PLANT_NODE]
     print(f"[realtime] plant process CPU {share:.1f} % of a core; floor {floor + periods_share:.1f} % (publishing "
           f"only {floor:.1f} % + the periods alone {periods_share:.1f} %), ratio {share / (floor + periods_share):.2f}")
@@ -266,6 +271,8 @@ def lockstep(rate: int, duration: float) -> None:
 
 def executors(rate: int, seconds: float = 10.0) -> None:
     """[executors]: prints this process's CPU share taking ``rate`` Hz of commands with each executor."""
+    from rclpy.experimental import EventsExecutor  # rclpy >= 7.1.4
+
     for name, make in (("SingleThreadedExecutor", lambda context: SingleThreadedExecutor(context=context)),
                        ("EventsExecutor", lambda context: EventsExecutor(context=context))):
         context = rclpy.Context()

@@ -1,6 +1,6 @@
 """The plant node's real-time pacing (control/pacing.py) on a clock written out here: every period runs once
-when due, a wake-up L seconds past a due time misses floor(L / T) periods, counted, however long the stall,
-and the periods run and missed add up to those due."""
+when due, a wake-up more than a period past a due time (L seconds) misses floor(L / T) periods, counted, however
+long the stall, and the periods run and missed add up to those due."""
 
 from __future__ import annotations
 

@@ -135,12 +135,15 @@ def test_forces_jumped_is_a_fresh_evaluation_under_the_new_drive(cases, realisat
         step = kernels.step_evaluation(q, qd, rng.normal(0.0, 1.0, n), k, before, partition, chain)
         jumped = kernels.forces_jumped(step, q, qd, k, after, partition, chain)
         fresh = kernels.evaluate(q, qd, k, after, partition, chain)
-        for name in Evaluation._fields:
-            got, expected = getattr(jumped, name), getattr(fresh, name)
-            for field, a, b in zip(expected._fields, got, expected, strict=True) if name == "terms" else [(name, got,
-                                                                                                            expected)]:
-                np.testing.assert_array_equal(a, b, err_msg=field)
+        for (name, got), (_, expected) in zip(_fields(jumped), _fields(fresh), strict=True):
+            np.testing.assert_array_equal(got, expected, err_msg=name)
         assert not np.array_equal(jumped.terms.qdd, kernels.evaluate(q, qd, k, before, partition, chain).terms.qdd)
+
+
+def _fields(e: Evaluation) -> list[tuple[str, object]]:
+    """An evaluation's fields by name, those of its terms one by one."""
+    return [*(("terms." + name, value) for name, value in zip(e.terms._fields, e.terms, strict=True)),
+            *((name, getattr(e, name)) for name in Evaluation._fields if name != "terms")]
 
 
 @pytest.mark.parametrize("a_blend", [False, True], ids=["paper-task", "blended-a"])

@@ -68,7 +68,7 @@ DAMPING_RATIO = 0.7
 def held_inertia(scenario: Scenario, joints: Sequence[str], start: HeldStart | None = None) -> np.ndarray:
     """J per joint of ``joints``: the diagonal of M at the held start (``start``, default :func:`held_start`)
     [kg m^2]."""
-    q = (start or held_start(scenario)).q
+    q = (start if start is not None else held_start(scenario)).q
     inertia = scenario.dynamics.terms(0.0, q, np.zeros_like(q)).M
     return np.array([inertia[j, j] for j in map(scenario.model.index, joints)])
 

@@ -6,7 +6,8 @@ which the Python controller calls too); the plant is the crane without programme
 by :func:`~.kernels.integration_step` exactly as :class:`~crane_reference.motion.simulation.MotionStepper`
 steps it: at each tick the command's forces jump and (8) is solved again there keeping the modal correction
 (:func:`~.kernels.corrected_accelerations`), on the position and velocity terms of the step that ended there
-(:func:`~.kernels.forces_jumped`: the state did not move); at a jump of the column drive's torque the step
+(:func:`~.kernels.forces_jumped`: the state did not move; a call's first tick evaluates its state afresh); at a
+jump of the column drive's torque the step
 ends on it and the integrator restarts there; every step is evaluated in full and its powers integrated by the
 trapezoidal rule into the work accounts.
 """

@@ -261,7 +261,7 @@ def evaluate(q, qd, k: Coefficients, drive, partition: Partition, chain: ChainDa
 def forces_jumped(e: Evaluation, q, qd, k: Coefficients, drive, partition: Partition, chain: ChainData):
     """:func:`evaluate` at the (q, qd) of the evaluation ``e`` under another ``drive`` (the forces jumped there:
     a new command, a jump of the column drive's torque): the position and velocity terms of ``e`` kept, Q
-    formed again from its Q_g and (8) solved again."""
+    formed again from its Q_g and (8) solved again.  ``q``, ``qd`` and ``k`` are those ``e`` was evaluated at."""
     s = e.terms
     forces = generalized_forces(q, qd, s.gravity_forces, chain, drive)
     e_dc = constraint_map(s.A, s.c, partition.independent, partition.dependent)[1]

@@ -140,7 +140,7 @@ class Trajectory:
 
     def subsampled(self, stride: int = 1, count: int | None = None) -> Trajectory:
         """Every ``stride``-th sample (the first ``count`` of them)."""
-        return Trajectory(self.variant, self.joint_names, self.drive_joint,
+        return type(self)(self.variant, self.joint_names, self.drive_joint,
                           *(getattr(self, name)[::stride][:count] for name in _SAMPLED))
 
     @property

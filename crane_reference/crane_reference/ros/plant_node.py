@@ -13,8 +13,8 @@ hold command on a timeout); the parameters are :mod:`.plant_parameters`.
   E in ``frame_id``) and ``~/tip_deflection`` (geometry_msgs/Vector3Stamped, the boom tip's deflection from
   its rigid chord in the first boom element's link), stamped with the end of the period.
 * ``clock_mode`` realtime: a period every period of the steady clock (a thread of its own paces them,
-  :mod:`~crane_reference.control.pacing`: the periods whose start passed by more than a period are missed and
-  counted in /diagnostics' ``missed_ticks``; while they run, Python's thread switch interval is
+  :mod:`~crane_reference.control.pacing`: after a stall the periods it skipped are missed, counted in
+  /diagnostics' ``missed_ticks`` at the next wake-up; while they run, Python's thread switch interval is
   :data:`SWITCH_INTERVAL`), stamped with the node's clock; the plant's time
   (and its column drive's program) starts with the first command, until which its held start is published
   every period;

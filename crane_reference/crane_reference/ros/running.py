@@ -5,8 +5,8 @@ destroyed and the context shut down after it, so that nothing is taken from the 
 shuts down (rclpy's handler shuts it down from under an executor that may be taking a message).
 
 The executor is rclpy's EventsExecutor where rclpy has it (``rclpy.experimental``, Jazzy's rclpy from 7.1.4;
-the SingleThreadedExecutor before): it takes a message at a fraction of the SingleThreadedExecutor's cost, which
-at a 1 kHz control rate is most of what these nodes spend (``benchmarks/bench_loop.py``, docs/performance.md).
+the SingleThreadedExecutor before): it takes a message at a fraction of the SingleThreadedExecutor's cost, a
+large part of what these nodes spend at a 1 kHz control rate (``benchmarks/bench_loop.py``, docs/performance.md).
 """
 
 from __future__ import annotations
@@ -17,11 +17,6 @@ from collections.abc import Callable
 
 import rclpy
 from rclpy.executors import Executor, SingleThreadedExecutor
-
-try:
-    from rclpy.experimental import EventsExecutor as NodeExecutor
-except ImportError:  # rclpy before 7.1.4
-    NodeExecutor = SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
@@ -29,6 +24,11 @@ from ..model.config import ConfigError
 from ..stream.health import CANNOT
 from .parameters import ParameterError
 from .settings import StartupError
+
+try:
+    from rclpy.experimental import EventsExecutor as NodeExecutor
+except ImportError:  # rclpy before 7.1.4
+    NodeExecutor = SingleThreadedExecutor
 
 SPIN_PERIOD = 0.1  # [s] the longest a signal waits for the spin loop
 LOST_MESSAGE = "Unable to convert call argument"
@@ -62,12 +62,13 @@ def run_node(make: Callable[[], Node], name: str, args: list[str] | None = None)
         except (StartupError, ConfigError, ParameterError, ValueError) as error:
             rclpy.logging.get_logger(name).fatal(f"{CANNOT} start: {error}")
             return 1
+        executor = NodeExecutor()
+        executor.add_node(node)
         try:
-            executor = NodeExecutor()
-            executor.add_node(node)
             while not stop.is_set():
                 spin_once(executor, node, SPIN_PERIOD)
         finally:
+            executor.shutdown()  # before the node goes: nothing of it is served while it is destroyed
             node.destroy_node()
     finally:
         rclpy.try_shutdown()
