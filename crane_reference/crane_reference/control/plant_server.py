@@ -154,6 +154,11 @@ class PlantServer:
         self.last_refusal = ""
         self.refused_last = False
         """The last command received was refused."""
+        # the kernels of a period, of its state and of the hold command made ready now, not at the first command
+        # (a period of its own on a copy of the state: the plant stays at its start)
+        HeldPeriods(self.plant, settings.period).advance(self._command)
+        self.hold_efforts(self.q)
+        self.state()
 
     def command(self, values: Sequence[float], now: float) -> None:
         """Accept the efforts ``values`` [N m] (order of the settings' ``joints``) received at ``now`` [s, the
