@@ -132,6 +132,23 @@ def test_a_goal_stops_with_publishing(server: ReferenceServer) -> None:
     assert goal.end(serving=True).outcome == STOPPED
 
 
+def test_a_goal_accepted_before_publishing_begins_waits_for_it(server: ReferenceServer) -> None:
+    """Accepted between activation and the first sample (the look-ahead being made), a goal goes on; it is
+    reached once publishing begins and passes the blend, and a second one stops when publishing ends."""
+    goal = RetargetGoal(server, dataclasses.replace(server.stream.targets, ellipse_a=3.2), BLEND, NS)
+    assert not server.publishing and goal.end(serving=True) is None
+    server.begin(NS)
+    out = publish(server, NS, BLEND + 0.1)
+    assert goal.end(serving=True) == (REACHED, "") and goal.path_stamp_ns in [o.stamp_ns for o in out]
+    server.end()
+    waiting = RetargetGoal(server, dataclasses.replace(server.stream.targets, ellipse_b=1.6), BLEND, NS)
+    assert goal.end(serving=True) == (REACHED, "") and waiting.end(serving=True) is None
+    server.begin(out[-1].stamp_ns + PERIOD)
+    publish(server, out[-1].stamp_ns + PERIOD, 0.05)
+    server.end()
+    assert waiting.end(serving=True).outcome == STOPPED
+
+
 def test_feedback_with_e_on_the_column_axis_is_the_nearest_ellipse_point(server: ReferenceServer) -> None:
     """E on the ellipse's centre (no ray to the ellipse): inside by the smaller semi-axis."""
     server.begin(NS)

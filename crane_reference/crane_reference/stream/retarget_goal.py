@@ -9,7 +9,8 @@ the goal is reached when the first sample at or after the blend's end is publish
 reached; pre-empted once the stream's targets are no longer the goal's or a newer command takes over (a newer goal,
 a change of the target parameters: a re-target that begins before this blend's end drops its milestones, so a
 superseded goal is never reached), unless it was reached first; stopped when the server no longer serves it, its
-solver stopped or its stream is in ERROR.
+solver stopped, it stopped publishing (a goal accepted before publishing begins, as just after activation, waits
+for it) or its stream is in ERROR.
 """
 
 from __future__ import annotations
@@ -56,6 +57,9 @@ class RetargetGoal:
         self.targets = targets
         self.blend_time = blend_time
         self.blend: RetargetBlend = server.retarget(targets, blend_time, accepted_ns)
+        # publishing ending stops the goal once it has published for it (not before it begins: after activation)
+        self._publishing_at_start = server.publishing
+        self._published_at_start = server.schedule.counters.published
         self._ellipse, self._height = paper_task_constraints(targets, server.info.z_static).constraints
 
     @property
@@ -83,7 +87,9 @@ class RetargetGoal:
             return GoalEnd(REACHED, "")
         if preempted_by or self.superseded:
             return GoalEnd(PREEMPTED, preempted_by or "a newer re-target took over")
-        if not (serving and self.server.computing and self.server.publishing):
+        stopped_publishing = not self.server.publishing and (
+            self._publishing_at_start or self.server.schedule.counters.published > self._published_at_start)
+        if not (serving and self.server.computing) or stopped_publishing:
             return GoalEnd(STOPPED, "publishing or the solver stopped before the new path")
         if stream.state == ERROR:
             return GoalEnd(STOPPED, f"the stream is in ERROR ({stream.last_error})")
