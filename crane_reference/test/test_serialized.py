@@ -175,8 +175,9 @@ def test_vectors_filled_in_place_equal_rosbags_serialization(little_endian):
 @pytest.mark.parametrize("rate", [1000, 100])
 def test_a_batch_of_frames_is_published_as_rclpy_and_rosbags_serialize_each_sample(params, rate):
     """The rows of a batch of frames made by the stream at the node's rates, written into the messages as the
-    publisher writes them (:meth:`fill_row`), are rclpy's serialization of each sample's message objects, read
-    back field by field, and rosbags' bytes in both byte orders."""
+    publisher writes them (the joint states and poses of the whole batch at once, :meth:`rows`, each stamped as it
+    goes out; the previews a row at a time, :meth:`fill_row`), are rclpy's serialization of each sample's message
+    objects, read back field by field, and rosbags' bytes in both byte orders."""
     from crane_reference.model.chain import ACTUATED_JOINTS
     from crane_reference.stream.reference_stream import ReferenceStream
     from crane_reference.stream.schedule import FrameSchedule, make_frames
@@ -216,14 +217,20 @@ def test_a_batch_of_frames_is_published_as_rclpy_and_rosbags_serialize_each_samp
             assert writer.fill_row(stamp, frames.samples, row, preview) == bytes(TYPESTORE.serialize_cdr(
                 messages.reference_preview(rosbags_message_types, stamp, "world", list(ACTUATED_JOINTS), indices,
                                            offsets, points), TRAJECTORY, little_endian=little))
-    for row in range(len(frames)):
+    # the batch's rows written at once, then stamped in any order, one of them twice (a later stamp wins)
+    joint_rows, pose_rows = joints.rows(frames.samples), poses.rows(frames.samples)
+    ordered_rows = {little: (joint_writer.rows(frames.samples), pose_writer.rows(frames.samples))
+                    for little, (joint_writer, pose_writer) in ordered.items()}
+    assert len(joint_rows) == len(pose_rows) == len(frames)
+    joint_rows.stamped(3, 5)
+    for row in [*range(len(frames) - 1, -1, -2), *range(0, len(frames), 2)]:
         stamp, sample = 1_700_000_000_000_000_000 + (frames.k + row) * 10**9 // rate, frames.samples.row(row)
-        assert deserialize_message(joints.fill_row(stamp, frames.samples, row), JointState) == messages.joint_state(
+        assert deserialize_message(joint_rows.stamped(row, stamp), JointState) == messages.joint_state(
             rclpy_message_types, stamp, names, sample)
-        assert deserialize_message(poses.fill_row(stamp, frames.samples, row), PoseStamped) == \
+        assert deserialize_message(pose_rows.stamped(row, stamp), PoseStamped) == \
             messages.end_effector_pose(rclpy_message_types, stamp, "world", sample)
-        for little, (joint_writer, pose_writer) in ordered.items():
-            assert joint_writer.fill_row(stamp, frames.samples, row) == bytes(TYPESTORE.serialize_cdr(
+        for little, (joint_writer, pose_writer) in ordered_rows.items():
+            assert joint_writer.stamped(row, stamp) == bytes(TYPESTORE.serialize_cdr(
                 messages.joint_state(rosbags_message_types, stamp, names, sample), JOINT_STATE, little_endian=little))
-            assert pose_writer.fill_row(stamp, frames.samples, row) == bytes(TYPESTORE.serialize_cdr(
+            assert pose_writer.stamped(row, stamp) == bytes(TYPESTORE.serialize_cdr(
                 messages.end_effector_pose(rosbags_message_types, stamp, "world", sample), POSE, little_endian=little))

@@ -6,7 +6,8 @@ a publisher handed the serialized bytes (rclpy's ``Publisher.publish(bytes)``, w
 ``rmw_publish_serialized_message``) publishes them as they are.  The bytes here are those of a prototype
 serialized by a message library (rclpy's ``serialize_message`` in the node, rosbags' CDR serializer
 offline) with each sample's numbers written over the prototype's at their offsets; the names and the
-frame_id stay the prototype's.
+frame_id stay the prototype's.  A batch of stacked samples is written at once, a message a row of one buffer
+(:class:`SerializedRows`), each stamped as it goes out.
 
 Layout of a ROS 2 serialized message (plain CDR, XCDR version 1, as every ROS 2 middleware and rosbag2
 use it): a 4-byte encapsulation header (second byte 1: little endian, 0: big endian), then the body, in
@@ -91,8 +92,40 @@ class _SerializedMessage:
 
     def _stamped(self, stamp_ns: int) -> bytes:
         """The message with header.stamp = ``stamp_ns`` (a non-negative time [ns]), as bytes."""
-        self._stamp.pack_into(self._buffer, ENCAPSULATION, stamp_ns // NANOSECONDS, stamp_ns % NANOSECONDS)
+        _write_stamp(self._stamp, self._buffer, 0, stamp_ns)
         return bytes(self._buffer)
+
+
+def _write_stamp(stamp: struct.Struct, buffer: bytearray, start: int, stamp_ns: int) -> None:
+    """header.stamp = ``stamp_ns`` (a non-negative time [ns]: sec, nanosec) in the message at ``start`` of
+    ``buffer``."""
+    stamp.pack_into(buffer, start + ENCAPSULATION, stamp_ns // NANOSECONDS, stamp_ns % NANOSECONDS)
+
+
+class SerializedRows:
+    """``count`` copies of a serialized message, a row each, one after the other in one buffer: a field of every row
+    is written at once (:meth:`columns`, numbers stacked from a batch of samples), and each row is stamped as it
+    goes out (:meth:`stamped`)."""
+
+    def __init__(self, message: _SerializedMessage, count: int):
+        self._size = len(message._buffer)
+        self._data = bytearray(bytes(message._buffer) * count)
+        self._rows = memoryview(self._data)
+        self._order, self._stamp, self._count = message._order, message._stamp, count
+
+    def __len__(self) -> int:
+        return self._count
+
+    def columns(self, offset: int, width: int) -> np.ndarray:
+        """A writable (count, width) view of the ``width`` float64 at body offset ``offset`` in every row."""
+        return np.ndarray((self._count, width), np.dtype(self._order + "f8"), self._data, ENCAPSULATION + offset,
+                          (self._size, 8))
+
+    def stamped(self, row: int, stamp_ns: int) -> bytes:
+        """Row ``row``'s message with header.stamp = ``stamp_ns`` (a non-negative time [ns]), as bytes."""
+        start = row * self._size
+        _write_stamp(self._stamp, self._data, start, stamp_ns)
+        return bytes(self._rows[start:start + self._size])
 
 
 class SerializedJointState(_SerializedMessage):
@@ -110,21 +143,23 @@ class SerializedJointState(_SerializedMessage):
                 raise ValueError(f"prototype JointState has {count} {field} entries for {len(self.names)} names")
             arrays.append(layout.doubles(count))
         super().__init__(prototype, layout)
+        self._offsets = arrays
         self._position, self._velocity, self._effort = (self._doubles(offset, len(self.names)) for offset in arrays)
 
     def fill(self, stamp_ns: int, sample: ReferenceSample) -> bytes:
         """The serialized JointState of ``sample`` stamped ``stamp_ns``."""
-        return self._filled(stamp_ns, sample.q, sample.qd, sample.effort)
-
-    def fill_row(self, stamp_ns: int, samples: Samples, row: int) -> bytes:
-        """The serialized JointState of row ``row`` of stacked ``samples`` stamped ``stamp_ns``."""
-        return self._filled(stamp_ns, samples.q[row], samples.qd[row], samples.effort[row])
-
-    def _filled(self, stamp_ns: int, position: np.ndarray, velocity: np.ndarray, effort: np.ndarray) -> bytes:
-        self._position[:] = position
-        self._velocity[:] = velocity
-        self._effort[:] = effort
+        self._position[:] = sample.q
+        self._velocity[:] = sample.qd
+        self._effort[:] = sample.effort
         return self._stamped(stamp_ns)
+
+    def rows(self, samples: Samples) -> SerializedRows:
+        """The serialized JointStates of stacked ``samples``, a row each, their numbers written at once (stamped as
+        each goes out: :meth:`SerializedRows.stamped`)."""
+        rows = SerializedRows(self, len(samples.t))
+        for offset, values in zip(self._offsets, (samples.q, samples.qd, samples.effort), strict=True):
+            rows.columns(offset, len(self.names))[:] = values
+        return rows
 
 
 class SerializedPose(_SerializedMessage):
@@ -136,20 +171,23 @@ class SerializedPose(_SerializedMessage):
         self.frame_id = layout.string()
         offset = layout.doubles(7)
         super().__init__(prototype, layout)
+        self._offset = offset
         self._pose = self._doubles(offset, 7)
 
     def fill(self, stamp_ns: int, sample: ReferenceSample) -> bytes:
         """The serialized PoseStamped of E in ``sample`` stamped ``stamp_ns``."""
-        return self._filled(stamp_ns, sample.ee_position, sample.ee_quaternion)
-
-    def fill_row(self, stamp_ns: int, samples: Samples, row: int) -> bytes:
-        """The serialized PoseStamped of E in row ``row`` of stacked ``samples`` stamped ``stamp_ns``."""
-        return self._filled(stamp_ns, samples.ee_position[row], samples.ee_quaternion[row])
-
-    def _filled(self, stamp_ns: int, position: np.ndarray, quaternion: np.ndarray) -> bytes:
-        self._pose[:3] = position
-        self._pose[3:] = quaternion
+        self._pose[:3] = sample.ee_position
+        self._pose[3:] = sample.ee_quaternion
         return self._stamped(stamp_ns)
+
+    def rows(self, samples: Samples) -> SerializedRows:
+        """The serialized PoseStamped of E in stacked ``samples``, a row each, their numbers written at once
+        (stamped as each goes out: :meth:`SerializedRows.stamped`)."""
+        rows = SerializedRows(self, len(samples.t))
+        pose = rows.columns(self._offset, 7)
+        pose[:, :3] = samples.ee_position
+        pose[:, 3:] = samples.ee_quaternion
+        return rows
 
 
 class SerializedVector3(_SerializedMessage):

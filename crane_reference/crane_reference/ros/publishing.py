@@ -6,7 +6,11 @@ Sample k is stamped ``start + k / publish_rate`` (integer nanoseconds) by the
 the node clock and publishes every sample due (normally one), so no sample is skipped or duplicated when it
 wakes late.  A thread rather than an rclpy timer publishes because rclpy's executor adds its overhead to every
 timer callback and runs the (slow) parameter validation on the same thread.  ~/joint_states and
-~/end_effector_pose are serialized once and then filled in place (:mod:`crane_reference.interface.serialized`).
+~/end_effector_pose are serialized once, as prototypes; the numbers of each batch of frames are written into
+copies of them at once as the batch comes (:meth:`SamplePublisher.encode`, the server's frame thread), so the
+publisher thread only stamps each message and publishes its bytes (:mod:`crane_reference.interface.serialized`).
+It reads the node clock through rclpy only while ROS time is active (use_sim_time): otherwise that clock is the
+system clock, read with one system call.
 The reference topics take ``qos_overrides.<topic>.publisher.<policy>`` parameters (rclpy's QoS overriding),
 e.g. ``-p qos_overrides./crane_reference/joint_states.publisher.depth:=50``.
 """
@@ -18,10 +22,11 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
+from rclpy.clock import ROSClock
 from rclpy.lifecycle import LifecycleNode
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSPolicyKind, QoSProfile
@@ -33,9 +38,10 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..interface import messages
-from ..interface.serialized import SerializedJointState, SerializedPose, SerializedPreview
+from ..interface.serialized import SerializedJointState, SerializedPose, SerializedPreview, SerializedRows
 from ..model.units import NANOSECONDS
 from ..stream.health import Level, serving_health, startup_health
+from ..stream.sample import Samples
 from ..stream.server import Outgoing, ReferenceServer
 from ..stream.threads import start_named
 
@@ -69,6 +75,22 @@ def run_until_shutdown(node: LifecycleNode, loop: Callable[[], None]) -> Callabl
     return run
 
 
+def node_time(clock: ROSClock) -> Callable[[], int]:
+    """A reader of ``clock`` (a node's) [ns]: rclpy's reading while ROS time is active; otherwise the system time
+    that rclpy would read (rcl's system clock, CLOCK_REALTIME), without converting it to an rclpy Time."""
+    def now() -> int:
+        return clock.now().nanoseconds if clock.ros_time_is_active else time.time_ns()
+    return now
+
+
+class SampleMessages(NamedTuple):
+    """A batch's ~/joint_states and ~/end_effector_pose (its frame ``frame_id``), serialized, a row a sample."""
+
+    frame_id: str
+    joint_states: SerializedRows
+    poses: SerializedRows
+
+
 @dataclass(frozen=True)
 class PublishSettings:
     """What the parameters choose of the messages: the frame of poses, previews and markers (prefixed), the
@@ -90,8 +112,7 @@ class SamplePublisher:
         self.trail: deque[Any] = deque(maxlen=TRAIL_POINTS)  # E's positions as Point messages
         self._trail_stride = max(1, round(server.rate / TRAIL_RATE))  # samples between two trail points
         self._ellipse: tuple[tuple[float, ...], list[Any]] = ((), [])  # (a, b, z) and its Point messages
-        self._joint_writer: SerializedJointState | None = None
-        self._pose_writer: SerializedPose | None = None
+        self._writers: tuple[str, SerializedJointState, SerializedPose] | None = None  # prototypes, pose's frame
         self._preview_writer: tuple[tuple, SerializedPreview] | None = None  # for (settings, horizon, points)
         depth, overridable = messages.PUBLISHER_DEPTH, OVERRIDABLE
         self._managed = [node.create_lifecycle_publisher(message_type, topic, depth, qos_overriding_options=overridable)
@@ -107,6 +128,7 @@ class SamplePublisher:
         self._thread: threading.Thread | None = None
         self._marker_thread: threading.Thread | None = None
         self.waiting_for_clock = False
+        server.encode = self.encode
 
     @property
     def active(self) -> bool:
@@ -148,17 +170,17 @@ class SamplePublisher:
         node clock is read once a wake-up (an rclpy call that costs microseconds); the time the publishing
         took is added from the monotonic clock.  A wait of up to SLEEP_LIMIT is a plain sleep.
         """
-        clock, server, rate = self.node.get_clock(), self.server, self.server.rate
-        while not self._quiet.is_set() and (not server.ready() or clock.now().nanoseconds == 0):
+        clock, server, rate = node_time(self.node.get_clock()), self.server, self.server.rate
+        while not self._quiet.is_set() and (not server.ready() or clock() == 0):
             self.waiting_for_clock = server.ready()
             self._quiet.wait(1.0 / rate)
         self.waiting_for_clock = False
         if self._quiet.is_set():  # stopped before publishing began: nothing to begin
             return
-        server.begin(clock.now().nanoseconds)
+        server.begin(clock())
         quiet, send = self._quiet, self.send
         while not quiet.is_set():
-            now, read_at = clock.now().nanoseconds, time.monotonic_ns()
+            now, read_at = clock(), time.monotonic_ns()
             due = server.due(now)
             for outgoing in due.outgoing:
                 send(outgoing)
@@ -168,19 +190,27 @@ class SamplePublisher:
             elif left > 0:  # within a period at 50 Hz or faster: one system call (an Event's wait takes locks too)
                 time.sleep(left / NANOSECONDS)
 
+    def encode(self, samples: Samples) -> SampleMessages:
+        """The joint states and E's poses of stacked ``samples`` (a batch of frames), serialized at once in the
+        frame of the settings, a row a sample (the prototypes serialized once per frame)."""
+        frame_id, writers = self.settings.frame_id, self._writers
+        if writers is None or writers[0] != frame_id:
+            first = samples.row(0)
+            writers = self._writers = (frame_id, SerializedJointState(serialize_message(
+                messages.joint_state(self.types, 0, self.joint_names, first))), SerializedPose(serialize_message(
+                    messages.end_effector_pose(self.types, 0, frame_id, first))))
+        return SampleMessages(frame_id, writers[1].rows(samples), writers[2].rows(samples))
+
     def send(self, outgoing: Outgoing) -> None:
-        """Publish one sample, a row of the stacked frames: joint states, E's pose and the preview if the row has
-        one (each serialized once, then filled in place from the rows and published as bytes); E's trail."""
+        """Publish one sample, a row of the stacked frames: joint states and E's pose (the frames' rows of
+        :meth:`encode`, stamped; a held sample's, or one made before a change of frame, encoded here alone), the
+        preview if the row has one (serialized once, then filled in place and published as bytes); E's trail."""
         frames, row, stamp, settings = outgoing.frames, outgoing.row, outgoing.stamp_ns, self.settings
-        samples = frames.samples
-        if self._joint_writer is None:
-            self._joint_writer = SerializedJointState(serialize_message(
-                messages.joint_state(self.types, stamp, self.joint_names, samples.row(row))))
-        if self._pose_writer is None or self._pose_writer.frame_id != settings.frame_id:
-            self._pose_writer = SerializedPose(serialize_message(
-                messages.end_effector_pose(self.types, stamp, settings.frame_id, samples.row(row))))
-        publish(self._joints, self._joint_writer.fill_row(stamp, samples, row))
-        publish(self._poses, self._pose_writer.fill_row(stamp, samples, row))
+        samples, wire, wire_row = frames.samples, frames.wire, row
+        if wire is None or wire.frame_id != settings.frame_id:
+            wire, wire_row = self.encode(samples.take(slice(row, row + 1))), 0
+        publish(self._joints, wire.joint_states.stamped(wire_row, stamp))
+        publish(self._poses, wire.poses.stamped(wire_row, stamp))
         preview = frames.previews.get(row)
         if preview is not None:
             key = (settings, frames.horizon, preview.t.size)

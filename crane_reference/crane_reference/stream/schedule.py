@@ -26,6 +26,7 @@ import math
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -50,13 +51,15 @@ class Frames:
     """Frames k .. k + N - 1 of the reference, stacked: their stream publish times ``tau`` (N,) [s], their samples
     (:class:`~.sample.Samples`, a row each) and the previews of some of them (row -> the preview's samples) over
     ``horizon`` seconds.  The solver makes them, the pipe carries them and the publisher reads them in this form:
-    a few arrays a batch, no object a sample."""
+    a few arrays a batch, no object a sample.  ``wire``: what the publisher made of the samples at once when the
+    batch came (its messages, a row a sample: :attr:`~.server.ReferenceServer.encode`), or None."""
 
     k: int
     tau: np.ndarray
     samples: Samples
     previews: dict[int, Samples] = field(default_factory=dict)
     horizon: float = 0.0
+    wire: Any = None
 
     def __len__(self) -> int:
         return self.tau.size
@@ -72,9 +75,9 @@ class Frames:
         return cls(k, np.asarray(taus, dtype=float), Samples.repeated(sample.hold(), len(taus)))
 
     def head(self, count: int) -> Frames:
-        """The first ``count`` frames."""
+        """The first ``count`` frames (the wire's rows beyond them are never read)."""
         return Frames(self.k, self.tau[:count], self.samples.take(slice(0, count)),
-                      {i: p for i, p in self.previews.items() if i < count}, self.horizon)
+                      {i: p for i, p in self.previews.items() if i < count}, self.horizon, self.wire)
 
     def renumbered(self, k: int) -> Frames:
         """The same frames as frames k, ..."""

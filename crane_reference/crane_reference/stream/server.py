@@ -52,7 +52,7 @@ import math
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
 
 from ..model.parameters import Task
@@ -60,7 +60,7 @@ from ..model.units import NANOSECONDS
 from ..motion.simulation import SOLVER_FAILURES
 from .history import TIME_SLACK
 from .reference_stream import ERROR, PAUSED, RUNNING
-from .sample import ReferenceSample
+from .sample import ReferenceSample, Samples
 from .schedule import FrameBatch, FrameRequest, Frames, FrameSchedule, Plan, stamp_at
 from .solver import STREAM_COMMANDS, SolverClient, SolverStoppedError, StreamStatus
 from .threads import start_named
@@ -210,6 +210,9 @@ class ReferenceServer:
         self._unstamped: dict[str, int] = {}  # command made while not publishing -> its frame, stamped at begin
         self._milestones: list[Milestone] = []  # not yet published
         self._rates_reference = (0, 0.0, 0.0, 0)
+        self.encode: Callable[[Samples], Any] | None = None
+        """What the publisher makes of a batch's samples at once (its messages, a row a sample), set by it: made
+        in the thread that receives the batch, outside the lock, and kept as the frames' ``wire``."""
         self._worker = start_named(self._work, "ref_frames")
 
     @property
@@ -260,7 +263,7 @@ class ReferenceServer:
                 with self._solver_lock:
                     if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
                         continue
-                    batch = self.solver.frames(request, RELEASE_KEEP + LOOKAHEAD)
+                    batch = self._encoded(self.solver.frames(request, RELEASE_KEEP + LOOKAHEAD))
                 with self._lock:
                     if self._accept(batch, plan) and not len(batch.frames) and not batch.busy:
                         self._lock.wait(timeout=LOOKAHEAD)
@@ -271,6 +274,13 @@ class ReferenceServer:
         except Exception as error:  # publishing goes on (holding) and reports it
             with self._lock:
                 schedule.fault = f"solver thread stopped: {type(error).__name__}: {error}"
+
+    def _encoded(self, batch: FrameBatch) -> FrameBatch:
+        """``batch`` with its frames' wire made (:attr:`encode`), if there are frames and an encoder."""
+        encode = self.encode
+        if encode is None or not len(batch.frames):
+            return batch
+        return replace(batch, frames=replace(batch.frames, wire=encode(batch.frames.samples)))
 
     def _frame_request(self, plan: Plan, count: int, budget: float) -> FrameRequest:
         """The solver's next request for ``plan`` (the server's lock held): up to ``count`` frames, after at most
@@ -403,6 +413,7 @@ class ReferenceServer:
         batch = None
         try:
             answer, batch = self._request(self.solver.command, name, tau, args, frames, RELEASE_KEEP + LOOKAHEAD)
+            batch = self._encoded(batch)
         finally:
             with self._lock:
                 if batch is not None:
