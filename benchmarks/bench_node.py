@@ -48,8 +48,9 @@ process and, after a warm-up, records for ``--duration`` seconds (default 30):
   executor in the main thread, Fast DDS's ``dds.*`` threads);
 * the time from SIGINT (sent while active) to the node's exit (``exit_after_sigint_s``);
 * first (``--message-costs``), in this process: what the node's publisher spends per sample to fill and
-  publish ~/joint_states and ~/end_effector_pose (serialized and filled in place, as the node does, and as
-  message objects, for comparison), alone and with a subscriber of the joint states in another process, the CPU
+  publish ~/joint_states and ~/end_effector_pose (rows of a batch serialized at once, each stamped, as the
+  node does, and message objects, for comparison), alone and with a subscriber of the joint states in another
+  process, the CPU
   share of a process that only publishes them at each rate (the floor of publishing from rclpy), and the cost of
   building and publishing ~/markers with a full trail.
 
@@ -96,6 +97,7 @@ from crane_reference.ros.message_types import rclpy_types
 from crane_reference.ros.parameters import SPECS
 from crane_reference.ros.publishing import MARKER_RATE, TRAIL_POINTS
 from crane_reference.stream.reference_stream import ReferenceStream
+from crane_reference.stream.sample import Samples
 from crane_reference.stream.schedule import Counters
 from crane_reference.stream.server import REFILL
 
@@ -417,8 +419,9 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
     """This process's CPU share [%] when it only publishes the node's messages at each of ``rates``, with a
     subscriber in another process on the joint states and the diagnostics, as the node's run has (the floor of the
     node's publishing in
-    rclpy: no stream, no clock, no schedule): ~/joint_states and ~/end_effector_pose serialized and filled per
-    sample, ~/reference_preview (built once, the default preview) at the default preview rate and
+    rclpy: no stream, no clock, no schedule): ~/joint_states and ~/end_effector_pose as rows of a batch serialized
+    at once, each stamped as it goes out, ~/reference_preview (built once, the default preview) at the default
+    preview rate and
     /diagnostics (built once, with the node's keys) once a second; with ``details``, print the publisher's
     per-sample costs of the first two alone and with the subscriber and that share both for the serialized
     messages and for message objects, and the markers' cost."""
@@ -436,8 +439,9 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
         poses = node.create_publisher(PoseStamped, "/bench_pose", 10)
         previews = node.create_publisher(JointTrajectory, "/bench_preview", 10)
         statuses = node.create_publisher(DiagnosticArray, "/bench_diagnostics", 10)
-        joint_writer = SerializedJointState(serialize_message(messages.joint_state(types, 0, names, sample)))
-        pose_writer = SerializedPose(serialize_message(messages.end_effector_pose(types, 0, "world", sample)))
+        batch = Samples.repeated(sample, 1000)  # a batch of frames, serialized at once as the node does
+        joint_rows = SerializedJointState(serialize_message(messages.joint_state(types, 0, names, sample))).rows(batch)
+        pose_rows = SerializedPose(serialize_message(messages.end_effector_pose(types, 0, "world", sample))).rows(batch)
         kept = {"joint": None, "pose": None}
         preview_joints, points = SPECS["preview.joints"].default, SPECS["preview.points"].default
         preview = messages.reference_preview(
@@ -448,9 +452,9 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
             {"frames_ready": 0, "blend_time_s": "2"}))
 
         def one_sample(k: int) -> None:
-            """As the node publishes: serialized once, filled in place and published as bytes."""
-            joints.publish(joint_writer.fill(k, sample))
-            poses.publish(pose_writer.fill(k, sample))
+            """As the node publishes: a row of a batch serialized at once, stamped and published as bytes."""
+            joints.publish(joint_rows.stamped(k % len(joint_rows), k))
+            poses.publish(pose_rows.stamped(k % len(pose_rows), k))
 
         def one_message_object(k: int) -> None:
             """As the node published before: message objects filled again and converted by rclpy."""
@@ -493,7 +497,7 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
             (alone_wall, alone_cpu), (with_wall, with_cpu) = alone[way], per_sample(publish)
             floors = {rate: paced(rate, publish) for rate in rates}
             node_floors = node_floors or floors
-            print(f"[messages] {way}: joint_states and pose filled and published, per sample: alone "
+            print(f"[messages] {way}: joint_states and pose stamped and published, per sample: alone "
                   f"{alone_wall * 1e6:.1f} us (CPU {alone_cpu * 1e6:.1f} us), with a subscriber of the joint states in "
                   f"another process {with_wall * 1e6:.1f} us (CPU {with_cpu * 1e6:.1f} us, every thread of this "
                   "process)")

@@ -263,7 +263,8 @@ class ReferenceServer:
                 with self._solver_lock:
                     if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
                         continue
-                    batch = self._encoded(self.solver.frames(request, RELEASE_KEEP + LOOKAHEAD))
+                    batch = self.solver.frames(request, RELEASE_KEEP + LOOKAHEAD)
+                batch = self._encoded(batch)  # a command need not wait for it
                 with self._lock:
                     if self._accept(batch, plan) and not len(batch.frames) and not batch.busy:
                         self._lock.wait(timeout=LOOKAHEAD)
