@@ -167,8 +167,8 @@ class SamplePublisher:
         It starts once the server's look-ahead of frames is ready and the clock runs (ROS time is 0 until the
         first /clock with use_sim_time).  It sleeps in wall time for the time left on the node clock and checks
         that clock again (at least every MAX_WAIT), so it follows ROS time and stops within SLEEP_LIMIT.  The
-        node clock is read once a wake-up (an rclpy call that costs microseconds); the time the publishing
-        took is added from the monotonic clock.  A wait of up to SLEEP_LIMIT is a plain sleep.
+        node clock is read once a wake-up (:func:`node_time`); the time the publishing took is added from the
+        monotonic clock.  A wait of up to SLEEP_LIMIT is a plain sleep.
         """
         clock, server, rate = node_time(self.node.get_clock()), self.server, self.server.rate
         while not self._quiet.is_set() and (not server.ready() or clock() == 0):
