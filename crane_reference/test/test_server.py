@@ -5,6 +5,7 @@ clock of plain integers drives it; what it serves is compared with an independen
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import threading
 import time
@@ -21,8 +22,8 @@ from crane_reference.stream.health import Health, Level, serving_health, startup
 from crane_reference.stream.reference_stream import ERROR, PAUSED, RUNNING, ReferenceStream
 from crane_reference.stream.schedule import URGENT_PART, FrameSchedule
 from crane_reference.stream.server import (
+    COMPUTE_SLICE,
     URGENT_REFILL,
-    URGENT_SLICE,
     CommandRefusedError,
     Preview,
     ReferenceServer,
@@ -117,10 +118,11 @@ def test_a_command_takes_effect_at_the_last_sample_within_the_lead(server: Refer
 def test_after_a_command_the_urgent_frames_come_in_short_requests_then_a_full_one(
         server: ReferenceServer, monkeypatch: pytest.MonkeyPatch) -> None:
     """After a pause (the motion it publishes is computed already, so making frames is all a request does) the
-    worker asks for the frames close to publishing in requests of at most URGENT_REFILL seconds of frames (not the
-    whole urgent quarter of the look-ahead at once, which takes longer to make than a command's lead), and leaves
-    the urgent window after about as many as it holds: then a full refill, not a request for each frame or two
-    published meanwhile.  Publishing runs in real time on the wall clock."""
+    worker asks for the frames close to publishing in short requests, the first for about the command's lead of
+    frames (not the whole urgent quarter of the look-ahead at once, which takes longer to make than a command's
+    lead), each for about as many as are ready, so that it leaves the urgent window after a few (the frames ready
+    double a request): then a full refill, not a request for each frame or two published meanwhile.  Publishing
+    runs in real time on the wall clock; no sample is held."""
     requests = []
     ask = server.solver.frames
     monkeypatch.setattr(server.solver, "frames", lambda request, keep: requests.append(request) or ask(request, keep))
@@ -134,11 +136,13 @@ def test_after_a_command_the_urgent_frames_come_in_short_requests_then_a_full_on
     while time.monotonic_ns() < start + 2 * NS:
         time.sleep(0.001)
         server.due(time.monotonic_ns())
-    most = round(URGENT_REFILL * RATE)
-    urgent = [r.count <= most if r.compute_budget == URGENT_SLICE else None for r in requests]
-    assert urgent[0] and None in urgent and all(urgent[:urgent.index(None)])
-    assert urgent.index(None) <= server.schedule.lookahead // URGENT_PART / most + 3
-    assert requests[urgent.index(None)].count > most
+    most, window = round(URGENT_REFILL * RATE), server.schedule.lookahead // URGENT_PART
+    urgent = [r.compute_budget < COMPUTE_SLICE for r in requests]
+    first_full = urgent.index(False)
+    assert first_full >= 1 and all(urgent[:first_full])
+    assert requests[0].count <= max(most, round(LEAD * RATE) + 2) and requests[0].compute_budget <= LEAD
+    assert first_full <= math.ceil(math.log2(window / most)) + 3
+    assert requests[first_full].count > most
     assert server.status(time.monotonic_ns()).counters["held_late"] == 0
 
 

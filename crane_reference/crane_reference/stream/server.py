@@ -20,10 +20,13 @@ Computing ahead
     publishing (unbounded before; any other request cuts it short at the next step, the solver's stop flag, and
     goes first: the worker asks nothing more while one waits).
     Frames close to publishing (within a quarter of the look-ahead, as after a command) are urgent: made as
-    soon as their own motion is computed, up to :data:`URGENT_REFILL` seconds of them a request, as many as
-    :data:`URGENT_SLICE` s of computing give (a command's own request: :data:`URGENT_BATCH` seconds of them), so
-    each request comes back soon, whether its motion needs computing or is computed already.  One urgent
-    request goes past the urgent ones, so that the next is a full one.  The worker forgets
+    soon as their own motion is computed, as many of them a request as are ready ahead of publishing (at least
+    :data:`URGENT_REFILL` seconds), as many as a slice of computing gives that takes half the time the frames
+    ready last (at least :data:`URGENT_SLICE` s, at most :data:`COMPUTE_SLICE`; a command's own request:
+    :data:`URGENT_BATCH` seconds of them).  So each request comes back before the frames ready run out, whether
+    its motion needs computing or is computed already, and the next ones are larger: the buffer grows
+    geometrically, and a solver slowed by a busy machine spends less of its time on the requests' own costs.
+    One urgent request goes past the urgent ones, so that the next is a full one.  The worker forgets
     motion older than :data:`RELEASE_KEEP` s before the frames it asks for.  Few large requests: the solver
     computes in long runs, seldom (a compiled run after an idle gap starts with cold caches), and answers few
     round trips.  The publisher never waits for the solver: the schedule's lock is held only to move frames.
@@ -256,8 +259,10 @@ class ReferenceServer:
                     plan = schedule.plan()
                     # in batches, but up to the whole look-ahead before publishing starts
                     refill = plan.room >= self._refill or not self.publishing
-                    if self.publishing and schedule.is_urgent(plan):  # as many as computed in a short slice
-                        request = self._frame_request(plan, self._urgent_refill, URGENT_SLICE)
+                    if self.publishing and schedule.is_urgent(plan):  # as many as computed in a slice they outlast
+                        ready = plan.k - schedule.next_k
+                        budget = min(COMPUTE_SLICE, max(URGENT_SLICE, 0.5 * ready / self.rate))
+                        request = self._frame_request(plan, max(self._urgent_refill, ready), budget)
                     else:
                         request = self._frame_request(plan, self._refill * refill, COMPUTE_SLICE)
                 with self._solver_lock:
