@@ -47,6 +47,9 @@ process and, after a warm-up, records for ``--duration`` seconds (default 30):
   the node gives its threads (``[threads]``: ``ref_publisher``, ``ref_frames``, ``ref_diagnostics``, rclpy's
   executor in the main thread, Fast DDS's ``dds.*`` threads);
 * the time from SIGINT (sent while active) to the node's exit (``exit_after_sigint_s``);
+* with ``--busy N``: all of the above with N processes that only spin (at the default priority) beside each node run,
+  not beside the floor's measurements: how the node holds up on a busy machine (the CPU ratios then count its
+  share of a contended machine);
 * first (``--message-costs``), in this process: what the node's publisher spends per sample to fill and
   publish ~/joint_states and ~/end_effector_pose (rows of a batch serialized at once, each stamped, as the
   node does, and message objects, for comparison), alone and with a subscriber of the joint states in another
@@ -55,7 +58,7 @@ process and, after a warm-up, records for ``--duration`` seconds (default 30):
   building and publishing ~/markers with a full trail.
 
 Run: ``.venv/bin/python benchmarks/bench_node.py [--duration 30] [--rates 100 500 1000] [--model flexible]
-[--flood 300] [-p command_lead:=0.05 ...]``.
+[--flood 300] [--busy 1] [-p command_lead:=0.05 ...]``.
 """
 
 from __future__ import annotations
@@ -570,6 +573,8 @@ def main() -> int:
     parser.add_argument("--domain-id", type=int, default=os.getpid() % 100 + 1)
     parser.add_argument("--message-costs", action="store_true", help="first print the publisher's message costs")
     parser.add_argument("--flood", type=int, default=0, metavar="N", help="N random parameter requests at 50 Hz")
+    parser.add_argument("--busy", type=int, default=0, metavar="N",
+                        help="N processes that only spin beside each node run (a busy machine)")
     parser.add_argument("-p", "--parameter", action="append", default=[], metavar="NAME:=VALUE",
                         help="a further node parameter, e.g. -p command_lead:=0.05 (repeatable)")
     args = parser.parse_args()
@@ -579,7 +584,13 @@ def main() -> int:
     rows = []
     for rate in args.rates:
         before = floor_parts(args.model, args.domain_id, rate, step)
-        row = run(rate, args.duration, args.model, args.changes, args.domain_id, args.flood, args.parameter)
+        busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
+        try:
+            row = run(rate, args.duration, args.model, args.changes, args.domain_id, args.flood, args.parameter)
+        finally:
+            for process in busy:
+                process.kill()
+                process.wait()
         after = floor_parts(args.model, args.domain_id, rate, step)
         publishing, steps = ((a + b) / 2 for a, b in zip(before, after, strict=True))
         print(f"[floor] {rate} Hz: publish-only {before[0]:.1f} / {after[0]:.1f} %, compiled steps alone at "
@@ -591,7 +602,8 @@ def main() -> int:
                    solver_over_steps=row["cpu_solver_process_percent"] / steps,
                    cpu_over_floor=row["cpu_percent"] / (publishing + steps))
         rows.append(row)
-    print_table(f"crane_reference node, {args.model} model, {args.duration:g} s per rate, {os.cpu_count()} CPUs", rows)
+    print_table(f"crane_reference node, {args.model} model, {args.duration:g} s per rate, {os.cpu_count()} CPUs"
+                + (f", {args.busy} busy processes beside it" if args.busy else ""), rows)
     print(f"targets (issue 29): cpu_over_floor <= {TARGET_OVER_FLOOR}, real_time_factor >= {TARGET_REAL_TIME_FACTOR}, "
           f"period_error_p99_ms <= {TARGET_P99_MS}, period_error_max_ms <= {TARGET_MAX_MS_100HZ} at 100 Hz, "
           "held_late_commands 0")
