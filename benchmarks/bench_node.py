@@ -50,12 +50,11 @@ process and, after a warm-up, records for ``--duration`` seconds (default 30):
 * with ``--busy N``: all of the above with N processes that only spin (at the default priority) beside each node run,
   not beside the floor's measurements: how the node holds up on a busy machine (the CPU ratios then count its
   share of a contended machine);
-* first (``--message-costs``), in this process: what the node's publisher spends per sample to fill and
-  publish ~/joint_states and ~/end_effector_pose (rows of a batch serialized at once, each stamped, as the
-  node does, and message objects, for comparison), alone and with a subscriber of the joint states in another
-  process, the CPU
-  share of a process that only publishes them at each rate (the floor of publishing from rclpy), and the cost of
-  building and publishing ~/markers with a full trail.
+* first (``--message-costs``), in this process: what the node's publisher spends per sample to stamp and
+  publish ~/joint_states and ~/end_effector_pose (rows of a batch serialized at once, as the node does, and
+  message objects, for comparison), alone and with a subscriber of the joint states in another process, the
+  CPU share of a process that only publishes them at each rate (the floor of publishing from rclpy), and the
+  cost of building and publishing ~/markers with a full trail.
 
 Run: ``.venv/bin/python benchmarks/bench_node.py [--duration 30] [--rates 100 500 1000] [--model flexible]
 [--flood 300] [--busy 1] [-p command_lead:=0.05 ...]``.
@@ -421,13 +420,11 @@ TARGET_OVER_FLOOR, TARGET_REAL_TIME_FACTOR, TARGET_P99_MS, TARGET_MAX_MS_100HZ =
 def message_costs(model: str, domain: int, rates: list[int], details: bool) -> dict[int, float]:
     """This process's CPU share [%] when it only publishes the node's messages at each of ``rates``, with a
     subscriber in another process on the joint states and the diagnostics, as the node's run has (the floor of the
-    node's publishing in
-    rclpy: no stream, no clock, no schedule): ~/joint_states and ~/end_effector_pose as rows of a batch serialized
-    at once, each stamped as it goes out, ~/reference_preview (built once, the default preview) at the default
-    preview rate and
-    /diagnostics (built once, with the node's keys) once a second; with ``details``, print the publisher's
-    per-sample costs of the first two alone and with the subscriber and that share both for the serialized
-    messages and for message objects, and the markers' cost."""
+    node's publishing in rclpy: no stream, no clock, no schedule): ~/joint_states and ~/end_effector_pose as rows
+    of a batch serialized at once, each stamped as it goes out, ~/reference_preview (built once, the default
+    preview) at the default preview rate and /diagnostics (built once, with the node's keys) once a second; with
+    ``details``, print the publisher's per-sample costs of the first two alone and with the subscriber and that
+    share both for the serialized messages and for message objects, and the markers' cost."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     context = rclpy.Context()

@@ -20,12 +20,12 @@ Computing ahead
     publishing (unbounded before; any other request cuts it short at the next step, the solver's stop flag, and
     goes first: the worker asks nothing more while one waits).
     Frames close to publishing (within a quarter of the look-ahead, as after a command) are urgent: made as
-    soon as their own motion is computed, as many of them a request as are ready ahead of publishing (at least
-    :data:`URGENT_REFILL` seconds), as many as a slice of computing gives that takes half the time the frames
-    ready last (at least :data:`URGENT_SLICE` s, at most :data:`COMPUTE_SLICE`; a command's own request:
-    :data:`URGENT_BATCH` seconds of them).  So each request comes back before the frames ready run out, whether
-    its motion needs computing or is computed already, and the next ones are larger: the buffer grows
-    geometrically, and a solver slowed by a busy machine spends less of its time on the requests' own costs.
+    soon as their own motion is computed.  A request asks for as many of them as are ready ahead of publishing
+    (at least :data:`URGENT_REFILL` seconds) and computes for at most half the time those last (at least
+    :data:`URGENT_SLICE` s, at most :data:`COMPUTE_SLICE`; a command's own request: :data:`URGENT_BATCH` seconds
+    of them).  So each request comes back before the frames ready run out, whether its motion needs computing or
+    is computed already, and the next ones are larger: the buffer grows geometrically, and a solver slowed by a
+    busy machine spends less of its time on the requests' own costs.
     One urgent request goes past the urgent ones, so that the next is a full one.  The worker forgets
     motion older than :data:`RELEASE_KEEP` s before the frames it asks for.  Few large requests: the solver
     computes in long runs, seldom (a compiled run after an idle gap starts with cold caches), and answers few
@@ -70,10 +70,10 @@ from .threads import start_named
 
 LOOKAHEAD = 2.0  # [s] of frames kept ready ahead of publishing
 COMPUTE_SLICE = 0.25  # [s] of wall time the solver computes per request while publishing (a command cuts it short)
-URGENT_SLICE = 0.005  # [s] of wall time per request for frames close to publishing (after a command)
+URGENT_SLICE = 0.005  # [s] of wall time at least per request for frames close to publishing (after a command)
 REFILL = 1.0  # [s] of frames made per request, and the room the worker waits for to ask again
 URGENT_BATCH = 0.005  # [s] of stream (at least one frame) made in a command's own request
-URGENT_REFILL = 0.05  # [s] of stream (at least one frame) made at most per request close to publishing
+URGENT_REFILL = 0.05  # [s] of stream (at least one frame) asked for at least per request close to publishing
 RELEASE_KEEP = 1.0  # [s] of computed motion kept before the next frame to make (for commands)
 MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, the stamps leap (re-anchored)
 REST_MARGIN = 1.0  # [s] :meth:`ReferenceServer.come_to_rest` waits beyond the ramp and the lead
