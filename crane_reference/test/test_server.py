@@ -115,7 +115,7 @@ def test_a_command_takes_effect_at_the_last_sample_within_the_lead(server: Refer
     assert server.stream.targets == targets
 
 
-def test_after_a_command_the_urgent_frames_come_in_short_requests_then_a_full_one(
+def test_after_a_command_the_urgent_frames_come_in_growing_requests_then_a_full_one(
         server: ReferenceServer, monkeypatch: pytest.MonkeyPatch) -> None:
     """After a pause (the motion it publishes is computed already, so making frames is all a request does) the
     worker asks for the frames close to publishing in short requests, the first for about the command's lead of
