@@ -95,6 +95,10 @@ class _SerializedMessage:
         _write_stamp(self._stamp, self._buffer, 0, stamp_ns)
         return bytes(self._buffer)
 
+    def _rows(self, count: int) -> SerializedRows:
+        """``count`` copies of the prototype, a row each (:class:`SerializedRows`)."""
+        return SerializedRows(bytes(self._buffer), self._order, self._stamp, count)
+
 
 def _write_stamp(stamp: struct.Struct, buffer: bytearray, start: int, stamp_ns: int) -> None:
     """header.stamp = ``stamp_ns`` (a non-negative time [ns]: sec, nanosec) in the message at ``start`` of
@@ -107,11 +111,12 @@ class SerializedRows:
     is written at once (:meth:`columns`, numbers stacked from a batch of samples), and each row is stamped as it
     goes out (:meth:`stamped`)."""
 
-    def __init__(self, message: _SerializedMessage, count: int):
-        self._size = len(message._buffer)
-        self._data = bytearray(bytes(message._buffer) * count)
+    def __init__(self, prototype: bytes, order: str, stamp: struct.Struct, count: int):
+        """``count`` copies of ``prototype`` (byte order ``order``, its stamp written by ``stamp``)."""
+        self._size = len(prototype)
+        self._data = bytearray(prototype * count)
         self._rows = memoryview(self._data)
-        self._order, self._stamp, self._count = message._order, message._stamp, count
+        self._order, self._stamp, self._count = order, stamp, count
 
     def __len__(self) -> int:
         return self._count
@@ -156,7 +161,7 @@ class SerializedJointState(_SerializedMessage):
     def rows(self, samples: Samples) -> SerializedRows:
         """The serialized JointStates of stacked ``samples``, a row each, their numbers written at once (stamped as
         each goes out: :meth:`SerializedRows.stamped`)."""
-        rows = SerializedRows(self, len(samples.t))
+        rows = self._rows(len(samples.t))
         for offset, values in zip(self._offsets, (samples.q, samples.qd, samples.effort), strict=True):
             rows.columns(offset, len(self.names))[:] = values
         return rows
@@ -183,7 +188,7 @@ class SerializedPose(_SerializedMessage):
     def rows(self, samples: Samples) -> SerializedRows:
         """The serialized PoseStamped of E in stacked ``samples``, a row each, their numbers written at once
         (stamped as each goes out: :meth:`SerializedRows.stamped`)."""
-        rows = SerializedRows(self, len(samples.t))
+        rows = self._rows(len(samples.t))
         pose = rows.columns(self._offset, 7)
         pose[:, :3] = samples.ee_position
         pose[:, 3:] = samples.ee_quaternion
