@@ -292,8 +292,9 @@ def newton_matrix(params: CraneParameters) -> None:
                 plus, minus = (kernels.step_residual(a0 + sign * delta, state.q, state.qd, a0, state.correction, step,
                                                      k, drive, partition, chain, settings) for sign in (1.0, -1.0))
                 jacobian[:, j] = (plus - minus) / (2.0 * delta[j])
-            first = kernels.first_iterate(state.q, state.qd, a0, kernels.predicted_accelerations(a0, state.earlier),
-                                          step, k, partition, chain, settings)
+            first = kernels.first_iterate(state.q, state.qd, state.qdd, a0,
+                                          kernels.predicted_accelerations(a0, state.earlier), step, k, partition, chain,
+                                          settings)
             at_first = motion.solve(t1, first.q, first.qd)
             factors = {
                 "first iterate": kernels.iteration_factor(at_first.dynamics.M, at_first.velocity_map, step,

@@ -25,7 +25,7 @@ from scipy.linalg import eigh
 from scipy.signal import butter, sosfiltfilt
 
 from crane_reference.dynamics import kernels
-from crane_reference.dynamics.structures import ACCOUNTS
+from crane_reference.dynamics.structures import ACCOUNTS, ModalCorrection, Partition
 from crane_reference.motion.integration import CUTOFF, ExactFrequencyTrapezoidal, stop_flag
 from crane_reference.motion.simulation import MotionStepper, Scenario
 
@@ -66,7 +66,9 @@ def test_modal_inertia_is_the_exact_frequency_correction_of_scipys_modes(scenari
     resolved = omega_h < CUTOFF
     c = np.zeros_like(omega_h)
     half = 0.5 * omega_h[resolved]
-    c[resolved] = 1.0 - (half / np.tan(half)) ** 2
+    ratio = np.ones_like(half)  # (omega h / 2) / tan(omega h / 2) -> 1 for a mode no spring resists (omega = 0)
+    ratio[half > 0.0] = half[half > 0.0] / np.tan(half[half > 0.0])
+    c[resolved] = 1.0 - ratio**2
     expected = reduced_mass @ phi @ np.diag(c) @ phi.T @ reduced_mass
     terms = _terms(scenario, q, 0.0)
     assert np.max(np.abs(terms.inertia - expected)) <= 1e-9 * np.max(np.abs(expected))
@@ -183,6 +185,36 @@ def test_a_run_stopped_by_its_flag_from_another_thread_goes_on_bit_for_bit(scena
         np.testing.assert_array_equal(np.concatenate((first[name], rest[name])), whole[name])
 
 
+@pytest.mark.parametrize("servo", [False, True], ids=["ideal", "servo"])
+def test_the_iteration_matrix_is_the_dense_formula(scenario, servo):
+    """The factor of the iteration matrix P^T (M + h^2/4 K + h/2 D) B - Delta M_r + h/2 D_u (K with the drive's
+    spring s_dr on psi2; P = B, or E_ic for servo-constraints), written out with numpy's dense products, for a
+    random M, B and modal correction, a damped chain, and the drive's joint independent or dependent."""
+    rng = np.random.default_rng(5)
+    chain = scenario.motion.dynamics.chain
+    chain = chain._replace(damping=1e-3 * chain.stiffness, damped=True)
+    n, spring = chain.stiffness.shape[0], 5e4
+    drive = np.array([0.0, spring, 0.0, 0.0])
+    for dependent in (scenario.motion.partition.dependent, np.array([chain.drive_joint, n - 1])):
+        independent = np.array([k for k in range(n) if k not in dependent])
+        n_ic = independent.size
+        B = np.zeros((n, n_ic))
+        B[independent, np.arange(n_ic)] = 1.0
+        B[dependent] = rng.normal(size=(dependent.size, n_ic))
+        root = rng.normal(size=(n, n))
+        M = root @ root.T + n * np.eye(n)
+        inertia, damping = (0.01 * (x + x.T) for x in rng.normal(size=(2, n_ic, n_ic)))
+        stiffness = chain.stiffness.copy()
+        stiffness[chain.drive_joint, chain.drive_joint] += spring
+        P = np.eye(n)[:, independent] if servo else B
+        expected = P.T @ (M + 0.25 * STEP**2 * stiffness + 0.5 * STEP * chain.damping) @ B - inertia \
+            + 0.5 * STEP * damping
+        factor = kernels.iteration_factor(M, B, STEP, ModalCorrection(inertia, damping, 0.0, STEP), drive,
+                                          Partition(independent, dependent, independent, dependent, servo), chain)
+        matrix = np.linalg.inv(factor) if servo else factor @ factor.T
+        np.testing.assert_allclose(matrix, expected, rtol=1e-11, atol=1e-11 * np.abs(expected).max())
+
+
 def test_newton_matrix_is_the_jacobian_of_the_step_residual(scenario):
     """At a step from t = 1 s (slewing, boom vibrating) the kernel's iteration matrix F, with M and B at the
     step's first iterate (``first_iterate``), against the Jacobian J of the step's residual in a1 by central
@@ -208,8 +240,8 @@ def test_newton_matrix_is_the_jacobian_of_the_step_residual(scenario):
         delta = np.zeros_like(a0)
         delta[j] = 1e-3 * max(1.0, abs(a0[j]))
         jacobian[:, j] = (residual(a0 + delta) - residual(a0 - delta)) / (2.0 * delta[j])
-    first = kernels.first_iterate(state.q, state.qd, a0, kernels.predicted_accelerations(a0, state.earlier), STEP, k,
-                                  partition, chain, settings)
+    first = kernels.first_iterate(state.q, state.qd, state.qdd, a0, kernels.predicted_accelerations(a0, state.earlier),
+                                  STEP, k, partition, chain, settings)
     at_first = motion.solve(t1, first.q, first.qd)
     at_end = kernels.iteration_factor(at_first.dynamics.M, at_first.velocity_map, STEP, correction, drive, partition,
                                       chain)

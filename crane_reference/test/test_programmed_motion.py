@@ -146,6 +146,17 @@ def _fields(e: Evaluation) -> list[tuple[str, object]]:
             *((name, getattr(e, name)) for name in Evaluation._fields if name != "terms")]
 
 
+def test_dependent_coordinates_must_be_free_of_springs_and_dampers(cases):
+    """The integrator's reduced stiffness is K[ic, ic]: a dependent coordinate that carries a spring of the
+    model is refused, naming it."""
+    case = cases["flexible"]
+    chain, dependent = case.dynamics.chain, case.dynamics.model.dependent_joints
+    sprung = int(np.flatnonzero(np.diag(chain.stiffness))[0])
+    with pytest.raises(ValueError, match=rf"dependent = \({sprung}, {dependent[1]}\): coordinate\(s\) \[{sprung}\] "
+                                         "carry a spring or a damper"):
+        ProgrammedMotion(case.dynamics, task(case.z_static, False), dependent=(sprung, dependent[1]))
+
+
 @pytest.mark.parametrize("a_blend", [False, True], ids=["paper-task", "blended-a"])
 def test_index_reduced_equations_keep_constraints(cases, a_blend):
     """Full-coordinate ODE (q, qd)' = (qd, solve(t, q, qd).qdd) of the rigid crane over 1 s, no

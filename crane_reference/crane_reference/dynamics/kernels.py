@@ -20,6 +20,7 @@ from .kinematics import forward_kinematics, point_bias, point_jacobian, velocity
 from .linalg import (
     cholesky,
     cholesky_solve,
+    congruent,
     largest_magnitude,
     map_columns,
     matmul,
@@ -188,9 +189,8 @@ def _solve_accelerations(M, f, A, B, e_dc, c_acc, partition: Partition):
     load = f.copy()
     for r in range(dependent.size):
         load -= M[:, dependent[r]] * e_dc[r]
-    reduced = map_columns(project_rows(M, B, independent, dependent, False), B, independent, dependent)
-    a = cholesky_solve(cholesky(reduced), project_rows(load.reshape((n, 1)), B, independent, dependent,
-                                                                 False)[:, 0])
+    rhs = project_rows(load.reshape((n, 1)), B, independent, dependent, False)[:, 0]
+    a = cholesky_solve(cholesky(congruent(M, B, independent, dependent)), rhs)
     return _accelerations_from(a, B, e_dc, independent, dependent)
 
 
@@ -274,8 +274,7 @@ def forces_jumped(e: Evaluation, q, qd, k: Coefficients, drive, partition: Parti
 @njit(cache=True, nogil=True)
 def _reduced_mass(M, B, partition: Partition):
     """M_r = B^T M B in the independent coordinates."""
-    return map_columns(project_rows(M, B, partition.independent, partition.dependent, False), B, partition.independent,
-                       partition.dependent)
+    return congruent(M, B, partition.independent, partition.dependent)
 
 
 @njit(cache=True, nogil=True)
@@ -375,14 +374,27 @@ def corrected_accelerations(M, B, qdd, qd, correction: ModalCorrection, partitio
 def iteration_factor(M, B, h, correction: ModalCorrection, drive, partition: Partition, chain: ChainData):
     """The factor of the Newton iteration matrix P^T (M + h^2/4 K + h/2 D) B - Delta M_r + h/2 D_u for the
     step h (K with the drive's spring s_dr on psi2): its Cholesky factor for ideal constraints (P = B,
-    symmetric positive definite), its inverse for servo-constraints (P = E_ic)."""
+    symmetric positive definite), its inverse for servo-constraints (P = E_ic).  The model's springs and
+    dampers act on independent coordinates only (:class:`~crane_reference.motion.programmed_motion.ProgrammedMotion`
+    checks it), so their part is h^2/4 K[ic, ic] + h/2 D[ic, ic]; the drive's spring adds
+    h^2/4 s_dr P[psi2]^T B[psi2] (psi2 may be dependent)."""
     independent, dependent, servo = partition.independent, partition.dependent, partition.servo
-    matrix = M + (0.25 * h * h) * chain.stiffness
-    matrix[chain.drive_joint, chain.drive_joint] += 0.25 * h * h * drive[1]
-    if chain.damped:
-        matrix += (0.5 * h) * chain.damping
-    reduced = map_columns(project_rows(matrix, B, independent, dependent, servo), B, independent, dependent)
-    reduced += (0.5 * h) * correction.damping - correction.inertia
+    if servo:
+        reduced = map_columns(project_rows(M, B, independent, dependent, True), B, independent, dependent)
+    else:
+        reduced = congruent(M, B, independent, dependent)
+    stiffness, damping, inertia, modal_damping = chain.stiffness, chain.damping, correction.inertia, correction.damping
+    spring, drive_row = 0.25 * h * h * drive[1], B[chain.drive_joint]
+    for i in range(independent.size):
+        row = independent[i]
+        left = drive_row[i] if not servo else (1.0 if row == chain.drive_joint else 0.0)
+        for j in range(independent.size):
+            column = independent[j]
+            value = (0.25 * h * h) * stiffness[row, column] + (0.5 * h) * modal_damping[i, j] - inertia[i, j] \
+                + spring * left * drive_row[j]
+            if chain.damped:
+                value += (0.5 * h) * damping[row, column]
+            reduced[i, j] += value
     return cholesky(reduced) if not servo else np.linalg.inv(reduced)
 
 
@@ -509,16 +521,15 @@ def predicted_accelerations(a0, earlier):
 
 
 @njit(cache=True, nogil=True, inline='always')
-def first_iterate(q0, qd0, a0, a1, h, k: Coefficients, partition: Partition, chain: ChainData,
+def first_iterate(q0, qd0, qdd0, a0, a1, h, k: Coefficients, partition: Partition, chain: ChainData,
                   settings: StepSettings):
     """The step's first iterate: the trapezoidal state for the predicted accelerations a1 of the integrated
-    coordinates (x0 + h v0 + h^2/4 (a0 + a1)) with q_hd from the position constraints, starting from
-    q0 + h qd0 for them."""
+    coordinates (x0 + h v0 + h^2/4 (a0 + a1)) with q_hd from the position constraints, their Newton iteration
+    starting from the Taylor polynomial q0 + h qd0 + h^2/2 qdd0 (off by O(h^3): one correction reaches the
+    tolerance)."""
     integrated = partition.integrated
-    guess = q0 + h * qd0
-    guess[integrated] += (0.25 * h * h) * (a0 + a1)
-    return _state_at(a1, q0[integrated], qd0[integrated], a0, guess, q0.size, h, k, partition, chain, settings, True,
-                     False)
+    return _state_at(a1, q0[integrated], qd0[integrated], a0, q0 + h * qd0 + (0.5 * h * h) * qdd0, q0.size, h, k,
+                     partition, chain, settings, True, False)
 
 
 @njit(cache=True, nogil=True)
@@ -582,7 +593,7 @@ def integration_step(q0, qd0, qdd0, B0, earlier, correction: ModalCorrection, t0
     if new_step:  # the earlier accelerations are of another equation
         earlier = np.full(earlier.shape, np.nan)
     a1 = predicted_accelerations(a0, earlier)
-    it = first_iterate(q0, qd0, a0, a1, h, k, partition, chain, settings)
+    it = first_iterate(q0, qd0, qdd0, a0, a1, h, k, partition, chain, settings)
     if not it.solved:
         return _failed(q0, qd0, qdd0, B0, earlier, correction, 1)
     qdd, residual, B, Hw = _step_residual_at(it, a1, correction, k, drive, partition, chain)

@@ -154,6 +154,35 @@ def project_rows(X, B, independent, dependent, servo):
 
 
 @njit(cache=True, nogil=True)
+def congruent(X, B, independent, dependent):
+    """B^T X B for a symmetric X (n, n) without forming B: with Gamma the rows of B on dc,
+    X[ic, ic] + X[ic, dc] Gamma + Gamma^T Z, Z = X[dc, ic] + X[dc, dc] Gamma (the lower triangle computed,
+    the upper one its mirror: symmetric to the last bit)."""
+    n_ic, m = independent.size, dependent.size
+    gamma = np.empty((m, n_ic))
+    Z = np.empty((m, n_ic))
+    for r in range(m):
+        for j in range(n_ic):
+            gamma[r, j] = B[dependent[r], j]
+    for r in range(m):
+        for j in range(n_ic):
+            total = X[dependent[r], independent[j]]
+            for s in range(m):
+                total += X[dependent[r], dependent[s]] * gamma[s, j]
+            Z[r, j] = total
+    out = np.empty((n_ic, n_ic))
+    for i in range(n_ic):
+        row = independent[i]
+        for j in range(i + 1):
+            total = X[row, independent[j]]
+            for r in range(m):
+                total += X[row, dependent[r]] * gamma[r, j] + gamma[r, i] * Z[r, j]
+            out[i, j] = total
+            out[j, i] = total
+    return out
+
+
+@njit(cache=True, nogil=True)
 def map_columns(Y, B, independent, dependent):
     """Y B for Y (k, n) without forming B: Y[:, ic] + Y[:, dc] Gamma."""
     out = np.empty((Y.shape[0], independent.size))

@@ -99,6 +99,13 @@ class ProgrammedMotion:
         if len(self.dependent) != constraints.size:
             raise ValueError(f"{constraints.size} constraints need as many dependent coordinates, "
                              f"got {len(self.dependent)}")
+        chain = dynamics.chain
+        sprung = [int(j) for j in self.dependent if np.any(chain.stiffness[j]) or np.any(chain.stiffness[:, j])
+                  or np.any(chain.damping[j]) or np.any(chain.damping[:, j])]
+        if sprung:
+            raise ValueError(f"dependent = {tuple(int(j) for j in self.dependent)}: coordinate(s) {sprung} carry a "
+                             "spring or a damper of the model; the dependent coordinates must be free of them (the "
+                             "integrator's reduced stiffness and damping are K[ic, ic] and D[ic, ic])")
         orders = constraints.orders
         self.holonomic_dependent = self.dependent[orders == 0]
         """Coordinates solved from the position constraints (the paper's psi(3,0), psi4)."""
