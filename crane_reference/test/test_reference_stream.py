@@ -20,7 +20,7 @@ from crane_reference.model.profiles import Constant, QuinticRise
 from crane_reference.motion.constraints import ArealRate, ConstraintSet, EllipseXY, HeightZ
 from crane_reference.motion.simulation import Scenario
 from crane_reference.stream.reference_stream import CHUNK_STEPS, ReferenceStream
-from crane_reference.stream.targets import reach
+from crane_reference.stream.targets import UnreachableTargetError, check_task, reach
 from crane_reference.stream.warmup import warm_up
 
 STEP = 1e-3  # [s]
@@ -129,14 +129,11 @@ def test_samples_between_steps_are_the_hermite_spline_and_the_kinematics_there()
     assert samples.t.tolist() == at.tolist()
 
 
-def test_reach_is_the_arms_geometric_reach(params):
-    """E's reach from the column's axis at a height z, found by continuation on the position constraints,
-    equals plane geometry for the rigid crane: the boom and the knuckle arm turn in the vertical plane of the
-    column's axis about the luff pivot (r_p, z_p), so E at height z lies at r = r_p + sqrt(L^2 - (z - z_p)^2)
-    for a pivot-to-E distance L between the folded and the stretched arm (L_min, L_max: forward kinematics
-    over the knuckle angle).  To within the 1 mm resolution plus what the singular-value margin 1e-3 cuts
-    off near the fold and the stretch."""
-    scenario = Scenario(params, "rigid")
+def _geometric_reach(scenario: Scenario, z: float) -> tuple[float, float]:
+    """The rigid crane's reach [m] from the column's axis at height z by plane geometry: the boom and the knuckle
+    arm turn in the vertical plane of the column's axis about the luff pivot (r_p, z_p), so E at height z lies at
+    r = r_p + sqrt(L^2 - (z - z_p)^2) for a pivot-to-E distance L between the folded and the stretched arm
+    (L_min, L_max: forward kinematics over the knuckle angle)."""
     model, chain = scenario.model, scenario.dynamics.chain
     q = model.initial_q.copy()
     q[model.drive_joint] = 0.0
@@ -144,11 +141,33 @@ def test_reach_is_the_arms_geometric_reach(params):
     arm = np.repeat(q[None], 20001, axis=0)
     arm[:, model.index("knuckle")] = np.linspace(-np.pi, np.pi, 20001)
     distance = np.linalg.norm(scenario.dynamics.end_effector_poses(arm)[0] - pivot, axis=1)
+    near, far = (pivot[0] + np.sqrt(length ** 2 - (z - pivot[2]) ** 2) for length in (distance.min(), distance.max()))
+    return float(near), float(far)
+
+
+def test_reach_is_the_arms_geometric_reach(params):
+    """E's reach from the column's axis at a height z, found by continuation on the position constraints,
+    equals plane geometry for the rigid crane (:func:`_geometric_reach`), to within the 1 mm resolution plus
+    what the singular-value margin 1e-3 cuts off near the fold and the stretch."""
+    scenario = Scenario(params, "rigid")
     for z in (scenario.z_static, scenario.z_static + 0.2):
-        near, far = (pivot[0] + np.sqrt(length ** 2 - (z - pivot[2]) ** 2)
-                     for length in (distance.min(), distance.max()))
+        near, far = _geometric_reach(scenario, z)
         low, high = reach(scenario, params.task.ellipse_b, [z], 1e-3)
         assert near <= low <= near + 5e-3 and far - 5e-3 <= high <= far
+
+
+def test_a_circle_is_accepted_inside_the_geometric_reach_and_refused_outside(params):
+    """The target check walks the whole ellipse: a circle at E's static height (z_increment 0) 2 cm inside the
+    rigid crane's geometric reach (:func:`_geometric_reach`) is accepted, one 2 cm outside it is refused at the
+    walk's first point (0, -r), named; so is one 2 cm inside the fold."""
+    scenario = Scenario(params, "rigid")
+    near, far = _geometric_reach(scenario, scenario.z_static)
+    for radius in (far - 0.02, near + 0.02):
+        check_task(scenario, Task(radius, radius, 0.0, 5.0), scenario.z_static, 1e-3)
+    for radius in (far + 0.02, near - 0.02):
+        with pytest.raises(UnreachableTargetError, match=rf"ellipse point \(0.000, {-radius:.3f}\) m at z = "
+                                                         rf"{scenario.z_static:.3f} m is out of the crane's reach"):
+            check_task(scenario, Task(radius, radius, 0.0, 5.0), scenario.z_static, 1e-3)
 
 
 def test_warm_up_makes_every_kernel_the_stream_uses_ready(kernel_signatures):

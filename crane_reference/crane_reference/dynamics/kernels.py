@@ -133,6 +133,36 @@ def project_positions(q, k: Coefficients, holonomic_dependent, chain: ChainData,
     return Projection(q, T, S, p, C, False)
 
 
+@njit(cache=True, nogil=True)
+def held_points(q, points, k: Coefficients, holonomic_dependent, chain: ChainData, tolerance, max_iterations):
+    """E held at each of ``points`` (N, 3) [m] in turn on the position constraints ``k``, by continuation: each
+    from the solution at the point before (the first from ``q``) with the column azimuth q[drive_joint] set to
+    the point's atan2(y, x) and q_hd from :func:`project_positions` (exact frames).  Returns the solution at the
+    last point held and, per point, whether Newton converged (a singular K_dc counts as not converged), E's
+    position there and the smallest singular value of K_dc = Phi_p C[:, hd]; it stops at the first point not
+    held (the rows from there on False and NaN)."""
+    count = points.shape[0]
+    held = np.zeros(count, dtype=np.bool_)
+    positions = np.full((count, 3), np.nan)
+    singular_values = np.full(count, np.nan)
+    q = q.copy()
+    for i in range(count):
+        trial = q.copy()
+        trial[chain.drive_joint] = np.arctan2(points[i, 1], points[i, 0])
+        try:
+            at = project_positions(trial, k, holonomic_dependent, chain, tolerance, max_iterations)
+        except Exception:  # numba catches no narrower class: a singular K_dc
+            break
+        if not at.solved:
+            break
+        grads = holonomic_values(at.ee_position, k)[1]
+        singular_values[i] = smallest_singular_value(matmul(grads, at.ee_jacobian, holonomic_dependent))
+        positions[i] = at.ee_position
+        held[i] = True
+        q = at.q
+    return q, held, positions, singular_values
+
+
 @njit(cache=True, nogil=True, inline='always')
 def dependent_velocities(qd, p, C, k: Coefficients, dependent):
     """qd with qd_dc solved from the velocity-level constraints (eq. (7): K_dc qd_dc = b - K_ic qd_ic for

@@ -15,7 +15,7 @@ hold command on a timeout); the parameters are :mod:`.plant_parameters`.
 * ``clock_mode`` realtime: a period every period of the steady clock (a thread of its own paces them,
   :mod:`~crane_reference.control.pacing`: after a stall the periods it skipped are missed, counted in
   /diagnostics' ``missed_ticks`` at the next wake-up; while they run, Python's thread switch interval is
-  :data:`SWITCH_INTERVAL`), stamped with the node's clock; the plant's time
+  :data:`~crane_reference.stream.threads.SWITCH_INTERVAL`), stamped with the node's clock; the plant's time
   (and its column drive's program) starts with the first command, until which its held start is published
   every period;
   lockstep: the node publishes /clock (``clock_start`` plus the plant's time) and advances one period per
@@ -51,7 +51,7 @@ from ..model.units import NANOSECONDS
 from ..motion.integration import IntegrationError
 from ..motion.programmed_motion import ProjectionError
 from ..stream.health import CANNOT
-from ..stream.threads import start_named
+from ..stream.threads import real_time_switching, start_named
 from .message_types import rclpy_types
 from .parameters import check, pre_set_callback
 from .plant_parameters import PLANT_SPECS, declare_plant
@@ -66,10 +66,6 @@ END_EFFECTOR_POSE_TOPIC = "~/end_effector_pose"
 TIP_DEFLECTION_TOPIC = "~/tip_deflection"
 CLOCK_TOPIC = "/clock"
 HEARTBEAT = 0.5  # [s] of wall time between repetitions of an unanswered lock-step state
-SWITCH_INTERVAL = 1e-4
-"""[s] Python's thread switch interval in real time: a period's compiled call releases the GIL, and the executor's
-thread, running Python while messages come, gives it back only after the switch interval (5 ms by default,
-five 1 kHz periods)."""
 
 
 class CranePlantNode(LifecycleNode):
@@ -185,9 +181,7 @@ class CranePlantNode(LifecycleNode):
     def _run_periods(self) -> None:
         """The real-time periods (a thread): each waits until due, then advances and publishes; until the first
         command the plant is held at its start (its time stands still) and its state is published each period."""
-        previous = sys.getswitchinterval()
-        sys.setswitchinterval(min(previous, SWITCH_INTERVAL))
-        try:
+        with real_time_switching():
             pacing, before = Pacing(self._server.settings.period, self._seconds()), self._missed
             while self._running.is_set():
                 wait = pacing.wait(self._seconds())
@@ -207,8 +201,6 @@ class CranePlantNode(LifecycleNode):
                         self._fail(f"{type(error).__name__}: {error}")
                     return
                 pacing.ran()
-        finally:
-            sys.setswitchinterval(previous)
 
     def _on_command(self, msg: Float64MultiArray) -> None:
         """~/commands: accepted or refused (counted, WARN); in lock-step a period follows either way (under the

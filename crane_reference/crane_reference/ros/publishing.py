@@ -43,7 +43,7 @@ from ..model.units import NANOSECONDS
 from ..stream.health import Level, serving_health, startup_health
 from ..stream.sample import Samples
 from ..stream.server import Outgoing, ReferenceServer
-from ..stream.threads import start_named
+from ..stream.threads import real_time_switching, start_named
 
 OVERRIDABLE = QoSOverridingOptions([QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH, QoSPolicyKind.RELIABILITY,
                                     QoSPolicyKind.DURABILITY])
@@ -168,7 +168,9 @@ class SamplePublisher:
         first /clock with use_sim_time).  It sleeps in wall time for the time left on the node clock and checks
         that clock again (at least every MAX_WAIT), so it follows ROS time and stops within SLEEP_LIMIT.  The
         node clock is read once a wake-up (:func:`node_time`); the time the publishing took is added from the
-        monotonic clock.  A wait of up to SLEEP_LIMIT is a plain sleep.
+        monotonic clock.  A wait of up to SLEEP_LIMIT is a plain sleep.  While it publishes, Python's thread switch
+        interval is short (:func:`~crane_reference.stream.threads.real_time_switching`), so that a wake-up gets the
+        GIL from the node's other threads within it.
         """
         clock, server, rate = node_time(self.node.get_clock()), self.server, self.server.rate
         while not self._quiet.is_set() and (not server.ready() or clock() == 0):
@@ -179,16 +181,17 @@ class SamplePublisher:
             return
         server.begin(clock())
         quiet, send = self._quiet, self.send
-        while not quiet.is_set():
-            now, read_at = clock(), time.monotonic_ns()
-            due = server.due(now)
-            for outgoing in due.outgoing:
-                send(outgoing)
-            left = due.next_stamp_ns - now - (time.monotonic_ns() - read_at)
-            if left > SLEEP_LIMIT:  # long (a slow rate, a stalled or reset clock): stopping wakes it
-                quiet.wait(min(left / NANOSECONDS, MAX_WAIT))
-            elif left > 0:  # within a period at 50 Hz or faster: one system call (an Event's wait takes locks too)
-                time.sleep(left / NANOSECONDS)
+        with real_time_switching():
+            while not quiet.is_set():
+                now, read_at = clock(), time.monotonic_ns()
+                due = server.due(now)
+                for outgoing in due.outgoing:
+                    send(outgoing)
+                left = due.next_stamp_ns - now - (time.monotonic_ns() - read_at)
+                if left > SLEEP_LIMIT:  # long (a slow rate, a stalled or reset clock): stopping wakes it
+                    quiet.wait(min(left / NANOSECONDS, MAX_WAIT))
+                elif left > 0:  # within a period at 50 Hz or faster: one system call (an Event's wait takes locks)
+                    time.sleep(left / NANOSECONDS)
 
     def encode(self, samples: Samples) -> SampleMessages:
         """The joint states and E's poses of stacked ``samples`` (a batch of frames), serialized at once in the

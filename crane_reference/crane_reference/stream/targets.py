@@ -9,11 +9,11 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from ..dynamics.linalg import smallest_singular_value
+from ..dynamics import kernels
 from ..model.parameters import Task
 from ..model.profiles import Blend, Constant, Profile
 from ..motion.constraints import ConstraintSet, paper_constraints
-from ..motion.programmed_motion import ProgrammedMotion, ProjectionError
+from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import Scenario
 
 ELLIPSE_POINTS = 145  # points per ellipse walked by the check
@@ -37,10 +37,10 @@ def check_task(scenario: Scenario, task: Task, z_now: float, margin: float) -> N
     if task.ellipse_a <= 0 or task.ellipse_b <= 0 or task.rise_time <= 0:
         raise UnreachableTargetError("ellipse_a, ellipse_b and rise_time must be > 0")
     q = scenario.model.initial_q.copy()
+    phi = np.linspace(-0.5 * np.pi, 1.5 * np.pi, ELLIPSE_POINTS)
     for z in np.linspace(z_now, scenario.z_static + task.z_increment, CHECK_HEIGHTS):
-        check = _motion(scenario, task.ellipse_a, task.ellipse_b, z)
-        for phi in np.linspace(-0.5 * np.pi, 1.5 * np.pi, ELLIPSE_POINTS):
-            q = _hold(check, scenario, q, task.ellipse_a * np.cos(phi), task.ellipse_b * np.sin(phi), z, margin)
+        points = np.column_stack((task.ellipse_a * np.cos(phi), task.ellipse_b * np.sin(phi), np.full(phi.size, z)))
+        q = _hold(_motion(scenario, task.ellipse_a, task.ellipse_b, z), q, points, margin)
 
 
 def _motion(scenario: Scenario, a: float, b: float, z: float) -> ProgrammedMotion:
@@ -49,30 +49,32 @@ def _motion(scenario: Scenario, a: float, b: float, z: float) -> ProgrammedMotio
                             min_singular_value=0.0)
 
 
-def _hold(check: ProgrammedMotion, scenario: Scenario, q: np.ndarray, x: float, y: float, z: float,
-          margin: float) -> np.ndarray:
-    """q with E at (x, y, z) [m] on ``check``'s constraints, solved from ``q`` (continuation) with the column
-    azimuth atan2(y, x); :class:`UnreachableTargetError` if E cannot be held there, or only with the smallest
-    singular value of K_dc below ``margin``."""
-    q = q.copy()
-    q[scenario.model.drive_joint] = np.arctan2(y, x)
-    where = f"ellipse point ({x:.3f}, {y:.3f}) m at z = {z:.3f} m"
-    try:
-        q, (p, C) = check.project_positions(0.0, q)
-    except (ProjectionError, np.linalg.LinAlgError) as failure:
-        raise UnreachableTargetError(f"{where} is out of the crane's reach") from failure
-    if math.hypot(p[0] - x, p[1] - y) > POINT_TOLERANCE:  # the constraints also hold with E across the axis
-        raise UnreachableTargetError(f"{where} is out of the crane's reach on the boom's side (the constraints "
-                                     f"hold only with E at ({p[0]:.3f}, {p[1]:.3f}) m)")
-    grads = check.constraints.position_jacobian(0.0, p)
-    sigma = smallest_singular_value(np.ascontiguousarray(grads @ C[:, check.dependent]))
-    if not sigma >= margin:
+def _hold(check: ProgrammedMotion, q: np.ndarray, points: np.ndarray, margin: float) -> np.ndarray:
+    """q with E held at each of ``points`` (N, 3) [m] in turn on ``check``'s constraints, by continuation from
+    ``q`` with the column azimuth atan2(y, x) (:func:`~crane_reference.dynamics.kernels.held_points`): the
+    solution at the last point; :class:`UnreachableTargetError` at the first point where E cannot be held, or
+    only with the smallest singular value of K_dc below ``margin``."""
+    q, held, positions, singular_values = kernels.held_points(
+        np.ascontiguousarray(q, dtype=float), points, check.constraints.coefficients(0.0), check.holonomic_dependent,
+        check.dynamics.chain, PROJECTION_TOLERANCE, kernels.PROJECTION_ITERATIONS)
+    off = np.hypot(positions[:, 0] - points[:, 0], positions[:, 1] - points[:, 1])
+    failed = np.flatnonzero(~held | ~(off <= POINT_TOLERANCE) | ~(singular_values >= margin))
+    if failed.size:
+        i = failed[0]
+        (x, y, z), p = points[i], positions[i]
+        where = f"ellipse point ({x:.3f}, {y:.3f}) m at z = {z:.3f} m"
+        if not held[i]:
+            raise UnreachableTargetError(f"{where} is out of the crane's reach")
+        if not off[i] <= POINT_TOLERANCE:  # the constraints also hold with E across the axis
+            raise UnreachableTargetError(f"{where} is out of the crane's reach on the boom's side (the constraints "
+                                         f"hold only with E at ({p[0]:.3f}, {p[1]:.3f}) m)")
         raise UnreachableTargetError(f"{where} is too near a stretch/fold singularity (smallest singular "
-                                     f"value of K_dc {sigma:.3g} < {margin:g})")
+                                     f"value of K_dc {singular_values[i]:.3g} < {margin:g})")
     return q
 
 
 POINT_TOLERANCE = 1e-6  # [m]
+PROJECTION_TOLERANCE = 1e-13  # [rad]: Newton on the position constraints stops after a correction this small
 REACH_RESOLUTION = 1e-3  # [m]
 REACH_FIRST_STEP = 0.5  # [m]
 
@@ -87,7 +89,7 @@ def reach(scenario: Scenario, radius: float, heights: Iterable[float], margin: f
     for z in heights:
         bounds = []
         for direction in (-1.0, 1.0):
-            q = _hold(_motion(scenario, radius, radius, z), scenario, scenario.model.initial_q, radius, 0.0, z,
+            q = _hold(_motion(scenario, radius, radius, z), scenario.model.initial_q, np.array([[radius, 0.0, z]]),
                       margin)
             r, step = radius, REACH_FIRST_STEP
             while step >= REACH_RESOLUTION:
@@ -95,7 +97,7 @@ def reach(scenario: Scenario, radius: float, heights: Iterable[float], margin: f
                 try:
                     if trial <= 0.0:
                         raise UnreachableTargetError("E on the column's axis")
-                    q = _hold(_motion(scenario, trial, trial, z), scenario, q, trial, 0.0, z, margin)
+                    q = _hold(_motion(scenario, trial, trial, z), q, np.array([[trial, 0.0, z]]), margin)
                     r = trial
                 except UnreachableTargetError:
                     step *= 0.5
