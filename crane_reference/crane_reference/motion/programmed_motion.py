@@ -73,6 +73,11 @@ class MotionSolution:
     powers: np.ndarray
 
 
+POSITION_TOLERANCE = 1e-13
+"""[rad or m]: Newton on the position constraints outside the integrator (a start, a check of targets) stops after a
+correction this small."""
+
+
 class ProgrammedMotion:
     """Equations (7)-(8) of a crane model under a :class:`ConstraintSet` (evaluated by the compiled
     kernels of :mod:`crane_reference.dynamics.kernels`).
@@ -135,8 +140,9 @@ class ProgrammedMotion:
                 f"smallest singular value of K_dc = {sigma:.3g} is below {self.min_singular_value:g}: "
                 "the end-effector task is at or near a stretch/fold singularity")
 
-    def project_positions(self, t: float, q: np.ndarray, tolerance: float = 1e-13,
-                          max_iterations: int = 25) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    def project_positions(self, t: float, q: np.ndarray, tolerance: float = POSITION_TOLERANCE,
+                          max_iterations: int = kernels.PROJECTION_ITERATIONS
+                          ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """q with q_hd solved from Phi(q, t) = 0 (Newton, Jacobian Phi_p C[:, hd]; the paper's K_dc), and
         (p_E, C) at the returned q; Newton stops after a correction of at most ``tolerance`` [rad or m]."""
         projection = kernels.project_positions(np.ascontiguousarray(q, dtype=float), self.constraints.coefficients(t),

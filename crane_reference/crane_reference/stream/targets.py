@@ -13,7 +13,7 @@ from ..dynamics import kernels
 from ..model.parameters import Task
 from ..model.profiles import Blend, Constant, Profile
 from ..motion.constraints import ConstraintSet, paper_constraints
-from ..motion.programmed_motion import ProgrammedMotion
+from ..motion.programmed_motion import POSITION_TOLERANCE, ProgrammedMotion
 from ..motion.simulation import Scenario
 
 ELLIPSE_POINTS = 145  # points per ellipse walked by the check
@@ -56,7 +56,7 @@ def _hold(check: ProgrammedMotion, q: np.ndarray, points: np.ndarray, margin: fl
     only with the smallest singular value of K_dc below ``margin``."""
     q, held, positions, singular_values = kernels.held_points(
         np.ascontiguousarray(q, dtype=float), points, check.constraints.coefficients(0.0), check.holonomic_dependent,
-        check.dynamics.chain, PROJECTION_TOLERANCE, kernels.PROJECTION_ITERATIONS)
+        check.dynamics.chain, POSITION_TOLERANCE, kernels.PROJECTION_ITERATIONS)
     off = np.hypot(positions[:, 0] - points[:, 0], positions[:, 1] - points[:, 1])
     failed = np.flatnonzero(~held | ~(off <= POINT_TOLERANCE) | ~(singular_values >= margin))
     if failed.size:
@@ -74,7 +74,6 @@ def _hold(check: ProgrammedMotion, q: np.ndarray, points: np.ndarray, margin: fl
 
 
 POINT_TOLERANCE = 1e-6  # [m]
-PROJECTION_TOLERANCE = 1e-13  # [rad]: Newton on the position constraints stops after a correction this small
 REACH_RESOLUTION = 1e-3  # [m]
 REACH_FIRST_STEP = 0.5  # [m]
 
