@@ -247,10 +247,16 @@ class ReferenceStream:
                 field[inside] = values
         return warped(made, rate, rate_change)
 
+    def preview_times(self, taus, horizon: float, count: int) -> np.ndarray:
+        """The publish times (len(taus), count) of ``count`` samples over (tau, tau + horizon] for each of ``taus``,
+        increasing, none beyond :attr:`computed_until`."""
+        ahead = np.asarray(taus, dtype=float)[:, None] + horizon * np.arange(1, count + 1) / count
+        return np.minimum(ahead, self.computed_until)
+
     def preview(self, tau: float, horizon: float, count: int) -> Samples:
-        """``count`` samples over (tau, tau + horizon], strictly increasing in time."""
+        """``count`` samples over (tau, tau + horizon] (:meth:`preview_times`), computed first if need be."""
         self.compute(tau + horizon)
-        return self.samples([min(tau + horizon * (i + 1) / count, self.computed_until) for i in range(count)])
+        return self.samples(self.preview_times([tau], horizon, count)[0])
 
     def release(self, tau: float, keep: float = 1.0) -> None:
         """Forget computed states older than ``keep`` seconds of motion before publish time tau."""

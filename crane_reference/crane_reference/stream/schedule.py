@@ -167,23 +167,29 @@ def make_frames(stream: ReferenceStream, request: FrameRequest, stop: np.ndarray
         return batch
     computed_until = stream.computed_until
     made = int(np.count_nonzero(times <= computed_until - TIME_TOLERANCE))
-    previews: dict[int, Samples] = {}
+    previewed = []  # the rows with a preview
     decimation = max(1, request.decimation)
     row = max(0, next_preview_k - plan.k)
     while row < made:  # the frames due a preview, in turn
-        t = float(times[row])
-        if computed_until >= t + horizon:
-            previews[row] = stream.preview(t, horizon, request.points)
+        if computed_until >= float(times[row]) + horizon:
+            previewed.append(row)
         elif plan.k + row >= request.urgent_until:
             made = row  # this frame's preview is not computed yet: make it on a later call
             break
         next_preview_k = plan.k + row + decimation  # (urgent, not computed: it goes without)
         row += decimation
-    parts = []
-    for first in range(0, made, FRAME_CHUNK):
+    parts, previews, points = [], {}, request.points
+    for first in range(0, made, FRAME_CHUNK):  # a chunk's frames and their previews read at once
         if batch := waited():
             return batch
-        parts.append(stream.samples(times[first:made][:FRAME_CHUNK]))
+        end = min(made, first + FRAME_CHUNK)
+        rows = [row for row in previewed if first <= row < end]
+        read = stream.samples(np.concatenate((times[first:end],
+                                              stream.preview_times(times[rows], horizon, points).ravel())))
+        parts.append(read.take(slice(0, end - first)))
+        for i, row in enumerate(rows):
+            start = end - first + i * points
+            previews[row] = read.take(slice(start, start + points))
     samples = Samples.concatenated(parts) if parts else stream.samples(times[:0])
     frames, non_finite, fault = checked(Frames(plan.k, times[:made], samples, previews, horizon), request.last_valid)
     return FrameBatch(frames, next_preview_k, computed_until < ahead, wall, motion, non_finite, fault)
