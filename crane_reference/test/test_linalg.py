@@ -3,17 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+from velocity_map import random_velocity_map
 
 from crane_reference.dynamics.linalg import congruent, map_columns, project_rows
-
-
-def _velocity_map(rng: np.random.Generator, n: int, dependent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """B of eq. (7) for a random Gamma: identity rows on ic, Gamma on dc; and the independent coordinates."""
-    independent = np.array([k for k in range(n) if k not in dependent])
-    B = np.zeros((n, independent.size))
-    B[independent, np.arange(independent.size)] = 1.0
-    B[dependent] = rng.normal(size=(dependent.size, independent.size))
-    return B, independent
 
 
 def test_congruent_is_the_dense_product_and_symmetric():
@@ -23,7 +15,7 @@ def test_congruent_is_the_dense_product_and_symmetric():
     for n, dependent in ((24, np.array([7, 23])), (9, np.array([0, 4, 8])), (5, np.array([], dtype=np.int64))):
         X = rng.normal(size=(n, n))
         X = X + X.T
-        B, independent = _velocity_map(rng, n, dependent)
+        B, independent = random_velocity_map(rng, n, dependent)
         reduced = congruent(X, B, independent, dependent)
         np.testing.assert_allclose(reduced, B.T @ X @ B, rtol=1e-12, atol=1e-12 * np.abs(X).max())
         np.testing.assert_array_equal(reduced, reduced.T)
@@ -33,7 +25,7 @@ def test_rows_and_columns_mapped_without_b_are_the_dense_products():
     """P^T X (P = B, or E_ic for servo-constraints) and Y B without forming B equal numpy's dense products."""
     rng = np.random.default_rng(4)
     n, dependent = 24, np.array([7, 23])
-    B, independent = _velocity_map(rng, n, dependent)
+    B, independent = random_velocity_map(rng, n, dependent)
     X, Y = rng.normal(size=(n, 3)), rng.normal(size=(4, n))
     np.testing.assert_allclose(project_rows(X, B, independent, dependent, False), B.T @ X, rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(project_rows(X, B, independent, dependent, True), X[independent])
