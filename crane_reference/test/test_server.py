@@ -146,6 +146,33 @@ def test_after_a_command_the_urgent_frames_come_in_growing_requests_then_a_full_
     assert server.status(time.monotonic_ns()).counters["held_late"] == 0
 
 
+def test_a_solver_whose_answers_come_late_gets_ahead_again_after_a_command(
+        server: ReferenceServer, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every answer of the solver comes 150 ms late (the round trip and a busy machine's scheduling), longer than
+    the frames ready after a command last (the lead, 0.1 s): after a pause and a resume the worker asks
+    for more frames than are published while it waits, so the frames ready grow back past the urgent window and
+    publishing holds no more samples once they have."""
+    ask = server.solver.frames
+    monkeypatch.setattr(server.solver, "frames", lambda request, keep: (time.sleep(0.15), ask(request, keep))[1])
+    start = time.monotonic_ns()
+    server.begin(start)
+
+    def publish_until(seconds: float) -> None:
+        while time.monotonic_ns() < start + seconds * NS:
+            time.sleep(0.001)
+            server.due(time.monotonic_ns())
+
+    publish_until(0.3)
+    server.command("pause", accepted_ns=time.monotonic_ns())
+    server.command("resume", accepted_ns=time.monotonic_ns())
+    publish_until(2.5)
+    schedule = server.schedule
+    assert schedule.made_k - schedule.next_k >= schedule.lookahead // URGENT_PART
+    held = server.status(time.monotonic_ns()).counters["held_late"]
+    publish_until(4.0)
+    assert server.status(time.monotonic_ns()).counters["held_late"] == held
+
+
 def test_restart_only_while_not_publishing_and_its_jump(server: ReferenceServer) -> None:
     server.begin(NS)
     out = publish(server, NS, 1.5)

@@ -204,6 +204,7 @@ class ReferenceServer:
         self._halt = threading.Event()
         self._commands_pending = 0
         self._requests_waiting = 0  # requests other than the worker's waiting for the solver (they come first)
+        self._urgent_took = 0.0  # [s] from asking to receiving, of the last request if urgent (else 0)
         self._start_ns: int | None = None
         self._last_stamp = 0
         self._clock_behind = 0
@@ -259,18 +260,19 @@ class ReferenceServer:
                     plan = schedule.plan()
                     # in batches, but up to the whole look-ahead before publishing starts
                     refill = plan.room >= self._refill or not self.publishing
-                    if self.publishing and schedule.is_urgent(plan):  # as many as computed in a slice they outlast
-                        ready = plan.k - schedule.next_k
-                        budget = min(COMPUTE_SLICE, max(URGENT_SLICE, 0.5 * ready / self.rate))
-                        request = self._frame_request(plan, max(self._urgent_refill, ready), budget)
+                    urgent = self.publishing and schedule.is_urgent(plan)
+                    if urgent:
+                        request = self._frame_request(plan, *self._urgent_request(plan.k - schedule.next_k))
                     else:
                         request = self._frame_request(plan, self._refill * refill, COMPUTE_SLICE)
                 with self._solver_lock:
                     if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
                         continue
+                    asked = time.monotonic()
                     batch = self.solver.frames(request, RELEASE_KEEP + LOOKAHEAD)
                 batch = self._encoded(batch)  # a command need not wait for it
                 with self._lock:
+                    self._urgent_took = time.monotonic() - asked if urgent else 0.0
                     if self._accept(batch, plan) and not len(batch.frames) and not batch.busy:
                         self._lock.wait(timeout=LOOKAHEAD)
         except SolverStoppedError as error:
@@ -280,6 +282,17 @@ class ReferenceServer:
         except Exception as error:  # publishing goes on (holding) and reports it
             with self._lock:
                 schedule.fault = f"solver thread stopped: {type(error).__name__}: {error}"
+
+    def _urgent_request(self, ready: int) -> tuple[int, float]:
+        """How many urgent frames the worker asks for, ``ready`` frames being ready ahead of publishing, and for
+        how long [s] the solver may compute for them: as many as are ready, at least URGENT_REFILL seconds of
+        them and twice as many as the last urgent request took to come back; for half the time the ready ones
+        last, or as long as that request took if longer (at least URGENT_SLICE, at most COMPUTE_SLICE).  So a
+        request brings more frames than are published meanwhile even where its fixed costs (the round trip to the
+        solver, a busy machine's scheduling) outweigh its computing."""
+        took = self._urgent_took
+        return (max(self._urgent_refill, ready, math.ceil(2.0 * took * self.rate)),
+                min(COMPUTE_SLICE, max(URGENT_SLICE, 0.5 * ready / self.rate, took)))
 
     def _encoded(self, batch: FrameBatch) -> FrameBatch:
         """``batch`` with its frames' wire made (:attr:`encode`), if there are frames and an encoder."""
