@@ -287,12 +287,14 @@ class ReferenceServer:
         """How many urgent frames the worker asks for, ``ready`` frames being ready ahead of publishing, and for
         how long [s] the solver may compute for them: as many as are ready, at least URGENT_REFILL seconds of
         them and twice as many as the last urgent request took to come back; for half the time the ready ones
-        last, or as long as that request took if longer (at least URGENT_SLICE, at most COMPUTE_SLICE).  So a
-        request brings more frames than are published meanwhile even where its fixed costs (the round trip to the
-        solver, a busy machine's scheduling) outweigh its computing."""
+        last (at least URGENT_SLICE, at most COMPUTE_SLICE), or, if they last less than that request took (samples
+        will be held whatever the request), as long as it took.  So a request brings more frames than are
+        published meanwhile even where its fixed costs (the round trip to the solver, a busy machine's
+        scheduling) outweigh its computing."""
         took = self._urgent_took
+        short = took if ready < took * self.rate else 0.0
         return (max(self._urgent_refill, ready, math.ceil(2.0 * took * self.rate)),
-                min(COMPUTE_SLICE, max(URGENT_SLICE, 0.5 * ready / self.rate, took)))
+                min(COMPUTE_SLICE, max(URGENT_SLICE, 0.5 * ready / self.rate, short)))
 
     def _encoded(self, batch: FrameBatch) -> FrameBatch:
         """``batch`` with its frames' wire made (:attr:`encode`), if there are frames and an encoder."""
