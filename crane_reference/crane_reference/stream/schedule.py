@@ -178,7 +178,8 @@ def make_frames(stream: ReferenceStream, request: FrameRequest, stop: np.ndarray
             break
         next_preview_k = plan.k + row + decimation  # (urgent, not computed: it goes without)
         row += decimation
-    parts, previews, points = [], {}, request.points
+    parts, points = [], request.points
+    previews: dict[int, Samples] = {}
     for first in range(0, made, FRAME_CHUNK):  # a chunk's frames and their previews read at once
         if batch := waited():
             return batch

@@ -25,7 +25,10 @@ Computing ahead
     :data:`URGENT_SLICE` s, at most :data:`COMPUTE_SLICE`; a command's own request: :data:`URGENT_BATCH` seconds
     of them).  So each request comes back before the frames ready run out, whether its motion needs computing or
     is computed already, and the next ones are larger: the buffer grows geometrically, and a solver slowed by a
-    busy machine spends less of its time on the requests' own costs.
+    busy machine spends less of its time on the requests' own costs.  A request also asks for twice as many
+    frames as were published while the last urgent one was out, and computes for as long as that took where
+    the frames ready last less: answers that come late do not keep
+    publishing behind.
     One urgent request goes past the urgent ones, so that the next is a full one.  The worker forgets
     motion older than :data:`RELEASE_KEEP` s before the frames it asks for.  Few large requests: the solver
     computes in long runs, seldom (a compiled run after an idle gap starts with cold caches), and answers few
