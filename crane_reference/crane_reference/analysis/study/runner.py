@@ -10,6 +10,7 @@ for the order of the rows (sorted by case at the end) and the wall times.
 from __future__ import annotations
 
 import csv
+import multiprocessing
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
@@ -36,7 +37,10 @@ def finished_keys(out: Path) -> set[str]:
 
 
 def _local(spec: StudySpec, cases: list[Case], workers: int) -> Iterator[dict[str, object]]:
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    """The cases' rows as they finish on ``workers`` local processes, each a fresh interpreter (``spawn``): a fork
+    of a caller with threads running (a node's executor, numba's, a test session's) may copy a lock held or
+    the collector's state mid-change into the worker."""
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
         pending: set[Future] = {pool.submit(run_case, spec, case) for case in cases}
         try:
             while pending:
