@@ -27,8 +27,7 @@ Computing ahead
     is computed already, and the next ones are larger: the buffer grows geometrically, and a solver slowed by a
     busy machine spends less of its time on the requests' own costs.  A request also asks for twice as many
     frames as were published while the last urgent one was out, and computes for as long as that took where
-    the frames ready last less: answers that come late do not keep
-    publishing behind.
+    the frames ready last less: answers that come late do not keep publishing behind.
     One urgent request goes past the urgent ones, so that the next is a full one.  The worker forgets
     motion older than :data:`RELEASE_KEEP` s before the frames it asks for.  Few large requests: the solver
     computes in long runs, seldom (a compiled run after an idle gap starts with cold caches), and answers few
@@ -295,9 +294,9 @@ class ReferenceServer:
         published meanwhile even where its fixed costs (the round trip to the solver, a busy machine's
         scheduling) outweigh its computing."""
         took = self._urgent_took
-        short = took if ready < took * self.rate else 0.0
+        outlasted = took if ready < took * self.rate else 0.0  # the frames ready run out before an answer
         return (max(self._urgent_refill, ready, math.ceil(2.0 * took * self.rate)),
-                min(COMPUTE_SLICE, max(URGENT_SLICE, 0.5 * ready / self.rate, short)))
+                min(COMPUTE_SLICE, max(URGENT_SLICE, 0.5 * ready / self.rate, outlasted)))
 
     def _encoded(self, batch: FrameBatch) -> FrameBatch:
         """``batch`` with its frames' wire made (:attr:`encode`), if there are frames and an encoder."""
