@@ -43,6 +43,10 @@ process and, after a warm-up, records for ``--duration`` seconds (default 30):
   ``cpu_over_floor``), and its parts: the node's process over the publish-only process
   (``node_over_publish_floor``) and the solver's process over the steps alone (``solver_over_steps``); the
   targets are printed under the table;
+* the real-time factor the compiled steps alone reach in the same measurements (``steps_alone_real_time_factor``:
+  seconds of motion per second of CPU, 100 / ``floor_steps_percent``) and the node's solver's over it
+  (``real_time_factor_over_steps_alone``): the solver's real-time factor as a ratio that this machine's drifting
+  speed leaves unchanged;
 * the CPU share of each thread of the node's and the solver's processes over the measured seconds, by the names
   the node gives its threads (``[threads]``: ``ref_publisher``, ``ref_frames``, ``ref_diagnostics``, rclpy's
   executor in the main thread, Fast DDS's ``dds.*`` threads);
@@ -597,7 +601,9 @@ def main() -> int:
         row.update(floor_publish_percent=publishing, floor_steps_percent=steps, floor_percent=publishing + steps,
                    node_over_publish_floor=row["cpu_node_process_percent"] / publishing,
                    solver_over_steps=row["cpu_solver_process_percent"] / steps,
-                   cpu_over_floor=row["cpu_percent"] / (publishing + steps))
+                   cpu_over_floor=row["cpu_percent"] / (publishing + steps),
+                   steps_alone_real_time_factor=100.0 / steps,
+                   real_time_factor_over_steps_alone=row["real_time_factor"] * steps / 100.0)
         rows.append(row)
     print_table(f"crane_reference node, {args.model} model, {args.duration:g} s per rate, {os.cpu_count()} CPUs"
                 + (f", {args.busy} busy processes beside it" if args.busy else ""), rows)
