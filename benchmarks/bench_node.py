@@ -45,8 +45,11 @@ process and, after a warm-up, records for ``--duration`` seconds (default 30):
   targets are printed under the table;
 * the real-time factor the compiled steps alone reach in the same measurements (``steps_alone_real_time_factor``:
   seconds of motion per second of CPU, 100 / ``floor_steps_percent``) and the node's solver's over it
-  (``real_time_factor_over_steps_alone``): the solver's real-time factor as a ratio that this machine's drifting
-  speed leaves unchanged;
+  (``real_time_factor_over_steps_alone``), and the wall time of a step of the node's solver in Pinocchio ABA
+  (``solver_step_aba``: ``integrator.step`` / (real-time factor x ABA time), its computing's wall time per step)
+  beside that of the steps alone (``steps_alone_step_aba``), with Pinocchio's ABA on the exported URDF timed
+  before and after each rate's run (``aba_us``, averaged): the solver's speed in units that this machine's
+  drifting speed leaves unchanged;
 * the CPU share of each thread of the node's and the solver's processes over the measured seconds, by the names
   the node gives its threads (``[threads]``: ``ref_publisher``, ``ref_frames``, ``ref_diagnostics``, rclpy's
   executor in the main thread, Fast DDS's ``dds.*`` threads);
@@ -79,7 +82,7 @@ from typing import Any
 
 import numpy as np
 import rclpy
-from common import print_table, process_cpu_seconds, run_times
+from common import aba_time, print_table, process_cpu_seconds, run_times
 from crane_reference_interfaces.action import Retarget
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
@@ -582,9 +585,10 @@ def main() -> int:
     if args.message_costs:
         message_costs(args.model, args.domain_id, args.rates, True)
     step = node_step(args.parameter)
+    scenario = Scenario(load_config(), args.model)
     rows = []
     for rate in args.rates:
-        before = floor_parts(args.model, args.domain_id, rate, step)
+        before, aba_before = floor_parts(args.model, args.domain_id, rate, step), aba_time(scenario)
         busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
         try:
             row = run(rate, args.duration, args.model, args.changes, args.domain_id, args.flood, args.parameter)
@@ -592,8 +596,9 @@ def main() -> int:
             for process in busy:
                 process.kill()
                 process.wait()
-        after = floor_parts(args.model, args.domain_id, rate, step)
+        after, aba_after = floor_parts(args.model, args.domain_id, rate, step), aba_time(scenario)
         publishing, steps = ((a + b) / 2 for a, b in zip(before, after, strict=True))
+        aba = (aba_before + aba_after) / 2
         print(f"[floor] {rate} Hz: publish-only {before[0]:.1f} / {after[0]:.1f} %, compiled steps alone at "
               f"h = {step * 1e3:g} ms {before[1]:.1f} / {after[1]:.1f} % (before / after the node's run); the same "
               f"steps paced in {REFILL:g} s runs as the node's solver computes them: "
@@ -603,7 +608,9 @@ def main() -> int:
                    solver_over_steps=row["cpu_solver_process_percent"] / steps,
                    cpu_over_floor=row["cpu_percent"] / (publishing + steps),
                    steps_alone_real_time_factor=100.0 / steps,
-                   real_time_factor_over_steps_alone=row["real_time_factor"] * steps / 100.0)
+                   real_time_factor_over_steps_alone=row["real_time_factor"] * steps / 100.0,
+                   aba_us=1e6 * aba, steps_alone_step_aba=steps / 100.0 * step / aba,
+                   solver_step_aba=step / (row["real_time_factor"] * aba))
         rows.append(row)
     print_table(f"crane_reference node, {args.model} model, {args.duration:g} s per rate, {os.cpu_count()} CPUs"
                 + (f", {args.busy} busy processes beside it" if args.busy else ""), rows)
