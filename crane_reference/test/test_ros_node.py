@@ -49,7 +49,7 @@ from crane_reference.model.parameters import Task
 from crane_reference.ros.message_types import rclpy_types
 from crane_reference.ros.node import CraneReferenceNode
 from crane_reference.ros.parameters import PARAMETERS, SPECS, NodeParameters, field_name
-from crane_reference.ros.publishing import node_time
+from crane_reference.ros.publishing import NodeTime
 from crane_reference.stream.health import Level
 from crane_reference.stream.reference_stream import ReferenceStream
 from crane_reference.stream.server import LOOKAHEAD
@@ -965,14 +965,22 @@ def test_qos_overrides_of_the_reference_topics(ros: Harness) -> None:
 
 def test_the_publisher_reads_the_node_clock_as_rclpy_does(ros: Harness) -> None:
     """Without ROS time, the publisher's reading of the node clock (the system time) lies between two of rclpy's
-    own readings; with ROS time active (use_sim_time, a /clock received), it is rclpy's reading."""
+    own readings; with ROS time active (use_sim_time set while it reads, a /clock received), it is rclpy's
+    reading; with use_sim_time cleared again, the system time again."""
     clock = ros.probe.get_clock()
-    now = node_time(clock)
-    for _ in range(100):
-        before, reading, after = clock.now().nanoseconds, now(), clock.now().nanoseconds
-        assert before <= reading <= after
-    ros.probe.set_parameters([Parameter("use_sim_time", value=True)])
-    publisher = ros.probe.create_publisher(Clock, "/clock", 10)
-    tick = Clock(clock=messages.time_msg(rclpy_types(), 1234 * NS))
-    ros.wait_for(lambda: publisher.publish(tick) or clock.now().nanoseconds == 1234 * NS, "ROS time from /clock")
-    assert clock.ros_time_is_active and now() == 1234 * NS
+
+    def system_time(now: NodeTime) -> None:
+        for _ in range(100):
+            before, reading, after = clock.now().nanoseconds, now(), clock.now().nanoseconds
+            assert before <= reading <= after
+
+    with NodeTime(clock) as now:
+        system_time(now)
+        ros.probe.set_parameters([Parameter("use_sim_time", value=True)])
+        publisher = ros.probe.create_publisher(Clock, "/clock", 10)
+        tick = Clock(clock=messages.time_msg(rclpy_types(), 1234 * NS))
+        ros.wait_for(lambda: publisher.publish(tick) or clock.now().nanoseconds == 1234 * NS, "ROS time from /clock")
+        assert clock.ros_time_is_active and now() == 1234 * NS
+        ros.probe.set_parameters([Parameter("use_sim_time", value=False)])
+        assert not clock.ros_time_is_active
+        system_time(now)

@@ -26,7 +26,7 @@ from typing import Any, NamedTuple
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
-from rclpy.clock import ROSClock
+from rclpy.clock import ClockChange, JumpThreshold, ROSClock, TimeJump
 from rclpy.lifecycle import LifecycleNode
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSPolicyKind, QoSProfile
@@ -75,12 +75,30 @@ def run_until_shutdown(node: LifecycleNode, loop: Callable[[], None]) -> Callabl
     return run
 
 
-def node_time(clock: ROSClock) -> Callable[[], int]:
+class NodeTime:
     """A reader of ``clock`` (a node's) [ns]: rclpy's reading while ROS time is active; otherwise the system time
-    that rclpy would read (rcl's system clock, CLOCK_REALTIME), without converting it to an rclpy Time."""
-    def now() -> int:
-        return clock.now().nanoseconds if clock.ros_time_is_active else time.time_ns()
-    return now
+    that rclpy would read (rcl's system clock, CLOCK_REALTIME), without converting it to an rclpy Time.  Whether
+    ROS time is active (use_sim_time) is kept from rclpy's jump callback on a change of clock, registered while
+    the reader is open (a context manager): asking rclpy at every reading costs microseconds."""
+
+    def __init__(self, clock: ROSClock):
+        self._clock = clock
+        self._handle = clock.create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=None, on_clock_change=True), post_callback=self._changed)
+        self.ros_time_active = clock.ros_time_is_active  # after registering: no change is missed
+
+    def _changed(self, jump: TimeJump) -> None:
+        if jump.clock_change in (ClockChange.ROS_TIME_ACTIVATED, ClockChange.ROS_TIME_DEACTIVATED):
+            self.ros_time_active = jump.clock_change == ClockChange.ROS_TIME_ACTIVATED
+
+    def __call__(self) -> int:
+        return self._clock.now().nanoseconds if self.ros_time_active else time.time_ns()
+
+    def __enter__(self) -> NodeTime:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self._handle.unregister()
 
 
 class SampleMessages(NamedTuple):
@@ -167,31 +185,32 @@ class SamplePublisher:
         It starts once the server's look-ahead of frames is ready and the clock runs (ROS time is 0 until the
         first /clock with use_sim_time).  It sleeps in wall time for the time left on the node clock and checks
         that clock again (at least every MAX_WAIT), so it follows ROS time and stops within SLEEP_LIMIT.  The
-        node clock is read once a wake-up (:func:`node_time`); the time the publishing took is added from the
+        node clock is read once a wake-up (:class:`NodeTime`); the time the publishing took is added from the
         monotonic clock.  A wait of up to SLEEP_LIMIT is a plain sleep.  While it publishes, Python's thread switch
         interval is short (:func:`~crane_reference.stream.threads.real_time_switching`), so that a wake-up gets the
         GIL from the node's other threads within it.
         """
-        clock, server, rate = node_time(self.node.get_clock()), self.server, self.server.rate
-        while not self._quiet.is_set() and (not server.ready() or clock() == 0):
-            self.waiting_for_clock = server.ready()
-            self._quiet.wait(1.0 / rate)
-        self.waiting_for_clock = False
-        if self._quiet.is_set():  # stopped before publishing began: nothing to begin
-            return
-        server.begin(clock())
-        quiet, send = self._quiet, self.send
-        with real_time_switching():
-            while not quiet.is_set():
-                now, read_at = clock(), time.monotonic_ns()
-                due = server.due(now)
-                for outgoing in due.outgoing:
-                    send(outgoing)
-                left = due.next_stamp_ns - now - (time.monotonic_ns() - read_at)
-                if left > SLEEP_LIMIT:  # long (a slow rate, a stalled or reset clock): stopping wakes it
-                    quiet.wait(min(left / NANOSECONDS, MAX_WAIT))
-                elif left > 0:  # within a period at 50 Hz or faster: one system call (an Event's wait takes locks)
-                    time.sleep(left / NANOSECONDS)
+        with NodeTime(self.node.get_clock()) as clock:
+            server, rate = self.server, self.server.rate
+            while not self._quiet.is_set() and (not server.ready() or clock() == 0):
+                self.waiting_for_clock = server.ready()
+                self._quiet.wait(1.0 / rate)
+            self.waiting_for_clock = False
+            if self._quiet.is_set():  # stopped before publishing began: nothing to begin
+                return
+            server.begin(clock())
+            quiet, send = self._quiet, self.send
+            with real_time_switching():
+                while not quiet.is_set():
+                    now, read_at = clock(), time.monotonic_ns()
+                    due = server.due(now)
+                    for outgoing in due.outgoing:
+                        send(outgoing)
+                    left = due.next_stamp_ns - now - (time.monotonic_ns() - read_at)
+                    if left > SLEEP_LIMIT:  # long (a slow rate, a stalled or reset clock): stopping wakes it
+                        quiet.wait(min(left / NANOSECONDS, MAX_WAIT))
+                    elif left > 0:  # within a period at 50 Hz or faster: one system call (an Event's wait takes locks)
+                        time.sleep(left / NANOSECONDS)
 
     def encode(self, samples: Samples) -> SampleMessages:
         """The joint states and E's poses of stacked ``samples`` (a batch of frames), serialized at once in the
