@@ -20,7 +20,9 @@ process and, after a warm-up, records for ``--duration`` seconds (default 30):
   sample's stamp (``retarget_accepted_s`` to ``retarget_stamp_s``, both on the node's clock), and the
   node's margin: how long before that stamp the sample was ready (``retarget_margin_s``, smallest of the
   changes; ``margin_*`` for the commands below); samples held late while the changes and the commands
-  below were made (held_late_commands);
+  below were made (held_late_commands), and during each kind (``held_late_retargets`` for these changes,
+  ``held_late_goals``, ``held_late_stream_commands`` for the pause, resume, speed change and re-target of the
+  smoothness windows);
 * the ~/retarget action, over ``--changes`` goals (alternating ellipse.a 3.1 / 3.0 m, blend 0.5 s): the time from
   sending a goal to its acceptance (``goal_accepted_max_ms``), the result's ``path_stamp`` - ``blend_stamp`` less
   the blend time (``goal_blend_span_error_max_ms``: 0 at speed 1, a period at most from rounding, more where
@@ -127,6 +129,7 @@ class Recorder:
     finite: list[bool] = field(default_factory=list)
     diagnostics: dict[str, str] = field(default_factory=dict)
     real_time_factors: list[tuple[int, float]] = field(default_factory=list)
+    reports: int = 0  # the node's /diagnostics statuses received
 
     def joint_state(self, msg: JointState) -> None:
         self.monotonic.append(time.monotonic_ns())
@@ -139,6 +142,7 @@ class Recorder:
         for status in msg.status:
             if status.name.startswith(NODE):
                 self.diagnostics = {kv.key: kv.value for kv in status.values}
+                self.reports += 1
                 if "real_time_factor" in self.diagnostics:
                     self.real_time_factors.append((time.monotonic_ns(), float(self.diagnostics["real_time_factor"])))
 
@@ -192,6 +196,13 @@ def spin_until(executor: SingleThreadedExecutor, condition, timeout: float) -> b
             return False
         executor.spin_once(timeout_sec=0.01)
     return True
+
+
+def held_late_now(executor: SingleThreadedExecutor, recorder: Recorder) -> float:
+    """The samples the node has held late so far, from the first /diagnostics it publishes from now on."""
+    reports = recorder.reports
+    spin_until(executor, lambda: recorder.reports > reports, 3.0)
+    return float(recorder.diagnostics.get("held_late", 0))
 
 
 def measure_latency(executor: SingleThreadedExecutor, client: AsyncParameterClient, recorder: Recorder,
@@ -364,11 +375,14 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         late = {k: float(recorder.diagnostics.get(k, 0)) - before[k] for k in before}
         factors = [value for at, value in recorder.real_time_factors
                    if t0 * NS < at <= (t0 + wall) * NS and math.isfinite(value)]  # inf: nothing computed
+        held = [held_late_now(executor, recorder)]  # after normal running, then after each kind of command
         latencies, after_acceptance, margins = (measure_latency(executor, client, recorder, changes) if changes
                                                 else ([float("nan")],) * 3)
+        held.append(held_late_now(executor, recorder))
         goals = measure_goals(executor, subscriber, recorder, changes) if changes else {}
+        held.append(held_late_now(executor, recorder))
         smoothness = command_smoothness(executor, subscriber, client, recorder, 1.0)
-        held_in_commands = float(recorder.diagnostics.get("held_late", 0)) - before["held_late"] - late["held_late"]
+        held.append(held_late_now(executor, recorder))
         flooded = flood(executor, client, recorder, flood_requests, rate) if flood_requests else {}
     finally:
         signalled = time.monotonic()
@@ -397,7 +411,8 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         "latency_median_ms": 1e3 * float(np.median(latencies)), "latency_max_ms": 1e3 * float(np.max(latencies)),
         "effect_after_acceptance_max_ms": 1e3 * float(np.max(after_acceptance)),
         "margin_retarget_min_ms": 1e3 * float(np.min(margins)),
-        "held_late_commands": int(held_in_commands),
+        "held_late_commands": int(held[-1] - held[0]), "held_late_retargets": int(held[1] - held[0]),
+        "held_late_goals": int(held[2] - held[1]), "held_late_stream_commands": int(held[3] - held[2]),
         **goals, **smoothness, **flooded, "exit_code": node.returncode, "exit_after_sigint_s": exit_after,
         "traceback": "Traceback" in stderr,
     }
