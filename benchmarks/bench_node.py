@@ -45,13 +45,11 @@ process and, after a warm-up, records for ``--duration`` seconds (default 30):
   ``cpu_over_floor``), and its parts: the node's process over the publish-only process
   (``node_over_publish_floor``) and the solver's process over the steps alone (``solver_over_steps``); the
   targets are printed under the table;
-* the real-time factor the compiled steps alone reach in the same measurements (``steps_alone_real_time_factor``:
-  seconds of motion per second of CPU, 100 / ``floor_steps_percent``) and the node's solver's over it
-  (``real_time_factor_over_steps_alone``), and the wall time of a step of the node's solver in Pinocchio ABA
-  (``solver_step_aba``: ``integrator.step`` / (real-time factor x ABA time), its computing's wall time per step)
-  beside that of the steps alone (``steps_alone_step_aba``), with Pinocchio's ABA on the exported URDF timed
-  before and after each rate's run (``aba_us``, averaged): the solver's speed in units that this machine's
-  drifting speed leaves unchanged;
+* the wall time of a step of the node's solver in Pinocchio ABA (``solver_step_aba``: ``integrator.step`` /
+  (real-time factor x ABA time), its computing's wall time per step) beside the CPU time of a step of the
+  compiled steps alone (``steps_alone_step_aba``, from ``floor_steps_percent``), with Pinocchio's ABA on the
+  exported URDF timed before and after each rate's run (``aba_us``, averaged): the solver's speed in units that
+  this machine's drifting speed leaves unchanged;
 * the CPU share of each thread of the node's and the solver's processes over the measured seconds, by the names
   the node gives its threads (``[threads]``: ``ref_publisher``, ``ref_frames``, ``ref_diagnostics``, rclpy's
   executor in the main thread, Fast DDS's ``dds.*`` threads);
@@ -622,8 +620,6 @@ def main() -> int:
                    node_over_publish_floor=row["cpu_node_process_percent"] / publishing,
                    solver_over_steps=row["cpu_solver_process_percent"] / steps,
                    cpu_over_floor=row["cpu_percent"] / (publishing + steps),
-                   steps_alone_real_time_factor=100.0 / steps,
-                   real_time_factor_over_steps_alone=row["real_time_factor"] * steps / 100.0,
                    aba_us=1e6 * aba, steps_alone_step_aba=steps / 100.0 * step / aba,
                    solver_step_aba=step / (row["real_time_factor"] * aba))
         rows.append(row)
