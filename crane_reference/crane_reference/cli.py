@@ -60,16 +60,17 @@ def simulate_command(args: argparse.Namespace) -> int:
         trajectory.to_npz(out / f"{variant}.npz")
         trajectories.append(trajectory)
         moved = start.q - scenario.model.initial_q
-        dependent = ", ".join(f"{scenario.model.joint_names[k]} {moved[k]:+.3e} rad"
+        dependent = ", ".join(f"{scenario.model.joint_names[k]} {moved[k]:+.3e}"
                               for k in scenario.model.dependent_joints)
         print(f"{variant:>8}: kernels ready in {ready:.2f} s (compiled or loaded); "
               f"{trajectory.t[-1]:.3f} s simulated in {wall:.2f} s wall "
               f"(real-time factor {trajectory.t[-1] / wall:.1f}), {len(trajectory.t) - 1} steps of {step:g} s; "
               f"max constraint residual {trajectory.residual_distance.max():.2e} m; "
               f"min singular value of K_dc {trajectory.kdc_min_singular_value.min():.3f}; "
-              f"equilibrium start: z_E,s = {scenario.z_static:.6f} m, {dependent} from (9), "
+              f"equilibrium start: z_E,s = {scenario.z_static:.6f} m, {dependent} rad or m from the initial "
+              "configuration, "
               f"holding torque {start.holding_torque:.2e} N m")
-    figure2(trajectories, (params.task.ellipse_a, params.task.ellipse_b), out / "figure2.png")
+    figure2(trajectories, params.actuated, (params.task.ellipse_a, params.task.ellipse_b), out / "figure2.png")
     print(f"wrote {', '.join(f'{t.variant}.csv/.npz' for t in trajectories)} and figure2.png to {out}")
     return 0
 
@@ -128,10 +129,9 @@ def study_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def _by_joint(values: list[str], option: str, size: int) -> dict[str, tuple[float, ...]]:
-    """``JOINT=V1,V2,...`` items (or bare ``V1,...`` for every actuated joint) as floats by joint name."""
-    from .model.chain import ACTUATED_JOINTS
-
+def _by_joint(values: list[str], option: str, size: int, joints: tuple[str, ...]) -> dict[str, tuple[float, ...]]:
+    """``JOINT=V1,V2,...`` items (or bare ``V1,...`` for every one of ``joints``, the actuated ones) as floats by
+    joint name."""
     out: dict[str, tuple[float, ...]] = {}
     for item in values:
         joint, _, numbers = item.rpartition("=")
@@ -141,9 +141,9 @@ def _by_joint(values: list[str], option: str, size: int) -> dict[str, tuple[floa
             parsed = ()
         if not 1 <= len(parsed) <= size:
             raise ValueError(f"{option} {item}: expected [JOINT=]V1[,...] with 1 to {size} numbers")
-        for name in [joint] if joint else ACTUATED_JOINTS:
-            if name not in ACTUATED_JOINTS:
-                raise ValueError(f"{option} {item}: joint {name!r} must be one of {', '.join(ACTUATED_JOINTS)}")
+        for name in [joint] if joint else joints:
+            if name not in joints:
+                raise ValueError(f"{option} {item}: joint {name!r} must be one of {', '.join(joints)}")
             out[name] = parsed
     return out
 
@@ -154,12 +154,14 @@ def track_command(args: argparse.Namespace) -> int:
     from .control.controller import JointGains
     from .motion.simulation import SOLVER_FAILURES
 
+    params = load_config(args.config)
     try:
-        given = _by_joint(args.gains, "--gains", 3)
+        given = _by_joint(args.gains, "--gains", 3, params.actuated)
         if any(len(values) < 2 for values in given.values()):
             raise ValueError(f"--gains {' '.join(args.gains)}: give KP,KD[,KI] for each joint")
         gains = {name: JointGains(*values) for name, values in given.items()}
-        limits = {name: values[0] for name, values in _by_joint(args.torque_limit, "--torque-limit", 1).items()}
+        limits = {name: values[0] for name, values in
+                  _by_joint(args.torque_limit, "--torque-limit", 1, params.actuated).items()}
         specs = [TrackingSpec(variant=args.model, realisation=args.realisation, controller=args.controller,
                               bandwidth=args.bandwidth, damping_ratio=args.damping_ratio, gains=gains,
                               feedforward=feedforward, limits=limits, rate=args.rate, duration=args.duration,
@@ -167,7 +169,6 @@ def track_command(args: argparse.Namespace) -> int:
     except ValueError as error:
         print(f"crane-reference track: {error}", file=sys.stderr)
         return 2
-    params = load_config(args.config)
     runs = []
     for spec in specs:
         with progress_bar(f"ff {spec.feedforward}", spec.duration) as bar:
@@ -311,7 +312,8 @@ def parser() -> argparse.ArgumentParser:
     tr.add_argument("--bandwidth", type=float, default=2.0, help="closed-loop bandwidth per joint [Hz] (default 2)")
     tr.add_argument("--damping-ratio", type=float, default=0.7, help="closed-loop damping ratio (default 0.7)")
     tr.add_argument("--gains", nargs="*", default=[], metavar="[JOINT=]KP,KD[,KI]",
-                    help="gains instead of the bandwidth's, per joint (column_slew, boom_luff, knuckle) or for all")
+                    help="gains instead of the bandwidth's, per actuated joint (the paper's crane: column_slew, "
+                         "boom_luff, knuckle) or for all")
     tr.add_argument("--feedforward", nargs="+", choices=["none", "rigid"], default=["none", "rigid"],
                     help="one run per choice (default: both)")
     tr.add_argument("--torque-limit", nargs="*", default=[], metavar="[JOINT=]N_M", help="actuator torque limits")

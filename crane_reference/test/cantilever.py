@@ -23,5 +23,5 @@ def cantilever_model(length: float, rfe_count: int, youngs_modulus: float, shear
     K = np.diag(beam.spring_stiffness[:, column])
     return ChainModel(variant="cantilever", joints=joints, bodies=bodies, end_effector_joint=n - 1,
                       end_effector_point=np.array([beam.lengths[-1], 0.0, 0.0]), gravity=gravity, stiffness=K,
-                      support_stiffness=np.zeros_like(K), boom_stiffness=K, drive_joint=0, dependent_joints=(),
+                      support_stiffness=np.zeros_like(K), beam_stiffness=K, drive_joint=0, dependent_joints=(),
                       initial_q=np.zeros(n))

@@ -18,10 +18,13 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from cranes import PAPER_LAYOUT
 from numba.core.registry import CPUDispatcher
 
 import crane_reference.dynamics as dynamics_package
-from crane_reference.model.config import load_config
+from crane_reference.model.config import load_config, read_yaml
+from crane_reference.model.description import CraneDescription
+from crane_reference.model.paper_layout import parse_parameters
 from crane_reference.model.parameters import CraneParameters
 from crane_reference.motion.simulation import Scenario
 
@@ -48,19 +51,25 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 
 @pytest.fixture(scope="session")
-def params() -> CraneParameters:
-    """The packaged default crane (config/crane.yaml)."""
+def params() -> CraneDescription:
+    """The packaged default crane (config/crane.yaml), the paper's."""
     return load_config()
 
 
 @pytest.fixture(scope="session")
-def flexible(params: CraneParameters) -> Scenario:
+def paper_params() -> CraneParameters:
+    """The packaged crane's numbers in the paper's layout (:data:`PAPER_LAYOUT`)."""
+    return parse_parameters(read_yaml(PAPER_LAYOUT))
+
+
+@pytest.fixture(scope="session")
+def flexible(params: CraneDescription) -> Scenario:
     """The paper's scenario on the flexible (RFE) crane."""
     return Scenario(params, "flexible")
 
 
 @pytest.fixture(scope="session")
-def rigid(params: CraneParameters) -> Scenario:
+def rigid(params: CraneDescription) -> Scenario:
     """The paper's scenario on the rigid-boom crane."""
     return Scenario(params, "rigid")
 

@@ -1,4 +1,6 @@
-"""Tests of crane_reference.model.config: the default crane.yaml and the validation of bad input."""
+"""Tests of crane_reference.model.config on crane files in the paper's layout (the packaged crane's numbers, in
+data/paper_layout_crane.yaml): its values and the validation of bad input.  The description layout's own tests
+are in test_description.py."""
 
 from __future__ import annotations
 
@@ -10,8 +12,11 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+from cranes import PAPER_LAYOUT
 
+from crane_reference.model.chain import build_model
 from crane_reference.model.config import ConfigError, default_config_path, load_config, parse_config
+from crane_reference.model.paper_layout import parse_parameters
 from crane_reference.model.parameters import CraneParameters, FlexibleDrive, RigidBody, TorqueDrive
 
 DEFAULT_YAML = Path(__file__).resolve().parent.parent / "config" / "crane.yaml"
@@ -21,12 +26,12 @@ H, W, T = 0.25, 0.15, 0.008
 HI, WI = H - 2 * T, W - 2 * T
 
 
-_DEFAULT_DATA = yaml.safe_load(DEFAULT_YAML.read_text(encoding="utf-8"))
+_DEFAULT_DATA = yaml.safe_load(PAPER_LAYOUT.read_text(encoding="utf-8"))
 
 
 @pytest.fixture
 def data() -> dict[str, Any]:
-    """A fresh, modifiable copy of the default YAML as parsed by yaml.safe_load."""
+    """A fresh, modifiable copy of the paper-layout YAML as parsed by yaml.safe_load."""
     return copy.deepcopy(_DEFAULT_DATA)
 
 
@@ -48,7 +53,8 @@ def test_default_path_is_the_packaged_file() -> None:
     assert default_config_path() == DEFAULT_YAML
 
 
-def test_default_loads_with_expected_values(params: CraneParameters) -> None:
+def test_default_loads_with_expected_values(paper_params: CraneParameters) -> None:
+    params = paper_params
     assert params.gravity == 9.81
     assert params.base.mass == 3000.0
     np.testing.assert_array_equal(params.base.center_of_mass, [0.0, 0.0, -0.3])
@@ -74,7 +80,8 @@ def test_default_loads_with_expected_values(params: CraneParameters) -> None:
     assert params.task.rise_time == 5.0
 
 
-def test_default_arrays_are_float(params: CraneParameters) -> None:
+def test_default_arrays_are_float(paper_params: CraneParameters) -> None:
+    params = paper_params
     for body in (params.base, params.column, params.link4.body):
         assert body.center_of_mass.shape == (3,) and body.center_of_mass.dtype == float
         assert body.inertia.shape == (3, 3) and body.inertia.dtype == float
@@ -83,7 +90,8 @@ def test_default_arrays_are_float(params: CraneParameters) -> None:
     assert isinstance(params.boom.rfe_count, int)
 
 
-def test_boom_section_is_the_rectangular_hollow_section(params: CraneParameters) -> None:
+def test_boom_section_is_the_rectangular_hollow_section(paper_params: CraneParameters) -> None:
+    params = paper_params
     section = params.boom.section
     area = W * H - WI * HI
     mid_area = (H - T) * (W - T)
@@ -95,24 +103,28 @@ def test_boom_section_is_the_rectangular_hollow_section(params: CraneParameters)
     assert section.second_moment_z > section.second_moment_y  # stiffer in the luffing plane
 
 
-def test_boom_tip_is_two_metres_from_the_column_axis(params: CraneParameters) -> None:
+def test_boom_tip_is_two_metres_from_the_column_axis(paper_params: CraneParameters) -> None:
+    params = paper_params
     reach = params.boom.pivot[0] + params.boom.length * math.cos(params.initial.boom)
     assert reach == pytest.approx(2.0, abs=1e-4)
 
 
-def test_link4_hangs_vertically_in_the_initial_configuration(params: CraneParameters) -> None:
+def test_link4_hangs_vertically_in_the_initial_configuration(paper_params: CraneParameters) -> None:
+    params = paper_params
     angle = params.initial.boom + params.initial.knuckle + params.link4.offset_angle
     assert (math.cos(angle), math.sin(angle)) == pytest.approx((0.0, -1.0), abs=1e-12)
 
 
-def test_box_inertia_of_the_base(params: CraneParameters) -> None:
+def test_box_inertia_of_the_base(paper_params: CraneParameters) -> None:
+    params = paper_params
     m, a, b, c = 3000.0, 4.0, 2.4, 0.6
     expected = np.diag([b**2 + c**2, a**2 + c**2, a**2 + b**2]) * m / 12
     np.testing.assert_allclose(params.base.inertia, expected)
 
 
 @pytest.mark.parametrize("name", ["base", "column", "link4"])
-def test_pseudo_inertia_identities(params: CraneParameters, name: str) -> None:
+def test_pseudo_inertia_identities(paper_params: CraneParameters, name: str) -> None:
+    params = paper_params
     body: RigidBody = params.link4.body if name == "link4" else getattr(params, name)
     H = body.pseudo_inertia()
     c = body.center_of_mass
@@ -123,17 +135,18 @@ def test_pseudo_inertia_identities(params: CraneParameters, name: str) -> None:
     assert np.trace(H[:3, :3]) - body.mass * c @ c == pytest.approx(np.trace(body.inertia) / 2)
 
 
-def test_load_config_with_explicit_path_equals_default(params: CraneParameters) -> None:
-    explicit = load_config(str(DEFAULT_YAML))
-    assert explicit.boom.section == params.boom.section
-    np.testing.assert_array_equal(explicit.base.inertia, params.base.inertia)
+def test_load_config_with_explicit_path_equals_default() -> None:
+    explicit, default = (build_model(load_config(path), "flexible") for path in (str(DEFAULT_YAML), None))
+    assert explicit.joint_names == default.joint_names
+    for a, b in zip(explicit.bodies, default.bodies, strict=True):
+        np.testing.assert_array_equal(a.inertia.pseudo_inertia(), b.inertia.pseudo_inertia())
 
 
 def test_optional_sections_default(data: dict[str, Any]) -> None:
     for key in ("damping", "initial", "task"):
         del data[key]
     data["damping"] = {"boom": 0.01}
-    params = parse_config(data)
+    params = parse_parameters(data)
     assert (params.damping.support, params.damping.boom) == (0.0, 0.01)
     assert params.initial.knuckle == pytest.approx(1.5 * math.pi)
     assert params.task.rise_time == 5.0
@@ -141,13 +154,13 @@ def test_optional_sections_default(data: dict[str, Any]) -> None:
 
 def test_ints_are_accepted_for_floats(data: dict[str, Any]) -> None:
     data["base"]["mass"] = 3000
-    params = parse_config(data)
+    params = parse_parameters(data)
     assert params.base.mass == 3000.0 and isinstance(params.base.mass, float)
 
 
 def test_inertia_products(data: dict[str, Any]) -> None:
     data["column"]["inertia"]["ixy"] = 1.5
-    np.testing.assert_array_equal(parse_config(data).column.inertia[0:2, 0:2], [[62.25, 1.5], [1.5, 62.25]])
+    np.testing.assert_array_equal(parse_parameters(data).column.inertia[0:2, 0:2], [[62.25, 1.5], [1.5, 62.25]])
 
 
 def test_flexible_drive(data: dict[str, Any]) -> None:
@@ -289,6 +302,6 @@ def test_yaml_1_2_exponent_floats_are_numbers(tmp_path):
     text = default_config_path().read_text().replace("2.1e+11", "2.1e11").replace("8.1e+10", "81e9")
     path = tmp_path / "exponents.yaml"
     path.write_text(text)
-    params = load_config(path)
-    assert params.boom.youngs_modulus == 2.1e11
-    assert params.boom.shear_modulus == 8.1e10
+    beam = load_config(path).flexible_links[0].beam
+    assert beam.youngs_modulus == 2.1e11
+    assert beam.shear_modulus == 8.1e10

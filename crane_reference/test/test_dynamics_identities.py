@@ -52,8 +52,8 @@ def models(params) -> dict[str, ChainModel]:
 
 def softened(model: ChainModel, factor: float) -> ChainModel:
     """``model`` with its RFE springs scaled by ``factor`` (support springs unchanged)."""
-    boom = factor * model.boom_stiffness
-    return dataclasses.replace(model, stiffness=model.support_stiffness + boom, boom_stiffness=boom)
+    boom = factor * model.beam_stiffness
+    return dataclasses.replace(model, stiffness=model.support_stiffness + boom, beam_stiffness=boom)
 
 
 def random_configuration(model: ChainModel, rng: np.random.Generator) -> np.ndarray:
@@ -144,9 +144,9 @@ class EnergyHistory:
 def energy_history(model: ChainModel, duration: float, damping: Damping | None, seed: int) -> EnergyHistory:
     """Free motion from q = initial_q with small random velocities, integrated with DOP853 as the
     first-order system (q, qd, W_diss)' = (qd, M^-1 (Q - h), qd^T D qd)."""
-    dynamics = CraneDynamics(model, NO_DRIVE, damping)
     damping = damping or Damping()
-    D = damping.support * model.support_stiffness + damping.boom * model.boom_stiffness  # built here
+    D = damping.support * model.support_stiffness + damping.boom * model.beam_stiffness  # built here
+    dynamics = CraneDynamics(dataclasses.replace(model, damping=D), NO_DRIVE)
     n = model.dof
 
     def rhs(t: float, y: np.ndarray) -> np.ndarray:

@@ -50,7 +50,7 @@ def case(request: pytest.FixtureRequest) -> Case:
     model = build_model(params, request.param)
     pin_model = pin.buildModelFromXML(model_to_urdf(model))
     pin_model.gravity = pin.Motion(np.array([0.0, 0.0, -model.gravity]), np.zeros(3))
-    return Case(model, CraneDynamics(model, make_drive(params.drive, params.initial.column)), pin_model)
+    return Case(model, CraneDynamics(model, make_drive(params.drive, params.drive_start)), pin_model)
 
 
 def random_state(model: ChainModel, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

@@ -21,8 +21,9 @@ import scipy.linalg
 
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.model.chain import AXES, REVOLUTE, VARIANTS, Body, ChainModel, Joint, build_model, homogeneous
+from crane_reference.model.description import CraneDescription
 from crane_reference.model.drive import TorqueSource, make_drive
-from crane_reference.model.parameters import Boom, CraneParameters
+from crane_reference.model.parameters import Boom
 from crane_reference.model.profiles import Constant, QuinticRise
 from crane_reference.model.rfe import discretise_beam
 from crane_reference.motion.constraints import paper_constraints
@@ -38,10 +39,10 @@ KKT_TOLERANCE = 1e-6  # [N or N m]
 EULER_BERNOULLI_ROOT = 1.875104068711961  # first root of cos(x) cosh(x) = -1
 
 
-def paper_motion(params: CraneParameters, model: ChainModel, z=None) -> ProgrammedMotion:
+def paper_motion(params: CraneDescription, model: ChainModel, z=None) -> ProgrammedMotion:
     """The paper's task on ``model`` with the default drive; z held at z_E,s unless ``z`` is given
     as a function of z_E,s."""
-    dynamics = CraneDynamics(model, make_drive(params.drive, params.initial.column))
+    dynamics = CraneDynamics(model, make_drive(params.drive, params.drive_start))
     z_static = float(dynamics.end_effector(model.initial_q)[0][2])
     task = params.task
     return ProgrammedMotion(dynamics, paper_constraints(Constant(task.ellipse_a), Constant(task.ellipse_b),
@@ -130,7 +131,7 @@ def clamped_free_frequency(boom: Boom, length: float, rfe_count: int, plane: str
     K = np.diag(beam.spring_stiffness[:, column])
     model = ChainModel(variant="beam", joints=joints, bodies=bodies, end_effector_joint=n - 1,
                        end_effector_point=np.array([beam.lengths[-1], 0.0, 0.0]), gravity=0.0, stiffness=K,
-                       support_stiffness=np.zeros_like(K), boom_stiffness=K, drive_joint=0, dependent_joints=(),
+                       support_stiffness=np.zeros_like(K), beam_stiffness=K, drive_joint=0, dependent_joints=(),
                        initial_q=np.zeros(n))
     M = CraneDynamics(model, TorqueSource(0.0, 0.0, 1.0)).terms(5.0, np.zeros(n), np.zeros(n)).M
     return float(np.sqrt(scipy.linalg.eigh(K, M, eigvals_only=True)[0]) / (2.0 * np.pi))
@@ -143,11 +144,11 @@ def euler_bernoulli_frequency(boom: Boom, length: float, plane: str) -> float:
 
 
 @pytest.mark.parametrize("plane", list(PLANES))
-def test_rfe_beam_converges_to_euler_bernoulli(params, plane):
+def test_rfe_beam_converges_to_euler_bernoulli(paper_params, plane):
     """The crane's section and steel on a slender 10 m beam (L / radius of gyration ~ 110 vertical,
     ~160 lateral), so that rotary inertia, which the RFE bodies include and Euler-Bernoulli neglects,
     shifts the frequency by < 0.03 %, well below the discretisation error being checked."""
-    boom = params.boom
+    boom = paper_params.boom
     length = 10.0
     exact = euler_bernoulli_frequency(boom, length, plane)
     errors = [abs(clamped_free_frequency(boom, length, n, plane) / exact - 1.0) for n in (6, 10, 20)]
@@ -156,9 +157,9 @@ def test_rfe_beam_converges_to_euler_bernoulli(params, plane):
 
 
 @pytest.mark.parametrize("plane", list(PLANES))
-def test_crane_boom_first_mode_near_euler_bernoulli(params, plane):
+def test_crane_boom_first_mode_near_euler_bernoulli(paper_params, plane):
     """The crane's own stocky boom (2.546 m): within 1 % at n_rfe = 20 even with rotary inertia."""
-    boom = params.boom
+    boom = paper_params.boom
     exact = euler_bernoulli_frequency(boom, boom.length, plane)
     error = abs(clamped_free_frequency(boom, boom.length, 20, plane) / exact - 1.0)
     assert error <= 0.01, f"error {error:.3%}"
@@ -171,7 +172,7 @@ STIFFNESS_FACTORS = (1.0, 1e2, 1e4)
 ANGLES = ("column_slew", "boom_luff", "knuckle")  # psi2, psi(3,0), psi4
 
 
-def angle_history(params: CraneParameters, model: ChainModel) -> np.ndarray:
+def angle_history(params: CraneDescription, model: ChainModel) -> np.ndarray:
     """psi2, psi(3,0), psi4 at every step of the paper's task (quintic rise of z) from the model's own
     static equilibrium with the default torque drive."""
     motion = paper_motion(params, model, z=lambda z_static: QuinticRise(z_static, params.task.z_increment, 0.0,
@@ -195,8 +196,8 @@ def test_stiff_rfe_springs_give_the_rigid_crane(params):
     flexible = build_model(params, "flexible")
     differences = []
     for factor in STIFFNESS_FACTORS:
-        boom = factor * flexible.boom_stiffness
-        stiffened = dataclasses.replace(flexible, stiffness=flexible.support_stiffness + boom, boom_stiffness=boom)
+        boom = factor * flexible.beam_stiffness
+        stiffened = dataclasses.replace(flexible, stiffness=flexible.support_stiffness + boom, beam_stiffness=boom)
         differences.append(np.max(np.abs(angle_history(params, stiffened) - rigid), axis=0))
     differences = np.array(differences)  # (factor, angle)
     assert np.ptp(rigid[:, 0]) > 0.1, "the column should slew noticeably in 0.5 s"

@@ -56,7 +56,7 @@ def omega_integral(t: float) -> float:
 def rigid():
     params = load_config()
     model = build_model(params, "rigid")
-    dynamics = CraneDynamics(model, make_drive(params.drive, params.initial.column))
+    dynamics = CraneDynamics(model, make_drive(params.drive, params.drive_start))
     z_static = float(dynamics.end_effector(model.initial_q)[0][2])
     start = static_equilibrium(ProgrammedMotion(dynamics, paper_task_constraints(params.task, z_static)),
                                model.initial_q).q

@@ -48,12 +48,12 @@ NO_DRIVE = TorqueSource(0.0, 0.0, 0.0)
 
 
 @pytest.mark.parametrize("plane", ["vertical", "lateral"])
-def test_cantilever_matches_euler_bernoulli(params, plane):
+def test_cantilever_matches_euler_bernoulli(paper_params, plane):
     """The crane's steel and section on a slender 10 m beam (L / radius of gyration = 108 vertical, 162
     lateral): rotary inertia, which the RFE bodies include and Euler-Bernoulli neglects, lowers the third
     frequency by ~ (beta_3 r)^2 / 2 < 0.3 %.  Measured errors at n_rfe = 20: +0.04 %, +0.08 %, +0.03 %
     (vertical), +0.05 %, +0.16 %, +0.21 % (lateral)."""
-    boom, length = params.boom, 10.0
+    boom, length = paper_params.boom, 10.0
     model = cantilever_model(length, 20, boom.youngs_modulus, boom.shear_modulus, boom.density, boom.section, plane)
     modes = modal_analysis(linearise_chain(CraneDynamics(model, NO_DRIVE), 0.0, model.initial_q))
     second_moment = boom.section.second_moment_z if plane == "vertical" else boom.section.second_moment_y
@@ -71,7 +71,7 @@ def point_mass_chain(axes: str, stiffness: np.ndarray, mass: float, gravity: flo
     body = Body("mass", len(axes) - 1, RigidBody(mass, np.zeros(3), np.zeros((3, 3))))
     return ChainModel(variant="point", joints=joints, bodies=(body,), end_effector_joint=len(axes) - 1,
                       end_effector_point=np.zeros(3), gravity=gravity, stiffness=stiffness,
-                      support_stiffness=np.zeros_like(stiffness), boom_stiffness=np.zeros_like(stiffness),
+                      support_stiffness=np.zeros_like(stiffness), beam_stiffness=np.zeros_like(stiffness),
                       drive_joint=0, dependent_joints=dependent, initial_q=np.zeros(len(axes)))
 
 

@@ -31,7 +31,7 @@ from crane_reference.control.plant import Plant, held_start
 from crane_reference.control.plant_server import CommandRefusedError, PlantServer, PlantSettings, warm_up_plant
 from crane_reference.control.preview_tracking import Preview, PreviewTracker
 from crane_reference.dynamics.kinematics import quaternion
-from crane_reference.model.chain import ACTUATED_JOINTS
+from crane_reference.model.paper_layout import ACTUATED as ACTUATED_JOINTS
 from crane_reference.model.parameters import TorqueDrive
 from crane_reference.motion.simulation import Scenario
 
@@ -185,7 +185,7 @@ def test_quaternion_is_scipys(seed):
 
 def test_settings_refuse_what_they_cannot_run():
     with pytest.raises(ValueError, match=r"joints = .*must name each of column_slew, boom_luff, knuckle once"):
-        PlantSettings(joints=("column_slew", "boom_luff"))
+        PlantSettings(joints=("column_slew", "boom_luff")).command_joints(ACTUATED_JOINTS)
     with pytest.raises(ValueError, match="whole number of integrator steps"):
         PlantSettings(rate=300.0)
     with pytest.raises(ValueError, match=r"drive_damping = .*one finite number >= 0"):

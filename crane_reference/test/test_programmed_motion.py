@@ -52,7 +52,7 @@ class Case:
 @pytest.fixture(scope="module")
 def cases() -> dict[str, Case]:
     params = load_config()
-    drive = make_drive(params.drive, params.initial.column)
+    drive = make_drive(params.drive, params.drive_start)
     out = {}
     for variant in VARIANTS:
         model = build_model(params, variant)

@@ -268,7 +268,7 @@ def test_pose_is_the_end_effector_of_the_published_positions(ros: Harness) -> No
     time.sleep(1.0)
     config = load_config()
     _, model = load_and_model()
-    dynamics = CraneDynamics(model, make_drive(config.drive, config.initial.column))
+    dynamics = CraneDynamics(model, make_drive(config.drive, config.drive_start))
     positions = {stamp_ns(m): np.array(m.position) for _, m in list(ros.received["joint_states"])}
     poses = [m for _, m in list(ros.received["pose"]) if stamp_ns(m) in positions]
     assert len(poses) > 50

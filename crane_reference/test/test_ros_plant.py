@@ -40,7 +40,7 @@ from std_msgs.msg import Float64MultiArray
 from crane_reference.analysis.tracking.closed_loop import TrackingSpec, run_tracking
 from crane_reference.control.plant import held_start
 from crane_reference.control.plant_server import CommandRefusedError, PlantServer, PlantSettings
-from crane_reference.model.chain import ACTUATED_JOINTS
+from crane_reference.model.paper_layout import ACTUATED as ACTUATED_JOINTS
 from crane_reference.motion.simulation import Scenario
 from crane_reference.motion.steps import ONLINE_STEP
 from crane_reference.ros.controller_node import CraneControllerNode

@@ -178,7 +178,7 @@ def test_a_batch_of_frames_is_published_as_rclpy_and_rosbags_serialize_each_samp
     publisher writes them (the joint states and poses of the whole batch at once, :meth:`rows`, each stamped as it
     goes out; the previews a row at a time, :meth:`fill_row`), are rclpy's serialization of each sample's message
     objects, read back field by field, and rosbags' bytes in both byte orders."""
-    from crane_reference.model.chain import ACTUATED_JOINTS
+    from crane_reference.model.paper_layout import ACTUATED as ACTUATED_JOINTS
     from crane_reference.stream.reference_stream import ReferenceStream
     from crane_reference.stream.schedule import FrameSchedule, make_frames
 

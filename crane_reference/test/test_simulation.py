@@ -158,7 +158,7 @@ def test_cli_reports_config_errors_by_field(tmp_path):
     bad.write_text(text.replace("rfe_count: 6", "rfe_count: 0"))
     result = run_cli("urdf", "--config", str(bad))
     assert result.returncode == 2
-    assert "boom.rfe_count" in result.stderr
+    assert "links[1].beam.rfe_count = 0: must be an integer >= 1" in result.stderr
 
 
 

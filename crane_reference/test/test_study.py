@@ -110,7 +110,7 @@ def test_case_metrics_against_a_direct_simulation():
     (case,) = spec.cases()
     row = run_case(spec, case)
     params = load_config()
-    params = type(params)(**{**params.__dict__, "payload_mass": 300.0,
+    params = type(params)(**{**params.__dict__, "payload": 300.0,
                              "task": type(params.task)(3.2, params.task.ellipse_b, params.task.z_increment,
                                                        params.task.rise_time)})
     scenario = Scenario(params, "rigid")

@@ -18,6 +18,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass
 
@@ -39,10 +40,10 @@ from crane_reference.analysis.vibration import (
 )
 from crane_reference.cli import main
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
-from crane_reference.dynamics.deflection import boom_tip_deflection
+from crane_reference.dynamics.deflection import tip_deflection
 from crane_reference.model.chain import AXES, PRISMATIC, Body, ChainModel, Joint, build_model, rotation
 from crane_reference.model.drive import TorqueSource, make_drive
-from crane_reference.model.parameters import Damping, RigidBody
+from crane_reference.model.parameters import RigidBody
 from crane_reference.model.profiles import Constant
 from crane_reference.model.rfe import discretise_beam
 from crane_reference.motion.constraints import ConstraintSet, HeightZ, paper_constraints
@@ -54,20 +55,21 @@ DRIVE_OFF = 2.0  # [s] the default torque drive acts on [0, 1) s
 
 
 @pytest.mark.parametrize(("suffix", "axis"), [("bend_vertical", 2), ("bend_lateral", 1), ("twist", 0)])
-def test_tip_deflection_of_a_boom_bent_at_one_element(params, suffix, axis):
+def test_tip_deflection_of_a_boom_bent_at_one_element(params, paper_params, suffix, axis):
     """Angle a at sde r only: the part of the boom beyond it, of length d_r = sum of the element lengths
     from r on, turns rigidly about the element's z, y or x axis, so w = R_axis(a) (d_r, 0, 0) - (d_r, 0, 0)
     (zero for a twist)."""
     model = build_model(params, "flexible")
     chain = CraneDynamics(model, TorqueSource(0.0, 0.0, 0.0)).chain
-    lengths = discretise_beam(params.boom.length, params.boom.rfe_count, params.boom.youngs_modulus,
-                              params.boom.shear_modulus, params.boom.density, params.boom.section).lengths
+    boom = paper_params.boom
+    lengths = discretise_beam(boom.length, boom.rfe_count, boom.youngs_modulus, boom.shear_modulus, boom.density,
+                              boom.section).lengths
     for r, angle in ((1, 0.05), (3, -0.2), (5, 0.7)):
         q = model.initial_q.copy()
         q[model.index(f"boom_sde{r}_{suffix}")] = angle
         d = lengths[r:].sum()
         expected = rotation(axis, angle) @ np.array([d, 0.0, 0.0]) - np.array([d, 0.0, 0.0])
-        assert boom_tip_deflection(model, chain, q)[0] == pytest.approx(expected, abs=1e-14)
+        assert tip_deflection(model, chain, q)[0] == pytest.approx(expected, abs=1e-14)
 
 
 def _prismatic_model(variant: str, axes: str, masses: dict[int, float], stiffness: np.ndarray,
@@ -78,7 +80,7 @@ def _prismatic_model(variant: str, axes: str, masses: dict[int, float], stiffnes
     zero = np.zeros_like(stiffness)
     return ChainModel(variant=variant, joints=joints, bodies=bodies, end_effector_joint=len(axes) - 1,
                       end_effector_point=np.zeros(3), gravity=9.81, stiffness=stiffness, support_stiffness=stiffness,
-                      boom_stiffness=zero, drive_joint=0, dependent_joints=dependent, initial_q=initial_q)
+                      beam_stiffness=zero, drive_joint=0, dependent_joints=dependent, initial_q=initial_q)
 
 
 def test_linear_oscillator_chain_is_exact_at_the_steps():
@@ -118,7 +120,8 @@ def test_damped_oscillator_chain_decays_at_the_exact_rates():
     omega_squared, phi = eigh(np.diag([k1, k2]), M)
     omega = np.sqrt(omega_squared)
     beta = 0.2 / omega[1]
-    motion = ProgrammedMotion(CraneDynamics(model, TorqueSource(0.0, 0.0, 0.0), Damping(support=beta)),
+    damped = dataclasses.replace(model, damping=beta * model.support_stiffness)
+    motion = ProgrammedMotion(CraneDynamics(damped, TorqueSource(0.0, 0.0, 0.0)),
                               ConstraintSet((HeightZ(Constant(0.0)),)))
     step = 2.0 / omega[1]
     tr = simulate(motion, model.initial_q, 10.0 * 2.0 * np.pi / omega[0], step=step)
@@ -188,7 +191,7 @@ def held(params) -> dict[str, Held]:
     out = {}
     for variant in ("rigid", "flexible"):
         model = build_model(params, variant)
-        dynamics = CraneDynamics(model, make_drive(params.drive, params.initial.column))
+        dynamics = CraneDynamics(model, make_drive(params.drive, params.drive_start))
         z = float(dynamics.end_effector(model.initial_q)[0][2])
         task = params.task
         motion = ProgrammedMotion(dynamics, paper_constraints(Constant(task.ellipse_a), Constant(task.ellipse_b),
@@ -252,7 +255,7 @@ def test_peaks_of_the_paper_motion_are_modes(params):
     assert all(m["explained_by"] != "none" for _, m in matches), matches
     by_mode = [m for _, m in matches if m["explained_by"] == "mode"]
     assert len(by_mode) >= 0.75 * len(matches)
-    vertical = next(m for name, m in matches if name == "tip_vertical")
+    vertical = next(m for name, m in matches if name == "boom_tip_vertical")
     assert vertical["explained_by"] == "mode" and "luffing plane" in vertical["character"]
 
 

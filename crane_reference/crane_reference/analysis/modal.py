@@ -33,9 +33,10 @@ exp(s t) with s^2 = -omega^2: frequency |Im s| / (2 pi) and growth rate |Re s| (
 statically unstable direction; complex omega^2, possible only for servo-constraints: flutter).
 
 Each mode is characterised by which springs deform: the split of phi^T (K_t + K_lambda) phi (= omega^2 for
-ideal constraints) over the stiffness contributions (support springs, boom bending in the luffing plane,
-boom bending in the horizontal plane, boom torsion, gravity, constraint curvature, drive spring); and by
-which bodies move: the split of phi^T M phi over the bodies (the boom's elements as one).
+ideal constraints) over the stiffness contributions (support springs, each flexible link's bending in its
+x-y plane (a boom's luffing plane), its bending across it and its torsion, joint springs, gravity, constraint
+curvature, drive spring); and by which bodies move: the split of phi^T M phi over the bodies (a flexible
+link's elements as one).
 """
 
 from __future__ import annotations
@@ -50,16 +51,18 @@ from ..dynamics.chain_dynamics import CraneDynamics
 from ..dynamics.inertia import composite_inertias, mass_matrix, world_pseudo_inertias
 from ..dynamics.kinematics import forward_kinematics
 from ..model.chain import ChainModel
-from ..model.parameters import CraneParameters
+from ..model.description import CraneDescription
 from ..motion.constraints import ConstraintSet
 from ..motion.equilibrium import static_equilibrium
 from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import Scenario, simulate
 
-BOOM_SPRING_PARTS = {"_bend_vertical": "boom bending, luffing plane", "_bend_lateral": "boom bending, horizontal",
-                     "_twist": "boom torsion"}
+BEAM_SPRING_PARTS = {"_bend_vertical": "bending, luffing plane", "_bend_lateral": "bending, horizontal",
+                     "_twist": "torsion"}
+"""The parts of a flexible link's springs, by RFE angle, labelled ``<link> <part>``."""
 SUPPORT = "support springs"
-BOOM = "boom springs"
+BEAM_SPRINGS = "beam springs"
+JOINT_SPRINGS = "joint springs"
 GRAVITY = "gravity"
 CONSTRAINT = "constraint curvature"
 DRIVE = "drive spring"
@@ -116,19 +119,23 @@ def body_mass_matrices(dynamics: CraneDynamics, q: np.ndarray) -> dict[str, np.n
 
 
 def _spring_parts(model: ChainModel) -> dict[str, np.ndarray]:
-    """The spring matrix K split into support springs and the boom's bending / torsion springs."""
+    """The spring matrix K split into support springs, each flexible link's bending / torsion springs and the
+    joint springs."""
     parts = {SUPPORT: model.support_stiffness}
-    remaining = model.boom_stiffness.copy()
-    for suffix, label in BOOM_SPRING_PARTS.items():
-        mask = np.array([name.endswith(suffix) for name in model.joint_names])
-        if mask.any():
-            parts[label] = np.where(np.outer(mask, mask), model.boom_stiffness, 0.0)
-            remaining -= parts[label]
-    if np.any(remaining):
-        parts[BOOM] = remaining
-    other = model.stiffness - model.support_stiffness - model.boom_stiffness
-    if np.any(other):
-        parts["other springs"] = other
+    names = np.array(model.joint_names)
+    remaining = model.beam_stiffness.copy()
+    for link in model.flexible_links:
+        for suffix, label in BEAM_SPRING_PARTS.items():
+            mask = np.zeros(model.dof, dtype=bool)
+            mask[[k for k in link.springs if names[k].endswith(suffix)]] = True
+            if mask.any():
+                parts[f"{link.name} {label}"] = np.where(np.outer(mask, mask), model.beam_stiffness, 0.0)
+                remaining -= parts[f"{link.name} {label}"]
+    if np.any(remaining):  # a chain built without its flexible links named
+        parts[BEAM_SPRINGS] = remaining
+    joint = model.stiffness - model.support_stiffness - model.beam_stiffness
+    if np.any(joint):
+        parts[JOINT_SPRINGS] = joint
     return parts
 
 
@@ -305,7 +312,7 @@ def scenario_motion(scenario: Scenario, realisation: str = "ideal") -> tuple[Pro
     return motion, static_equilibrium(motion, scenario.model.initial_q).q
 
 
-def modes_at(params: CraneParameters, variant: str = "flexible", t: float = 0.0, realisation: str = "ideal",
+def modes_at(params: CraneDescription, variant: str = "flexible", t: float = 0.0, realisation: str = "ideal",
              step: float = 1e-3) -> tuple[Modes, ProgrammedMotion]:
     """Modes of the default scenario at time t of its programmed motion: at the static equilibrium for
     t = 0, else at the state (q, qd) reached by the integrator (``step``)."""

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..dynamics.chain_dynamics import CraneDynamics
 from ..dynamics.kinematics import forward_kinematics
-from ..model.parameters import CraneParameters
+from ..model.description import CraneDescription
 from .figures import pyplot
 from .modal import Modes, modes_at
 
@@ -90,7 +90,7 @@ def plot_mode_shapes(modes: Modes, dynamics: CraneDynamics, path: str | Path, co
     plt.close(fig)
 
 
-def modes_report(params: CraneParameters, variant: str, t: float, count: int, realisation: str,
+def modes_report(params: CraneDescription, variant: str, t: float, count: int, realisation: str,
                  out: str | Path) -> Path:
     """Print the table of the first ``count`` modes at time t and write their drawing; returns the PNG."""
     modes, motion = modes_at(params, variant, t, realisation)

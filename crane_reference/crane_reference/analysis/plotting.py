@@ -1,4 +1,5 @@
-"""Figure 2 of the paper: joint coordinates of the rigid and flexible models and E's path."""
+"""Figure 2 of the paper: the actuated joints' coordinates of the rigid and flexible models and E's path (for
+any crane: its actuated joints, the paper's psi2, psi(3,0), psi4)."""
 
 from __future__ import annotations
 
@@ -12,21 +13,30 @@ from .bands import CONTROLLER_BAND, controller_band
 from .figures import pyplot as plt
 
 MEAN_WINDOW = 0.1  # [s], window of the residual maximum
-COORDINATES = (("column_slew", r"$\psi^{(2)}$ [rad]"), ("boom_luff", r"$\psi^{(3,0)}$ [rad]"),
-               ("knuckle", r"$\psi^{(4)}$ [rad]"))
+PAPER_LABELS = {"column_slew": r"$\psi^{(2)}$ [rad]", "boom_luff": r"$\psi^{(3,0)}$ [rad]",
+                "knuckle": r"$\psi^{(4)}$ [rad]"}
+"""The paper's symbols for its crane's joints; another joint is labelled by its name."""
 
 
-def figure2(trajectories: list[Trajectory], ellipse: tuple[float, float], path: str | Path) -> None:
-    """Time courses of psi2, psi(3,0), psi4 for each model; with both models, the flexible-minus-rigid
-    differences in panels of their own, raw (the undamped boom rings at 70-450 Hz) and in the controller
-    band (below 10 Hz, zero phase); E's XY path with the target ellipse, z_E(t) and the constraint residual."""
+def figure2(trajectories: list[Trajectory], joints: tuple[str, ...], ellipse: tuple[float, float],
+            path: str | Path) -> None:
+    """Time courses of ``joints`` (the actuated ones; the paper's psi2, psi(3,0), psi4) for each model; with both
+    models, the flexible-minus-rigid differences in panels of their own, raw (the undamped boom rings at
+    70-450 Hz) and in the controller band (below 10 Hz, zero phase); E's XY path with the target ellipse,
+    z_E(t) and the constraint residual."""
     by_variant = {tr.variant: tr for tr in trajectories}
     both = {"rigid", "flexible"} <= by_variant.keys()
     rows = 4 if both else 2
-    fig, axes = plt.subplots(rows, 3, figsize=(15, 4.0 * rows), constrained_layout=True)
+    columns = max(len(joints), 3)
+    fig, axes = plt.subplots(rows, columns, figsize=(5 * columns, 4.0 * rows), constrained_layout=True)
     # the two models differ by milliradians: the rigid one dashed and on top, so both stay visible
     styles = {"rigid": dict(color="tab:blue", ls=(0, (4, 3)), zorder=3), "flexible": dict(color="tab:red", ls="-")}
-    for column, (name, label) in enumerate(COORDINATES):
+    for ax in axes[:-1, len(joints):].flat:
+        ax.set_visible(False)
+    for ax in axes[-1, 3:]:
+        ax.set_visible(False)
+    for column, name in enumerate(joints):
+        label = PAPER_LABELS.get(name, f"{name} [rad or m]")
         ax = axes[0, column]
         for tr in trajectories:
             ax.plot(tr.t, tr.coordinate(name), label=tr.variant, lw=2.0 if tr.variant == "rigid" else 1.2,

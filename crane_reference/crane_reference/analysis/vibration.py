@@ -1,10 +1,12 @@
-"""Vibration of the flexible boom during the programmed motion: its signals, spectra and runs.
+"""Vibration of the flexible links during the programmed motion: their signals, spectra and runs.
 
-Signals of a run (:class:`~crane_reference.motion.trajectory.Trajectory`):
+Signals of a run (:class:`~crane_reference.motion.trajectory.Trajectory`), per flexible link (the paper's
+boom):
 
-* the RFE angles psi, theta, phi of every spring-damping element of the boom;
-* the boom-tip deflection w relative to the rigid chord
-  (:func:`~crane_reference.dynamics.deflection.boom_tip_deflection`): w_y in the luffing plane, w_z horizontal;
+* the RFE angles psi, theta, phi of every spring-damping element of the link;
+* the tip deflection w relative to the rigid chord
+  (:func:`~crane_reference.dynamics.deflection.tip_deflection`): w_y in the beam's x-y plane (a boom's
+  luffing plane), w_z across it;
 * the tip torsion, the sum of the RFE twist angles (the twist of the tip element to first order).
 
 Spectra: Welch's method (scipy.signal.welch: Hann windows of 2^k samples, at least four per run, 50 %
@@ -44,10 +46,10 @@ import numpy as np
 from scipy import signal
 from scipy.ndimage import uniform_filter1d
 
-from ..dynamics.deflection import boom_tip_deflection, rfe_indices
+from ..dynamics.deflection import rfe_indices, tip_deflection
 from ..dynamics.structures import ChainData
-from ..model.chain import ACTUATED_JOINTS, ChainModel
-from ..model.parameters import CraneParameters
+from ..model.chain import ChainModel
+from ..model.description import CraneDescription
 from ..motion.integration import CUTOFF
 from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import SOLVER_FAILURES, MotionStepper, Scenario
@@ -59,15 +61,25 @@ RELATIVE_TOLERANCE = 0.01  # of the peak frequency, besides one spectral bin
 SIGNALS = {"tip_vertical": "tip deflection $w_y$ (luffing plane) [m]",
            "tip_horizontal": "tip deflection $w_z$ (horizontal) [m]",
            "tip_torsion": r"tip torsion $\sum \varphi$ [rad]"}
+"""The signals of each flexible link, named ``<link>_<key>``, with their labels."""
 MEAN_WINDOW = 0.1  # [s] moving mean that separates drift from ringing in the differences
 RUN_CHUNK = 0.25  # [s] of motion per compiled run
 
 
+def signal_labels(model: ChainModel) -> dict[str, str]:
+    """The signals of the flexible links of ``model`` (:data:`SIGNALS` per link), with their labels."""
+    return {f"{link.name}_{key}": f"{link.name} {label}" for link in model.flexible_links
+            for key, label in SIGNALS.items()}
+
+
 def deflection_signals(model: ChainModel, chain: ChainData, trajectory: Trajectory) -> dict[str, np.ndarray]:
-    """The signals of :data:`SIGNALS` over a run."""
-    w = boom_tip_deflection(model, chain, trajectory.q)
-    return {"tip_vertical": w[:, 1], "tip_horizontal": w[:, 2],
-            "tip_torsion": trajectory.q[:, rfe_indices(model, "_twist")].sum(axis=1)}
+    """The signals of :func:`signal_labels` over a run."""
+    out = {}
+    for link in model.flexible_links:
+        w = tip_deflection(model, chain, trajectory.q, link.name)
+        out.update({f"{link.name}_tip_vertical": w[:, 1], f"{link.name}_tip_horizontal": w[:, 2],
+                    f"{link.name}_tip_torsion": trajectory.q[:, rfe_indices(model, "_twist", link.name)].sum(axis=1)})
+    return out
 
 
 @dataclass(frozen=True)
@@ -190,7 +202,7 @@ class Run:
     start_modes: Modes | None
 
 
-def run(params: CraneParameters, variant: str, realisation: str, duration: float, step: float) -> Run:
+def run(params: CraneDescription, variant: str, realisation: str, duration: float, step: float) -> Run:
     """Simulate one variant and realisation from its equilibrium; a failure keeps the samples so far."""
     scenario = Scenario(params, variant)
     wall = time.perf_counter()
@@ -223,10 +235,11 @@ def moving_mean(t: np.ndarray, x: np.ndarray, window: float = MEAN_WINDOW) -> np
     return uniform_filter1d(x, max(1, round(window / float(np.median(np.diff(t))))), axis=0)
 
 
-def differences(reference: Trajectory, other: Trajectory) -> dict[str, np.ndarray]:
-    """``other`` minus ``reference`` psi2, psi(3,0), psi4 on ``other``'s times (common span)."""
+def differences(reference: Trajectory, other: Trajectory, joints: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """``other`` minus ``reference`` at ``joints`` (the actuated joints; the paper's psi2, psi(3,0), psi4) on
+    ``other``'s times (common span)."""
     keep = other.t <= min(reference.t[-1], other.t[-1]) + 1e-12
     out = {"t": other.t[keep]}
-    for name in ACTUATED_JOINTS:
+    for name in joints:
         out[name] = other.coordinate(name)[keep] - np.interp(other.t[keep], reference.t, reference.coordinate(name))
     return out

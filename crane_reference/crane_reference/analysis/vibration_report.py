@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from ..dynamics.deflection import rfe_indices
-from ..model.chain import ACTUATED_JOINTS, VARIANTS
-from ..model.parameters import CraneParameters
+from ..model.chain import VARIANTS
+from ..model.description import CraneDescription
 from ..motion.integration import CUTOFF, METHOD
 from ..motion.programmed_motion import REALISATIONS
 from ..motion.steps import ANALYSIS_STEP
@@ -20,7 +20,6 @@ from .figures import pyplot
 from .vibration import (
     MEAN_WINDOW,
     MIN_FREQUENCY,
-    SIGNALS,
     Run,
     deflection_signals,
     differences,
@@ -28,6 +27,7 @@ from .vibration import (
     modal_bands,
     moving_mean,
     run,
+    signal_labels,
     spectral_peaks,
     spectrum,
 )
@@ -37,7 +37,7 @@ def _difference_summary(d: dict[str, np.ndarray]) -> dict:
     return {"span_s": float(d["t"][-1]),
             **{name: {"max_abs_rad": float(np.max(np.abs(d[name]))),
                       "max_abs_mean_rad": float(np.max(np.abs(moving_mean(d["t"], d[name])))),
-                      "final_rad": float(d[name][-1])} for name in ACTUATED_JOINTS}}
+                      "final_rad": float(d[name][-1])} for name in d if name != "t"}}
 
 
 def _run_summary(r: Run) -> dict:
@@ -60,11 +60,12 @@ def _run_summary(r: Run) -> dict:
     return summary
 
 
-def analyze(params: CraneParameters, out: str | Path, duration: float = 10.0, step: float = ANALYSIS_STEP,
+def analyze(params: CraneDescription, out: str | Path, duration: float = 10.0, step: float = ANALYSIS_STEP,
             modal_interval: float = 0.25, realisations: tuple[str, ...] = REALISATIONS,
             log: Callable[[str], None] = print) -> dict:
     """Run both variants under each realisation, write the PNGs, ``summary.json`` and ``summary.md`` to
-    ``out`` and return the summary."""
+    ``out`` and return the summary (the joint differences at the actuated joints, the deflections of every
+    flexible link)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     runs: dict[tuple[str, str], Run] = {}
@@ -75,7 +76,8 @@ def analyze(params: CraneParameters, out: str | Path, duration: float = 10.0, st
             reached = r.trajectory.t[-1] if r.trajectory is not None else 0.0
             log(f"{realisation:>5} {variant:>8}: {reached:.3f} s in {r.wall:.1f} s wall"
                 + (f" - {r.error}" if r.error else ""))
-    summary: dict = {"duration_s": duration, "step_s": step, "method": METHOD,
+    summary: dict = {"crane": params.name, "duration_s": duration, "step_s": step, "method": METHOD,
+                     "joints": list(params.actuated), "flexible_links": [link.name for link in params.flexible_links],
                      "resolved_below_hz": CUTOFF / (2.0 * np.pi * step),
                      "runs": [_run_summary(r) for r in runs.values()], "differences": {}, "spectra": {}}
     first = runs.get((realisations[0], "flexible"))
@@ -92,7 +94,7 @@ def analyze(params: CraneParameters, out: str | Path, duration: float = 10.0, st
               if set(REALISATIONS) <= set(realisations)]
     for label, reference, other in pairs:
         if not (runs[reference].error or runs[other].error):
-            diffs[label] = differences(runs[reference].trajectory, runs[other].trajectory)
+            diffs[label] = differences(runs[reference].trajectory, runs[other].trajectory, params.actuated)
             summary["differences"][label] = _difference_summary(diffs[label])
     spectra = {}
     for realisation in realisations:
@@ -116,9 +118,10 @@ def analyze(params: CraneParameters, out: str | Path, duration: float = 10.0, st
         spectra[realisation] = result
         summary["spectra"][realisation] = entry
     _plot_deflection(runs, spectra, out / "deflection.png")
-    _plot_spectra(spectra, out / "spectra.png")
+    model = runs[realisations[0], "flexible"].motion.dynamics.model
+    _plot_spectra(spectra, signal_labels(model), out / "spectra.png")
     _plot_differences(diffs, out / "differences.png")
-    _plot_efforts(runs, out / "efforts.png")
+    _plot_efforts(runs, model, out / "efforts.png")
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     (out / "summary.md").write_text(summary_markdown(summary))
     return summary
@@ -141,11 +144,12 @@ def summary_markdown(summary: dict) -> str:
         lines.append(f"| {r['realisation']} | {r['variant']} | {r.get('simulated_s', 0.0):.3f} | "
                      f"{r.get('max_residual_m', nan):.2e} | {r.get('max_energy_balance_error_j', nan):.2e} | "
                      f"{r['wall_time_s']:.1f} | {note.strip()} |")
-    lines += ["", "## Joint differences (max |difference| [rad]; in brackets: of the 0.1 s moving mean)", "",
-              "| difference | span [s] | psi2 | psi(3,0) | psi4 |", "|---|---|---|---|---|"]
+    joints = summary["joints"]
+    lines += ["", "## Joint differences (max |difference| [rad or m]; in brackets: of the 0.1 s moving mean)", "",
+              f"| difference | span [s] | {' | '.join(joints)} |", "|---|---|" + "---|" * len(joints)]
     for label, d in summary["differences"].items():
         cells = " | ".join(f"{d[n]['max_abs_rad']:.3e} ({d[n]['max_abs_mean_rad']:.3e})"
-                           for n in ACTUATED_JOINTS)
+                           for n in joints)
         lines.append(f"| {label} | {d['span_s']:.3f} | {cells} |")
     if "modes_at_start" in summary:
         lines += ["", f"## Constrained modes at t = 0 ({summary['modes_at_start']['realisation']} constraints, "
@@ -153,7 +157,7 @@ def summary_markdown(summary: dict) -> str:
         lines += [f"| {m['mode']} | {m['frequency_hz']:.3f} | {m['growth_rate_per_s']:.3g} | {m['character']} | "
                   f"{m['bodies']} |" for m in summary["modes_at_start"]["modes"]]
     for realisation, entry in summary["spectra"].items():
-        lines += ["", f"## Dominant spectral peaks, {realisation} constraints (flexible boom; bin "
+        lines += ["", f"## Dominant spectral peaks, {realisation} constraints (flexible model; bin "
                   f"{entry['resolution_hz']:.3f} Hz, tolerance bin + 1 %)", "",
                   "| signal | peak [Hz] | explained by | modal band [Hz] | distance [Hz] | character |",
                   "|---|---|---|---|---|---|"]
@@ -163,9 +167,12 @@ def summary_markdown(summary: dict) -> str:
             lines.append(f"| {p['signal']} | {p['peak_hz']:.2f} | {by} | {band[0]:.2f} - {band[1]:.2f} | "
                          f"{p['distance_hz']:.2f} | {p['character']} |")
         largest = entry["max_abs"]
-        lines.append(f"\nMax |w_y| = {largest['tip_vertical']:.3e} m, max |w_z| = {largest['tip_horizontal']:.3e} m, "
-                     f"max |tip torsion| = {largest['tip_torsion']:.3e} rad, max |RFE angle| = "
-                     f"{entry['max_abs_rfe_angle_rad']:.3e} rad.")
+        lines.append("")
+        for link in summary["flexible_links"]:
+            lines.append(f"{link}: max |w_y| = {largest[f'{link}_tip_vertical']:.3e} m, max |w_z| = "
+                         f"{largest[f'{link}_tip_horizontal']:.3e} m, max |tip torsion| = "
+                         f"{largest[f'{link}_tip_torsion']:.3e} rad.")
+        lines.append(f"Max |RFE angle| = {entry['max_abs_rfe_angle_rad']:.3e} rad.")
     return "\n".join(lines) + "\n"
 
 
@@ -179,16 +186,18 @@ def _plot_deflection(runs: dict, spectra: dict, path: Path) -> None:
         r = runs[realisation, "flexible"]
         tr, model = r.trajectory, r.motion.dynamics.model
         signals = spectra[realisation]["signals"]
-        for ax, name, label in zip(axes[:2, c], ("tip_vertical", "tip_horizontal"),
-                                   ("$w_y$ (luffing plane)", "$w_z$ (horizontal)"), strict=True):
-            ax.plot(tr.t, 1e3 * signals[name], lw=0.5, color="tab:blue")
-            ax.set_ylabel(f"boom-tip deflection {label} [mm]", fontsize="small")
-        axes[0, c].set_title(f"{realisation} constraints, flexible boom")
+        for ax, key, label in zip(axes[:2, c], ("tip_vertical", "tip_horizontal"),
+                                  ("$w_y$ (luffing plane)", "$w_z$ (horizontal)"), strict=True):
+            for link in model.flexible_links:
+                ax.plot(tr.t, 1e3 * signals[f"{link.name}_{key}"], lw=0.5, label=link.name)
+            ax.set_ylabel(f"tip deflection {label} [mm]", fontsize="small")
+            ax.legend(fontsize="x-small")
+        axes[0, c].set_title(f"{realisation} constraints, flexible model")
         for ax, suffix, label in zip(axes[2:, c], ("_bend_vertical", "_bend_lateral", "_twist"),
                                      (r"bending $\psi$ (luffing plane)", r"bending $\theta$ (horizontal)",
                                       r"torsion $\varphi$"), strict=True):
             for k in rfe_indices(model, suffix):
-                ax.plot(tr.t, tr.q[:, k], lw=0.5, label=model.joint_names[k].split("_")[1])
+                ax.plot(tr.t, tr.q[:, k], lw=0.5, label=model.joint_names[k].removesuffix(suffix))
             ax.set_ylabel(f"RFE {label} [rad]")
             ax.legend(fontsize="x-small", ncol=5)
         axes[-1, c].set_xlabel("t [s]")
@@ -198,17 +207,17 @@ def _plot_deflection(runs: dict, spectra: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def _plot_spectra(spectra: dict, path: Path) -> None:
-    """PSDs of the deflection signals with the bands of the resolved modes (shaded: min-max over the run)
-    and the peaks."""
+def _plot_spectra(spectra: dict, labels: dict[str, str], path: Path) -> None:
+    """PSDs of the deflection signals (``labels``: name -> label) with the bands of the resolved modes (shaded:
+    min-max over the run) and the peaks."""
     plt = pyplot
     columns = list(spectra)
-    fig, axes = plt.subplots(len(SIGNALS), max(len(columns), 1), figsize=(8 * max(len(columns), 1), 10),
+    fig, axes = plt.subplots(len(labels), max(len(columns), 1), figsize=(8 * max(len(columns), 1), 3.4 * len(labels)),
                              squeeze=False, constrained_layout=True)
     for c, realisation in enumerate(columns):
         result = spectra[realisation]
         bands = result["bands"]
-        for ax, (name, label) in zip(axes[:, c], SIGNALS.items(), strict=True):
+        for ax, (name, label) in zip(axes[:, c], labels.items(), strict=True):
             spec = result["spectra"][name]
             ax.semilogy(spec.frequency, spec.psd, lw=0.8, color="k")
             top = min(spec.frequency[-1], 1.2 * max(float(np.max(result["peaks"][name], initial=0.0)), 250.0))
@@ -239,36 +248,38 @@ def _label_time_axes(ax, title: str, ylabel: str, **title_style: str) -> None:
 
 
 def _plot_differences(diffs: dict, path: Path) -> None:
-    """Differences of psi2, psi(3,0), psi4 over time (raw grey, 0.1 s moving mean black), one row per pair
-    (flexible - rigid per realisation, servo - ideal per model)."""
+    """Differences at the actuated joints (the paper's psi2, psi(3,0), psi4) over time (raw grey, 0.1 s moving
+    mean black), one row per pair (flexible - rigid per realisation, servo - ideal per model)."""
     plt = pyplot
     rows = max(len(diffs), 1)
-    fig, axes = plt.subplots(rows, len(ACTUATED_JOINTS), figsize=(15, 3.8 * rows), squeeze=False,
+    joints = [name for name in next(iter(diffs.values()), {"t": None}) if name != "t"]
+    fig, axes = plt.subplots(rows, max(len(joints), 1), figsize=(5 * max(len(joints), 1), 3.8 * rows), squeeze=False,
                              constrained_layout=True)
-    labels = (r"$\psi^{(2)}$", r"$\psi^{(3,0)}$", r"$\psi^{(4)}$")
     for r, (pair, d) in enumerate(diffs.items()):
-        for ax, name, label in zip(axes[r], ACTUATED_JOINTS, labels, strict=True):
+        for ax, name in zip(axes[r], joints, strict=True):
             ax.plot(d["t"], d[name], color="0.7", lw=0.5, label="raw")
             ax.plot(d["t"], moving_mean(d["t"], d[name]), color="k", lw=1.2, label=f"{MEAN_WINDOW:g} s mean")
-            _label_time_axes(ax, f"{label}: {pair}", "[rad]", fontsize="medium")
+            _label_time_axes(ax, f"{name}: {pair}", "[rad or m]", fontsize="medium")
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
-def _plot_efforts(runs: dict, path: Path) -> None:
-    """Generalized force of the constraint realisation on the luff and knuckle coordinates over the
-    completed runs: the servo torques tau, and for ideal constraints the rows of A^T lambda (the moments
-    of the ideal force at E about those joints)."""
+def _plot_efforts(runs: dict, model, path: Path) -> None:
+    """Generalized force of the constraint realisation on the dependent coordinates (the paper's luff and
+    knuckle) over the completed runs: the servo torques tau, and for ideal constraints the rows of A^T lambda
+    (the moments of the ideal force at E about those joints)."""
     plt = pyplot
-    fig, axes = plt.subplots(1, 2, figsize=(14, 4.5), constrained_layout=True)
+    dependent = [model.joint_names[k] for k in model.dependent_joints]
+    fig, axes = plt.subplots(1, len(dependent), figsize=(7 * len(dependent), 4.5), squeeze=False,
+                             constrained_layout=True)
     completed = sorted(((v == "rigid", r, v), run_) for (r, v), run_ in runs.items() if not run_.error)
     for (rigid, realisation, variant), r in completed:  # flexible first, rigid dashed on top
         tr = r.trajectory
-        for ax, name in zip(axes, ("boom_luff", "knuckle"), strict=True):
+        for ax, name in zip(axes[0], dependent, strict=True):
             k = tr.joint_names.index(name)
             ax.plot(tr.t, tr.constraint_forces[:, k], lw=0.6 if not rigid else 1.2, ls="--" if rigid else "-",
                     label=f"{realisation}, {variant}")
-    for ax, name in zip(axes, ("luff joint psi(3,0)", "knuckle psi4"), strict=True):
-        _label_time_axes(ax, f"constraint realisation's generalized force on the {name}", "[N m]")
+    for ax, name in zip(axes[0], dependent, strict=True):
+        _label_time_axes(ax, f"constraint realisation's generalized force on {name}", "[N m or N]")
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -4,7 +4,7 @@
 
 of the rigid crane along its programmed motion (the same task and realisation as the reference; for a
 flexible crane the rigid crane's own reference, whose accelerations carry no boom vibration), with Q
-holding gravity, the support springs, damping and the column drive as the plant has it.  These are the
+holding gravity, the support springs, damping and the drive as the plant has it.  These are the
 torques that move the rigid crane as the reference does, as far as actuators on these joints can: for
 a reference realised by the luff and knuckle torques (servo-constraints) the other rows balance and
 tau_ff is exact on the rigid crane; under the ideal constraints the force at E also acts on the base,
@@ -17,9 +17,9 @@ import numpy as np
 
 from ..dynamics.chain_dynamics import CraneDynamics
 from ..dynamics.kernels import imbalance_rows
-from ..model.chain import ACTUATED_JOINTS, build_model
+from ..model.chain import build_model
+from ..model.description import CraneDescription
 from ..model.drive import make_drive
-from ..model.parameters import CraneParameters
 
 FEEDFORWARDS = ("none", "rigid")
 
@@ -27,15 +27,15 @@ FEEDFORWARDS = ("none", "rigid")
 class RigidInverseDynamics:
     """tau_ff of the module docstring for references over the coordinates ``joint_names``."""
 
-    def __init__(self, params: CraneParameters, joint_names: tuple[str, ...]):
+    def __init__(self, params: CraneDescription, joint_names: tuple[str, ...]):
         model = build_model(params, "rigid")
-        self.dynamics = CraneDynamics(model, make_drive(params.drive, params.initial.column), params.damping)
+        self.dynamics = CraneDynamics(model, make_drive(params.drive, params.drive_start))
         self._columns = np.array([joint_names.index(name) for name in model.joint_names], dtype=np.int64)
-        self._actuated = np.array([model.index(name) for name in ACTUATED_JOINTS], dtype=np.int64)
+        self._actuated = np.array([model.index(name) for name in model.actuated_joints], dtype=np.int64)
 
     def __call__(self, t: float | np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                  left_limit: bool = False) -> np.ndarray:
-        """tau_ff [N m] (order of :data:`~.plant.ACTUATED_JOINTS`; (N, 3) for N rows) at the reference's
+        """tau_ff [N m or N] (order of the actuated joints; (N, a) for N rows) at the reference's
         (q, qd, qdd) at t [s] (or rows (N, n) at times (N,); with ``left_limit`` the drive just before t: at a
         jump of its torque, with the qdd from before it), by O(n) inverse dynamics
         (:func:`~crane_reference.dynamics.kernels.imbalance_rows`)."""

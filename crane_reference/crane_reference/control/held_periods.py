@@ -52,7 +52,7 @@ class HeldPeriods:
         return float(self.carry.clock[0])
 
     def advance(self, efforts: np.ndarray) -> None:
-        """Hold the efforts u [N m] (order of :data:`~crane_reference.model.chain.ACTUATED_JOINTS`) over the next
+        """Hold the efforts u [N m or N] (order of the actuated joints) over the next
         period; an :class:`~crane_reference.motion.integration.IntegrationError` (or ProjectionError) if a step
         fails, the plant then staying where it was."""
         i = self.count - self._planned

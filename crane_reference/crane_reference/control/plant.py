@@ -2,8 +2,9 @@
 
 The crane of a config (supports, RFE boom, payload, damping, column drive) without programmed
 constraints: every coordinate is independent and nothing holds E but the crane itself, so the payload
-loads the boom and the base.  Actuators add torques tau [N m] on :data:`ACTUATED_JOINTS` (positive along
-+q); on the column they act beside its drive (for a flexible drive that is the same as offsetting the
+loads the boom and the base.  Actuators add torques tau [N m, or N on a prismatic joint] on the model's
+actuated joints (``ChainModel.actuated_joints``, positive along +q); on the drive's joint they act beside the
+drive (for a flexible drive that is the same as offsetting the
 motor angle by tau / s_dr).  The plant is integrated with the package's integrator
 (:mod:`crane_reference.motion.integration`) through an :class:`~crane_reference.model.drive.Actuated`
 drive: a command holds over one controller period, linear in time on it, and the integrator restarts at
@@ -20,9 +21,9 @@ import numpy as np
 from ..dynamics.chain_dynamics import CraneDynamics
 from ..dynamics.closed_loop import closed_loop_run
 from ..dynamics.structures import ACCOUNTS, CONVERGED, LoopRows
-from ..model.chain import ACTUATED_JOINTS, build_model
+from ..model.chain import build_model
+from ..model.description import CraneDescription
 from ..model.drive import Actuated, make_drive
-from ..model.parameters import CraneParameters
 from ..motion.constraints import ConstraintSet
 from ..motion.equilibrium import static_equilibrium
 from ..motion.integration import StepState
@@ -33,30 +34,32 @@ from .controller import JointController, JointGains, bandwidth_gains
 
 
 def servo_motion(scenario: Scenario) -> ProgrammedMotion:
-    """The scenario's task realised by the luff and knuckle torques (servo-constraints) instead of a force
-    at E: the motion an actuated crane can follow exactly where that motion exists (the rigid boom)."""
+    """The scenario's task realised by the dependent joints' torques (the paper's luff and knuckle;
+    servo-constraints) instead of a force at E: the motion an actuated crane can follow exactly where that motion
+    exists (the rigid boom)."""
     return ProgrammedMotion(scenario.dynamics, scenario.motion.constraints, realisation="servo")
 
 
 @dataclass(frozen=True)
 class HeldStart:
-    """A start of the plant at rest: q and the actuator torques [N m] (order of :data:`ACTUATED_JOINTS`)
-    that hold it."""
+    """A start of the plant at rest: q and the actuator torques [N m or N] (order of the model's actuated
+    joints) that hold it."""
 
     q: np.ndarray
     torques: np.ndarray
 
 
 def held_start(scenario: Scenario) -> HeldStart:
-    """Static equilibrium with E on the task's start point, the payload carried by the crane: the luff and
-    knuckle torques of the servo-constraint equilibrium and the column's holding torque."""
+    """Static equilibrium with E on the task's start point, the payload carried by the crane: the dependent
+    joints' torques of the servo-constraint equilibrium (the paper's luff and knuckle) and the holding torques
+    of the other actuated joints (the paper's column)."""
     motion = servo_motion(scenario)
     equilibrium = static_equilibrium(motion, scenario.model.initial_q)
     solution = motion.solve(0.0, equilibrium.q, np.zeros_like(equilibrium.q), left_limit=True)
     names = scenario.model.joint_names
-    torques = {names[j]: float(tau) for j, tau in zip(motion.dependent, solution.reactions, strict=True)}
-    torques[names[scenario.model.drive_joint]] = equilibrium.holding_torque
-    return HeldStart(equilibrium.q, np.array([torques[name] for name in ACTUATED_JOINTS]))
+    torques = dict(equilibrium.holding_forces)
+    torques.update({names[j]: float(tau) for j, tau in zip(motion.dependent, solution.reactions, strict=True)})
+    return HeldStart(equilibrium.q, np.array([torques[name] for name in scenario.model.actuated_joints]))
 
 
 BANDWIDTH = 2.0
@@ -81,24 +84,24 @@ def default_gains(scenario: Scenario, joints: Sequence[str]) -> list[JointGains]
 
 class Plant:
     """The actuated crane of ``params`` (``variant`` flexible or rigid) from ``start`` at t0, integrated with
-    the step ``step`` [s]; the joint drives' velocity loops add ``joint_damping`` kd [N m s/rad] (order of
-    :data:`ACTUATED_JOINTS`): the actuator torque is the command minus kd qd.  With ``keep`` False the run is
+    the step ``step`` [s]; the joint drives' velocity loops add ``joint_damping`` kd [N m s/rad] (order of the
+    model's actuated joints): the actuator torque is the command minus kd qd.  With ``keep`` False the run is
     not kept (a plant that runs for ever: no :meth:`trajectory`)."""
 
-    def __init__(self, params: CraneParameters, variant: str, start: HeldStart, step: float,
+    def __init__(self, params: CraneDescription, variant: str, start: HeldStart, step: float,
                  joint_damping: np.ndarray | None = None, t0: float = 0.0, keep: bool = True):
         self.model = build_model(params, variant)
-        self.drive = Actuated(make_drive(params.drive, params.initial.column), self.model.dof)
-        self.actuated = np.array([self.model.index(name) for name in ACTUATED_JOINTS], dtype=np.int64)
-        self.joint_damping = np.zeros(len(ACTUATED_JOINTS)) if joint_damping is None else np.asarray(joint_damping)
+        self.drive = Actuated(make_drive(params.drive, params.drive_start), self.model.dof)
+        self.actuated = np.array([self.model.index(name) for name in self.model.actuated_joints], dtype=np.int64)
+        self.joint_damping = np.zeros(self.actuated.size) if joint_damping is None else np.asarray(joint_damping)
         damping = np.zeros(self.model.dof)
         damping[self.actuated] = self.joint_damping
-        self.dynamics = CraneDynamics(self.model, self.drive, params.damping, damping)
+        self.dynamics = CraneDynamics(self.model, self.drive, damping)
         motion = ProgrammedMotion(self.dynamics, ConstraintSet(()), dependent=())
         self.stepper = MotionStepper(motion, t0, start.q, np.zeros(self.model.dof), step)
         self.keep = keep
         self._samples = [stack_samples([self.stepper.sample])]
-        self._torque_rows = [np.zeros((1, len(ACTUATED_JOINTS)))]
+        self._torque_rows = [np.zeros((1, self.actuated.size))]
 
     def actuate(self, end: float, torque_start: np.ndarray, torque_end: np.ndarray) -> None:
         """Command the joint drives [N m] from now to ``end`` [s] (on the step grid), linear from

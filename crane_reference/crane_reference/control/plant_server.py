@@ -1,8 +1,8 @@
 """The plant node's ROS-free core: the actuated crane (:class:`~.plant.Plant`) driven by joint effort
 commands one control period at a time, as ros2_control's forward command controllers drive a robot.
 
-Commands.  A command is one effort u [N m] per joint of ``joints`` (a permutation of
-:data:`~crane_reference.model.chain.ACTUATED_JOINTS`), in that order, as a forward command controller's
+Commands.  A command is one effort u [N m, or N on a prismatic joint] per joint of ``joints`` (a permutation
+of the crane's actuated joints, ``ChainModel.actuated_joints``), in that order, as a forward command controller's
 ``joints`` order its std_msgs/Float64MultiArray.  Each joint's drive closes a velocity loop, so the
 torque it applies is
 
@@ -17,8 +17,8 @@ applied: the previous command goes on.
 
 Timeout.  When no command has been accepted for ``command_timeout`` s (of the caller's clock: the
 plant node's wall clock in real time), the plant applies the *hold command*: the efforts that balance
-gravity, the springs and the column drive at the actuated joints in the configuration q_h where the
-timeout began, u(t) = (h(q_h, 0) - Q(q_h, t))[joints] (the column drive's torque or motor angle goes on
+gravity, the springs and the drive at the actuated joints in the configuration q_h where the
+timeout began, u(t) = (h(q_h, 0) - Q(q_h, t))[joints] (the drive's torque or motor angle goes on
 with time); with the drives' damping the crane comes to rest near q_h, as a drive's hold does (its
 flexible boom and supports ring out).  The next accepted command ends it.
 
@@ -39,9 +39,9 @@ from ..dynamics.cache import WarmUp, cache_counts
 from ..dynamics.deflection import TipDeflection
 from ..dynamics.kernels import imbalance_rows
 from ..dynamics.kinematics import quaternion
-from ..model.chain import ACTUATED_JOINTS, VARIANTS
+from ..model.chain import VARIANTS
 from ..model.config import load_config
-from ..model.parameters import CraneParameters
+from ..model.description import CraneDescription
 from ..motion.simulation import Scenario
 from ..motion.steps import PLANT_STEP
 from .held_periods import HeldPeriods
@@ -55,14 +55,15 @@ class CommandRefusedError(ValueError):
 @dataclass(frozen=True)
 class PlantSettings:
     """The plant's settings: the crane ``variant``, the integrator ``step`` [s], the control ``rate`` [Hz] (a
-    whole number of steps per period), the command's ``joints`` (a permutation of ACTUATED_JOINTS), the
+    whole number of steps per period), the command's ``joints`` (a permutation of the crane's actuated joints;
+    None: those, in the crane's order), the
     drives' damping kd per joint of ``joints`` [N m s/rad] (None: :func:`default_drive_damping`), the
     ``command_timeout`` [s] and whether the state gives ``all_coordinates`` or the ``joints`` only."""
 
     variant: str = "flexible"
     step: float = PLANT_STEP
     rate: float = 1000.0
-    joints: tuple[str, ...] = ACTUATED_JOINTS
+    joints: tuple[str, ...] | None = None
     drive_damping: tuple[float, ...] | None = None
     command_timeout: float = 0.1
     all_coordinates: bool = False
@@ -70,8 +71,6 @@ class PlantSettings:
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
             raise ValueError(f"variant = {self.variant!r}: must be one of {', '.join(VARIANTS)}")
-        if sorted(self.joints) != sorted(ACTUATED_JOINTS):
-            raise ValueError(f"joints = {list(self.joints)}: must name each of {', '.join(ACTUATED_JOINTS)} once")
         for name in ("step", "rate", "command_timeout"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
@@ -79,10 +78,20 @@ class PlantSettings:
         if not abs(self.steps_per_period * self.step * self.rate - 1.0) <= 1e-9:
             raise ValueError(f"rate = {self.rate} Hz with step = {self.step} s: the control period must be a "
                              "whole number of integrator steps")
-        if self.drive_damping is not None and (len(self.drive_damping) != len(self.joints) or not all(
+        if self.drive_damping is not None and (
+                (self.joints is not None and len(self.drive_damping) != len(self.joints)) or not all(
                 math.isfinite(kd) and kd >= 0.0 for kd in self.drive_damping)):
             raise ValueError(f"drive_damping = {list(self.drive_damping)}: must be one finite number >= 0 "
-                             f"N m s/rad per joint of {list(self.joints)}")
+                             f"N m s/rad per joint of {list(self.joints or ['the actuated joints'])}")
+
+    def command_joints(self, actuated: Sequence[str]) -> tuple[str, ...]:
+        """The command's joints for a crane whose actuated joints are ``actuated``: ``joints``, checked to name
+        each of them once, or ``actuated`` itself."""
+        if self.joints is None:
+            return tuple(actuated)
+        if sorted(self.joints) != sorted(actuated):
+            raise ValueError(f"joints = {list(self.joints)}: must name each of {', '.join(actuated)} once")
+        return self.joints
 
     @property
     def steps_per_period(self) -> int:
@@ -104,8 +113,8 @@ def default_drive_damping(scenario: Scenario, joints: Sequence[str]) -> tuple[fl
 class PlantState:
     """The plant at time ``t`` [s] (from its start): q, qd and the actuator ``effort`` u - kd qd [N m] of the
     published coordinates (:attr:`PlantServer.published`; effort 0 where no actuator acts), E's
-    ``ee_position`` [m] and ``ee_quaternion`` (x, y, z, w) in the world frame {0}, the boom tip's
-    ``deflection`` [m] in the first boom element's frame (:mod:`~crane_reference.dynamics.deflection`; zero on
+    ``ee_position`` [m] and ``ee_quaternion`` (x, y, z, w) in the world frame {0}, the first flexible link's
+    tip ``deflection`` [m] in its first element's frame (:mod:`~crane_reference.dynamics.deflection`; zero on
     the rigid boom) and whether the hold command acts (``holding``)."""
 
     t: float
@@ -119,32 +128,38 @@ class PlantState:
 
 
 class PlantServer:
-    """The crane ``params`` under the commands of the module docstring, started at rest at its held start."""
+    """The crane ``params`` under the commands of the module docstring, started at rest at its held start
+    (a ValueError names a setting that does not fit the crane)."""
 
-    def __init__(self, params: CraneParameters, settings: PlantSettings):
+    def __init__(self, params: CraneDescription, settings: PlantSettings):
         self.settings = settings
         scenario = Scenario(params, settings.variant)
+        actuated = scenario.model.actuated_joints
+        self.joints = settings.command_joints(actuated)
+        """The command's joints, in their order."""
         start = held_start(scenario)
-        self.order = np.array([ACTUATED_JOINTS.index(name) for name in settings.joints], dtype=np.int64)
-        """Where each of the settings' ``joints`` is in ACTUATED_JOINTS."""
-        damping = settings.drive_damping or default_drive_damping(scenario, settings.joints)
+        self.order = np.array([actuated.index(name) for name in self.joints], dtype=np.int64)
+        """Where each of :attr:`joints` is among the crane's actuated joints."""
+        damping = settings.drive_damping or default_drive_damping(scenario, self.joints)
         self.drive_damping = np.asarray(damping, dtype=float)
-        """kd per joint of the settings' ``joints`` [N m s/rad]."""
-        actuated_damping = np.empty(len(ACTUATED_JOINTS))
+        """kd per joint of :attr:`joints` [N m s/rad]."""
+        actuated_damping = np.empty(len(actuated))
         actuated_damping[self.order] = self.drive_damping
         self.plant = Plant(params, settings.variant, start, settings.step, actuated_damping, keep=False)
         """The crane at its start (:attr:`periods` carries it on)."""
         self.periods = HeldPeriods(self.plant, settings.period)
         """The control periods done and the crane's state after them."""
         model = self.plant.model
-        self.published = model.joint_names if settings.all_coordinates else settings.joints
+        self.published = model.joint_names if settings.all_coordinates else self.joints
         """The coordinates of :class:`PlantState` (q, qd, effort), by name."""
         self._published = np.array([model.index(name) for name in self.published], dtype=np.int64)
-        luff = model.index("boom_luff")
-        self.deflection_frame = next(body.name for body in model.bodies if body.joint == luff)
-        """The frame of the tip deflection: the URDF link of the first boom element."""
-        self._deflection = TipDeflection(model, self.plant.dynamics.chain) if settings.variant == "flexible" else None
-        self._command = start.torques.copy()  # u in the order of ACTUATED_JOINTS
+        flexible = model.flexible_links[0] if model.flexible_links else None
+        self.deflection_frame = (next(body.name for body in model.bodies if body.joint == flexible.root)
+                                 if flexible is not None else "world")
+        """The frame of the tip deflection: the URDF link of the first flexible link's first element."""
+        self._deflection = (TipDeflection(model, self.plant.dynamics.chain)
+                            if settings.variant == "flexible" and flexible is not None else None)
+        self._command = start.torques.copy()  # u in the order of the actuated joints
         self._last_command = -math.inf  # when the last command was accepted [s, the caller's clock]
         self._held: np.ndarray | None = None  # q_h while the hold command acts
         self.accepted = 0
@@ -161,10 +176,10 @@ class PlantServer:
         self.state()
 
     def command(self, values: Sequence[float], now: float) -> None:
-        """Accept the efforts ``values`` [N m] (order of the settings' ``joints``) received at ``now`` [s, the
+        """Accept the efforts ``values`` [N m] (order of :attr:`joints`) received at ``now`` [s, the
         caller's clock]; they act from the next :meth:`tick`.  :class:`CommandRefusedError` (counted) for a
         wrong length, NaN or inf."""
-        joints = self.settings.joints
+        joints = self.joints
         u = np.asarray(values, dtype=float)
         reason = None
         if u.ndim != 1 or u.size != len(joints):
@@ -176,7 +191,7 @@ class PlantServer:
             self.refused += 1
             self.last_refusal, self.refused_last = reason, True
             raise CommandRefusedError(reason)
-        self._command = np.empty(len(ACTUATED_JOINTS))
+        self._command = np.empty(self.order.size)
         self._command[self.order] = u
         self._last_command = now
         self._held = None
@@ -224,7 +239,7 @@ class PlantServer:
         return self._held is not None
 
     def hold_efforts(self, q: np.ndarray) -> np.ndarray:
-        """u = (h(q, 0) - Q(q, t)) at the actuated joints (order of ACTUATED_JOINTS) [N m], t now: the efforts
+        """u = (h(q, 0) - Q(q, t)) at the actuated joints (in the crane's order) [N m or N], t now: the efforts
         that hold the configuration q at rest."""
         plant = self.plant
         q = np.ascontiguousarray(q, dtype=float)[None, :]

@@ -9,7 +9,6 @@ import numpy as np
 
 from ..model.chain import ChainModel
 from ..model.drive import Drive
-from ..model.parameters import Damping
 from .structures import ChainData
 from .terms import chain_terms, end_effector_jacobian, end_effector_poses, energy_accounts, generalized_forces
 
@@ -46,15 +45,13 @@ def chain_data(model: ChainModel, damping_matrix: np.ndarray) -> ChainData:
 
 class CraneDynamics:
     """Evaluates M, h, Q and the end-effector kinematics of a :class:`ChainModel` driven by ``drive``,
-    with Rayleigh ``damping`` (D = beta_sup K_sup + beta_boom K_boom) plus ``joint_damping`` (n,)
+    with the model's dampers D (:attr:`ChainModel.damping_matrix`) plus ``joint_damping`` (n,)
     [N m s/rad or N s/m] on the diagonal (e.g. the velocity loops of joint drives; none by default)."""
 
-    def __init__(self, model: ChainModel, drive: Drive, damping: Damping | None = None,
-                 joint_damping: np.ndarray | None = None):
+    def __init__(self, model: ChainModel, drive: Drive, joint_damping: np.ndarray | None = None):
         self.model = model
         self.drive = drive
-        damping = damping or Damping()
-        self.damping_matrix = damping.support * model.support_stiffness + damping.boom * model.boom_stiffness
+        self.damping_matrix = model.damping_matrix
         if joint_damping is not None:
             self.damping_matrix = self.damping_matrix + np.diag(joint_damping)
         self.chain = chain_data(model, self.damping_matrix)

@@ -1,11 +1,12 @@
-"""The boom tip's deflection relative to its rigid chord, in the frame of the first boom element (the frame
-after the luff joint: x along the unbent boom, y up in the luffing plane, z along the luff axis):
+"""A flexible link's tip deflection relative to its rigid chord, in the frame of the link's first element (the
+frame after the link's joint: x along the unbent beam; for the paper's boom y up in the luffing plane and z
+along the luff axis):
 
-    w = R_0^T (r_tip(q) - r_tip(q with every RFE angle set to 0)),
+    w = R_0^T (r_tip(q) - r_tip(q with the link's RFE angles set to 0)),
 
-r_tip the origin of the knuckle frame; R_0 is the same in both terms because the RFE joints come after the
-luff joint.  w_y is the deflection in the luffing plane, w_z the horizontal one, w_x the (second-order)
-shortening.
+r_tip the beam's end (on its last element); R_0 is the same in both terms because the RFE joints come after
+the link's joint.  w_y is the deflection in the beam's x-y plane (the luffing plane of a boom), w_z the one
+across it, w_x the (second-order) shortening.
 """
 
 from __future__ import annotations
@@ -13,43 +14,59 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..model.chain import ChainModel
+from ..model.chain import ChainModel, FlexibleLink
 from .kinematics import forward_kinematics
 from .structures import ChainData
 
 
-def rfe_indices(model: ChainModel, suffix: str = "") -> np.ndarray:
-    """Indices of the boom's RFE angles (all, or those whose name ends with ``suffix``)."""
-    return np.array([k for k, name in enumerate(model.joint_names)
-                     if name.startswith("boom_sde") and name.endswith(suffix)], dtype=np.int64)
+def flexible_link(model: ChainModel, name: str | None = None) -> FlexibleLink:
+    """The flexible link called ``name`` (by default the first, the paper's boom); ValueError if there is none."""
+    for link in model.flexible_links:
+        if name is None or link.name == name:
+            return link
+    known = ", ".join(link.name for link in model.flexible_links) or "none"
+    raise ValueError(f"flexible link {name!r}: the crane's flexible links are {known}")
+
+
+def rfe_indices(model: ChainModel, suffix: str = "", link: str | None = None) -> np.ndarray:
+    """Indices of the RFE angles of every flexible link, or of ``link``'s (all, or those whose name ends with
+    ``suffix``)."""
+    links = model.flexible_links if link is None else (flexible_link(model, link),)
+    indices = [k for each in links for k in each.springs if model.joints[k].name.endswith(suffix)]
+    return np.array(sorted(indices), dtype=np.int64)
 
 
 class TipDeflection:
-    """w of the module docstring for the chain of ``model`` (``chain`` is ``CraneDynamics.chain``)."""
+    """w of the module docstring for the flexible link ``link`` (default the first) of ``model`` (``chain`` is
+    ``CraneDynamics.chain``)."""
 
-    def __init__(self, model: ChainModel, chain: ChainData):
-        self._arguments = (rfe_indices(model), model.index("boom_luff"), model.index("knuckle"), chain.kinds,
-                           chain.axes, chain.origins)
+    def __init__(self, model: ChainModel, chain: ChainData, link: str | None = None):
+        flexible = flexible_link(model, link)
+        self._arguments = (flexible.springs, flexible.root, flexible.last, np.asarray(flexible.tip, dtype=float),
+                           chain.kinds, chain.axes, chain.origins)
 
     def __call__(self, q: np.ndarray) -> np.ndarray:
         """w (N, 3) [m] for q (N, n) (one row for q (n,))."""
         return _deflections(np.ascontiguousarray(np.atleast_2d(q), dtype=float), *self._arguments)
 
 
-def boom_tip_deflection(model: ChainModel, chain: ChainData, q: np.ndarray) -> np.ndarray:
-    """w (N, 3) [m] for q (N, n) (one row for q (n,)), see the module docstring; ``chain`` is
-    ``CraneDynamics.chain``."""
-    return TipDeflection(model, chain)(q)
+def tip_deflection(model: ChainModel, chain: ChainData, q: np.ndarray, link: str | None = None) -> np.ndarray:
+    """w (N, 3) [m] of the flexible link ``link`` (default the first) for q (N, n) (one row for q (n,)), see the
+    module docstring; ``chain`` is ``CraneDynamics.chain``."""
+    return TipDeflection(model, chain, link)(q)
 
 
 @njit(cache=True, nogil=True)
-def _deflections(q, rfe, luff, tip, kinds, axes, origins):
+def _deflections(q, rfe, root, last, tip, kinds, axes, origins):
     out = np.empty((q.shape[0], 3))
     for i in range(q.shape[0]):
         T, _ = forward_kinematics(q[i], kinds, axes, origins)
         chord = q[i].copy()
         chord[rfe] = 0.0
         T0, _ = forward_kinematics(chord, kinds, axes, origins)
-        for a in range(3):  # R_0^T (r_tip - r_tip of the chord)
-            out[i, a] = sum([T[luff, b, a] * (T[tip, b, 3] - T0[tip, b, 3]) for b in range(3)])
+        gap = np.empty(3)  # r_tip - r_tip of the chord
+        for b in range(3):
+            gap[b] = T[last, b, 3] - T0[last, b, 3] + sum([(T[last, b, c] - T0[last, b, c]) * tip[c] for c in range(3)])
+        for a in range(3):  # R_0^T gap
+            out[i, a] = sum([T[root, b, a] * gap[b] for b in range(3)])
     return out

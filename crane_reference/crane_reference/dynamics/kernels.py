@@ -134,10 +134,11 @@ def project_positions(q, k: Coefficients, holonomic_dependent, chain: ChainData,
 
 
 @njit(cache=True, nogil=True)
-def held_points(q, points, k: Coefficients, holonomic_dependent, chain: ChainData, tolerance, max_iterations):
+def held_points(q, points, k: Coefficients, holonomic_dependent, chain: ChainData, slew, tolerance, max_iterations):
     """E held at each of ``points`` (N, 3) [m] in turn on the position constraints ``k``, by continuation: each
-    from the solution at the point before (the first from ``q``) with the column azimuth q[drive_joint] set to
-    the point's atan2(y, x) and q_hd from :func:`project_positions` (exact frames).  Returns the solution at the
+    from the solution at the point before (the first from ``q``) with the slew joint's angle set to the point's
+    azimuth (``slew`` = (joint, sign, offset) of :class:`~crane_reference.motion.simulation.Slew`: q[joint] =
+    sign (atan2(y, x) - offset)) and q_hd from :func:`project_positions` (exact frames).  Returns the solution at the
     last point held and, per point, whether Newton converged (a singular K_dc counts as not converged), E's
     position there and the smallest singular value of K_dc = Phi_p C[:, hd]; it stops at the first point not
     held (the rows from there on False and NaN)."""
@@ -148,7 +149,7 @@ def held_points(q, points, k: Coefficients, holonomic_dependent, chain: ChainDat
     q = q.copy()
     for i in range(count):
         trial = q.copy()
-        trial[chain.drive_joint] = np.arctan2(points[i, 1], points[i, 0])
+        trial[int(slew[0])] = slew[1] * (np.arctan2(points[i, 1], points[i, 0]) - slew[2])
         try:
             at = project_positions(trial, k, holonomic_dependent, chain, tolerance, max_iterations)
         except Exception:  # numba catches no narrower class: a singular K_dc

@@ -38,8 +38,8 @@ from rosbags.interfaces import Connection, Qos, QosDurability, QosHistory, QosLi
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 
+from ..model.description import CraneDescription
 from ..model.drive import column_drive
-from ..model.parameters import CraneParameters
 from ..model.units import NANOSECONDS
 from ..motion.steps import ONLINE_STEP
 from ..stream.health import Level
@@ -253,7 +253,7 @@ class ReferenceBag:
 # --- offline export of the reference ---------------------------------------------------------------
 
 
-def node_stream(config: CraneParameters, variant: str = "flexible", step: float = ONLINE_STEP) -> ReferenceStream:
+def node_stream(config: CraneDescription, variant: str = "flexible", step: float = ONLINE_STEP) -> ReferenceStream:
     """The stream the node builds for ``config`` with its parameters at their defaults (the column drive
     made as the node makes it, so that the motion is the same to the bit)."""
     return ReferenceStream(config, variant, step, drive=column_drive(config))

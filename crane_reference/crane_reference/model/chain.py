@@ -1,6 +1,11 @@
-"""The crane as a serial kinematic chain of one-DOF joints, built from :class:`CraneParameters`.
+"""The crane as a serial kinematic chain of one-DOF joints (:class:`ChainModel`), built from a
+:class:`~crane_reference.model.description.CraneDescription`.
 
-Every generalized coordinate of eq. (1) is one joint of the chain, in the paper's order::
+Every generalized coordinate of eq. (1) is one joint of the chain, from the base outwards: a sprung base's
+six coordinates q~(1) = (x, y, z, psi, theta, phi) (``base_x`` ... ``base_roll``), then each link's joint,
+each flexible link's joint followed by the three RFE angles of each of its spring-damping elements
+(``<link>_sde{r}_bend_vertical`` / ``_bend_lateral`` / ``_twist``, r = 1 .. n_rfe - 1, :mod:`.rfe`).  For
+the paper's crane (``config/crane.yaml``)::
 
     base_x base_y base_z base_yaw base_pitch base_roll   q~(1) = x y z psi theta phi
     column_slew                                          q~(2) = psi2
@@ -9,42 +14,59 @@ Every generalized coordinate of eq. (1) is one joint of the chain, in the paper'
     knuckle                                              q~(4) = psi4
 
 Joint k has a constant ``origin`` (the transform from the frame after joint k-1 to joint k's frame at
-q_k = 0) followed by its motion: a rotation about, or a translation along, one axis of that frame.
-The world transform of the frame after joint k is therefore
-``T_k = T_{k-1} @ origin_k @ motion_k(q_k)``; a body rigidly attached to that frame has
-``T^(l) = T_k``.  Bodies without mass (the intermediate frames of multi-axis joints) do not appear.
+q_k = 0) followed by its motion: a rotation about, or a translation along, one axis (x, y or z) of that
+frame.  The world transform of the frame after joint k is therefore
+``T_k = T_{k-1} @ origin_k @ motion_k(q_k)``; a body rigidly attached to that frame has ``T^(l) = T_k``.
+A described joint about another unit axis a gets the frame R_a (R_a z = a) appended to its origin, and what
+its link carries (bodies, points, the next origin) is expressed in that frame, so the chain moves exactly as
+described.  Bodies without mass (the intermediate frames of multi-axis joints) do not appear.
 
 Springs are linear in q: E_p,spring = 1/2 q^T K q, with K holding the support springs of the paper,
-sum_s U^(sup,s)T S^(sup,s) U^(sup,s) (the linearised form printed in the paper), and the RFE springs
-S^(3) on the boom coordinates.  The ``flexible`` variant has ``rfe_count`` elements (24 DOF for the
-paper's 6), the ``rigid`` variant one boom element (9 DOF).
+sum_s U^(sup,s)T S^(sup,s) U^(sup,s) (the linearised form printed in the paper), the RFE springs S^(l) of the
+flexible links and the joint springs.  Dampers: D = beta_sup K_sup + sum_l beta_l K_l + diag(joint dampers).
+The ``flexible`` variant has each flexible link's ``rfe_count`` elements (24 DOF for the paper's crane with
+its 6), the ``rigid`` variant one element per flexible link (9 DOF for the paper's).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from .parameters import Boom, CraneParameters, RigidBody, SupportSpring
+from .description import (
+    BASE,
+    BASE_JOINTS,
+    CraneDescription,
+    LinkDescription,
+    PointOnLink,
+)
+from .description import (
+    PRISMATIC as PRISMATIC_JOINT,
+)
+from .parameters import RigidBody, SupportSpring
 from .rfe import discretise_beam
 
 PRISMATIC = 0
 REVOLUTE = 1
 AXES = {"x": 0, "y": 1, "z": 2}
 VARIANTS = ("flexible", "rigid")
-ACTUATED_JOINTS = ("column_slew", "boom_luff", "knuckle")
-"""The joints the crane's actuators drive, psi2, psi(3,0) and psi4 (also the coordinates the paper plots)."""
+RFE_SPRINGS = (("bend_vertical", 2), ("bend_lateral", 1), ("twist", 0))
+"""The RFE angles of a spring-damping element, (name suffix, axis), in the order of :mod:`.rfe`: psi about z
+(bending in the beam's x-y plane, the luffing plane for a boom), theta about y, phi about x (torsion)."""
 
 
 @dataclass(frozen=True)
 class Joint:
-    """One generalized coordinate: ``kind`` PRISMATIC or REVOLUTE along/about local ``axis``."""
+    """One generalized coordinate: ``kind`` PRISMATIC or REVOLUTE along/about local ``axis``; ``limits``
+    (lower, upper) where described."""
 
     name: str
     kind: int
     axis: int
     origin: np.ndarray
+    limits: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -57,8 +79,26 @@ class Body:
 
 
 @dataclass(frozen=True)
+class FlexibleLink:
+    """A flexible link in the chain: its joint ``root`` (the frame of its first element), the indices
+    ``springs`` of its RFE angles, the frame ``last`` of its last element and the beam's end ``tip`` (3,) in
+    that frame [m]."""
+
+    name: str
+    root: int
+    springs: np.ndarray
+    last: int
+    tip: np.ndarray
+
+
+@dataclass(frozen=True)
 class ChainModel:
-    """Serial chain, springs and task indices of one crane variant."""
+    """Serial chain, springs, dampers and task indices of one crane variant.
+
+    ``stiffness`` K = ``support_stiffness`` + ``beam_stiffness`` + the joint springs; ``damping`` D (None:
+    none); ``dependent_joints`` the coordinates the task solves for (None: chosen at the start,
+    :func:`crane_reference.motion.simulation.choose_dependent`); ``actuated_joints`` the joints with
+    actuators; ``name`` the robot's."""
 
     variant: str
     joints: tuple[Joint, ...]
@@ -68,10 +108,14 @@ class ChainModel:
     gravity: float
     stiffness: np.ndarray
     support_stiffness: np.ndarray
-    boom_stiffness: np.ndarray
+    beam_stiffness: np.ndarray
     drive_joint: int
-    dependent_joints: tuple[int, ...]
+    dependent_joints: tuple[int, ...] | None
     initial_q: np.ndarray
+    damping: np.ndarray | None = None
+    actuated_joints: tuple[str, ...] = ()
+    flexible_links: tuple[FlexibleLink, ...] = ()
+    name: str = "crane"
 
     @property
     def dof(self) -> int:
@@ -84,6 +128,11 @@ class ChainModel:
     def index(self, name: str) -> int:
         """Index of the coordinate called ``name``."""
         return self.joint_names.index(name)
+
+    @property
+    def damping_matrix(self) -> np.ndarray:
+        """D (n, n) [N m s/rad, N s/m]; zero where the model has no dampers."""
+        return np.zeros((self.dof, self.dof)) if self.damping is None else self.damping
 
 
 def homogeneous(rotation: np.ndarray | None = None, translation=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -120,72 +169,174 @@ def support_stiffness(supports: tuple[SupportSpring, ...]) -> np.ndarray:
     return K
 
 
-def _base_joints() -> list[Joint]:
-    names = [("base_x", PRISMATIC, "x"), ("base_y", PRISMATIC, "y"), ("base_z", PRISMATIC, "z"),
-             ("base_yaw", REVOLUTE, "z"), ("base_pitch", REVOLUTE, "y"), ("base_roll", REVOLUTE, "x")]
-    return [Joint(name, kind, AXES[axis], np.eye(4)) for name, kind, axis in names]
+def axis_frame(axis: np.ndarray) -> tuple[int, np.ndarray]:
+    """(k, R_a): the chain axis k and the rotation R_a with R_a e_k = ``axis`` (unit).  R_a is the identity for
+    +x, +y, +z; a half turn about x (-y, -z) or z (-x) for a negative one, so a beam's x axis is kept where it
+    can be; for any other axis the shortest rotation taking z to it (Rodrigues)."""
+    for k in range(3):
+        if np.array_equal(axis, np.eye(3)[k]):
+            return k, np.eye(3)
+        if np.array_equal(axis, -np.eye(3)[k]):
+            return k, rotation(2 if k == 0 else 0, np.pi).round()
+    z = np.eye(3)[2]
+    v, c = np.cross(z, axis), float(z @ axis)
+    skew = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    return 2, np.eye(3) + skew + skew @ skew / (1.0 + c)
 
 
-def _boom_joints_and_bodies(boom: Boom, rfe_count: int,
-                            first_joint: int) -> tuple[list[Joint], list[Body], np.ndarray, np.ndarray]:
-    """Luff joint, the RFE spring triples and the element bodies; returns joints, bodies, the boom
-    stiffness diagonal for these joints and the element lengths."""
-    beam = discretise_beam(boom.length, rfe_count, boom.youngs_modulus, boom.shear_modulus,
-                           boom.density, boom.section)
-    # Luff frame: column frame rotated by +pi/2 about x, so that its z axis is the column's -y axis
-    # and a positive rotation about it lifts the boom's x axis towards the column's z axis.
-    joints = [Joint("boom_luff", REVOLUTE, AXES["z"], homogeneous(rotation(0, 0.5 * np.pi), boom.pivot))]
-    bodies = [Body("boom_rfe0", first_joint, beam.bodies[0])]
-    stiffness = [0.0]
-    for r in range(1, rfe_count):
-        at_spring = homogeneous(translation=(beam.lengths[r - 1], 0.0, 0.0))
-        for suffix, axis, s in zip(("bend_vertical", "bend_lateral", "twist"), "zyx", beam.spring_stiffness[r - 1],
-                                   strict=True):
-            joints.append(Joint(f"boom_sde{r}_{suffix}", REVOLUTE, AXES[axis], at_spring if axis == "z" else np.eye(4)))
-            stiffness.append(s)
-        bodies.append(Body(f"boom_rfe{r}", first_joint + len(joints) - 1, beam.bodies[r]))
-    return joints, bodies, np.array(stiffness), beam.lengths
+def transformed_body(body: RigidBody, R: np.ndarray) -> RigidBody:
+    """``body`` expressed in a frame rotated by R from its own (same origin)."""
+    if np.array_equal(R, np.eye(3)):
+        return body
+    return RigidBody(body.mass, R.T @ body.center_of_mass, R.T @ body.inertia @ R)
 
 
-def build_model(params: CraneParameters, variant: str = "flexible") -> ChainModel:
-    """Chain model of the crane; ``variant`` is ``"flexible"`` (n_rfe from the config) or ``"rigid"``."""
+class _Attachment:
+    """Where the next link hangs: the chain frame index, and the transform from the described parent frame
+    (a link's frame, or its undeformed beam frame) to that chain frame."""
+
+    def __init__(self, frame: int, transform: np.ndarray):
+        self.frame, self.transform = frame, transform
+
+    def origin(self, origin: np.ndarray) -> np.ndarray:
+        """A transform given in the parent's described frame, in the chain frame."""
+        return origin if np.array_equal(self.transform, np.eye(4)) else self.transform @ origin
+
+    def point(self, point: np.ndarray) -> np.ndarray:
+        return point if np.array_equal(self.transform, np.eye(4)) else (self.transform @ np.append(point, 1.0))[:3]
+
+
+def chain_order(links: Sequence[LinkDescription]) -> tuple[LinkDescription, ...]:
+    """``links`` from the base out (each link's parent the one before it); ValueError naming the links where
+    they are not one serial chain."""
+    children: dict[str, list[str]] = {}
+    for link in links:
+        children.setdefault(link.parent, []).append(link.name)
+    by_name = {link.name: link for link in links}
+    order, parent = [], BASE
+    while parent in children:
+        if len(children[parent]) > 1:
+            raise ValueError(f"links {', '.join(children[parent])} all hang on {parent!r}: the crane must be one "
+                             "serial chain (each link the parent of at most one other)")
+        parent = children[parent][0]
+        order.append(by_name[parent])
+        if len(order) > len(by_name):
+            break
+    if len(order) != len(by_name):
+        missing = [name for name in by_name if name not in {link.name for link in order}]
+        raise ValueError(f"links {', '.join(missing)} do not hang on the base through a chain of parents (a loop, or "
+                         "a parent that is no link)")
+    return tuple(order)
+
+
+def build_model(description: CraneDescription, variant: str = "flexible") -> ChainModel:
+    """Chain model of the crane; ``variant`` is ``"flexible"`` (each beam's ``rfe_count`` elements) or
+    ``"rigid"`` (each beam one element)."""
     if variant not in VARIANTS:
         raise ValueError(f"model variant = {variant!r}: must be one of {', '.join(VARIANTS)}")
-    rfe_count = params.boom.rfe_count if variant == "flexible" else 1
-    joints = _base_joints()
-    bodies = [Body("base", 5, params.base)]
-    joints.append(Joint("column_slew", REVOLUTE, AXES["z"], np.eye(4)))
-    bodies.append(Body("column", 6, params.column))
-    boom_joints, boom_bodies, boom_diag, lengths = _boom_joints_and_bodies(params.boom, rfe_count, 7)
-    joints += boom_joints
-    bodies += boom_bodies
-    knuckle_origin = homogeneous(rotation(2, params.link4.offset_angle), (lengths[-1], 0.0, 0.0))
-    joints.append(Joint("knuckle", REVOLUTE, AXES["z"], knuckle_origin))
-    knuckle = len(joints) - 1
-    bodies.append(Body("link4", knuckle, params.link4.body))
-    if params.payload_mass > 0.0:
-        payload = RigidBody(params.payload_mass, np.asarray(params.link4.end_effector, float), np.zeros((3, 3)))
-        bodies.append(Body("payload", knuckle, payload))
+    joints: list[Joint] = []
+    bodies: list[Body] = []
+    initial: list[float] = []
+    spring_diagonal: list[float] = []  # beam and joint springs, per coordinate
+    damper_diagonal: list[float] = []  # joint dampers, per coordinate
+    beta_diagonal: list[float] = []  # the beams' Rayleigh beta, per coordinate
+    flexible: list[FlexibleLink] = []
+    attachments: dict[str, _Attachment] = {}
+    frames: dict[str, np.ndarray] = {}  # per link: R_a of its joint (points in the link frame -> chain frame)
+
+    def add(joint: Joint, value: float = 0.0, spring: float = 0.0, damper: float = 0.0, beta: float = 0.0) -> int:
+        joints.append(joint)
+        initial.append(value)
+        spring_diagonal.append(spring)
+        damper_diagonal.append(damper)
+        beta_diagonal.append(beta)
+        return len(joints) - 1
+
+    base = description.base
+    if base is not None:
+        for name, (kind, axis) in zip(BASE_JOINTS, ((PRISMATIC, 0), (PRISMATIC, 1), (PRISMATIC, 2), (REVOLUTE, 2),
+                                                    (REVOLUTE, 1), (REVOLUTE, 0)), strict=True):
+            add(Joint(name, kind, axis, np.eye(4)))
+        bodies.append(Body("base", len(joints) - 1, base.body))
+    attachments[BASE] = _Attachment(len(joints) - 1, np.eye(4))
+
+    for link in chain_order(description.links):
+        described = link.joint
+        parent = attachments[link.parent]
+        k, R = axis_frame(np.asarray(described.axis, dtype=float))
+        origin = parent.origin(described.origin)
+        if not np.array_equal(R, np.eye(3)):
+            origin = origin @ homogeneous(R)
+        kind = PRISMATIC if described.kind == PRISMATIC_JOINT else REVOLUTE
+        root = add(Joint(described.name, kind, k, origin, described.limits), described.initial,
+                   described.stiffness, described.damping)
+        frames[link.name] = R
+        if link.beam is None:
+            bodies.append(Body(link.name, root, transformed_body(link.body, R)))
+            attachments[link.name] = _Attachment(root, homogeneous(R.T))
+            continue
+        beam = link.beam
+        count = beam.rfe_count if variant == "flexible" else 1
+        elements = discretise_beam(beam.length, count, beam.youngs_modulus, beam.shear_modulus, beam.density,
+                                   beam.section)
+        bodies.append(Body(f"{link.name}_rfe0", root, transformed_body(elements.bodies[0], R)))
+        springs = []
+        for r in range(1, count):
+            at_spring = homogeneous(translation=(elements.lengths[r - 1], 0.0, 0.0))
+            if r == 1 and not np.array_equal(R, np.eye(3)):
+                at_spring = homogeneous(R.T) @ at_spring
+            for (suffix, axis), s in zip(RFE_SPRINGS, elements.spring_stiffness[r - 1], strict=True):
+                springs.append(add(Joint(f"{link.name}_sde{r}_{suffix}", REVOLUTE, axis,
+                                         at_spring if axis == 2 else np.eye(4)), 0.0, s, 0.0, beam.damping))
+            bodies.append(Body(f"{link.name}_rfe{r}", len(joints) - 1, elements.bodies[r]))
+        last = len(joints) - 1
+        # the described frame seen from the last element's: back along the beam by all but the last element
+        back = homogeneous(translation=(elements.lengths[-1] - beam.length, 0.0, 0.0)) if count > 1 else np.eye(4)
+        to_last = back if count > 1 else homogeneous(R.T)
+        attachments[link.name] = _Attachment(last, to_last)
+        flexible.append(FlexibleLink(link.name, root, np.array(springs, dtype=np.int64), last,
+                                     np.array([elements.lengths[-1], 0.0, 0.0]) if count > 1 else
+                                     R.T @ np.array([beam.length, 0.0, 0.0])))
+
+    def placed(point: PointOnLink) -> tuple[int, np.ndarray]:
+        attachment = attachments[point.link]
+        return attachment.frame, attachment.point(np.asarray(point.point, dtype=float))
+
+    ee_joint, ee_point = placed(description.end_effector)
+    if description.payload > 0.0:
+        frame, at = placed(description.payload_at or description.end_effector)
+        bodies.append(Body("payload", frame, RigidBody(description.payload, at, np.zeros((3, 3)))))
 
     n = len(joints)
-    K_support = np.zeros((n, n))
-    K_support[:6, :6] = support_stiffness(params.supports)
-    K_boom = np.zeros((n, n))
-    K_boom[7:7 + len(boom_diag), 7:7 + len(boom_diag)] = np.diag(boom_diag)
-    q0 = np.zeros(n)
-    q0[6], q0[7], q0[knuckle] = params.initial.column, params.initial.boom, params.initial.knuckle
+    K_support, K_beam = np.zeros((n, n)), np.zeros((n, n))
+    D = np.zeros((n, n))
+    if base is not None:
+        K_support[:6, :6] = support_stiffness(base.supports)
+        D += base.damping * K_support
+    is_beam = np.zeros(n, dtype=bool)
+    for link in flexible:
+        is_beam[link.springs] = True
+    diagonal = np.array(spring_diagonal)
+    K_beam[np.diag_indices(n)] = np.where(is_beam, diagonal, 0.0)
+    K_joint = np.diag(np.where(is_beam, 0.0, diagonal))
+    D += np.diag(np.array(beta_diagonal)) @ K_beam + np.diag(damper_diagonal)
+    names = [j.name for j in joints]
     return ChainModel(
         variant=variant,
         joints=tuple(joints),
         bodies=tuple(bodies),
-        end_effector_joint=knuckle,
-        end_effector_point=np.asarray(params.link4.end_effector, dtype=float),
-        gravity=params.gravity,
-        stiffness=K_support + K_boom,
+        end_effector_joint=ee_joint,
+        end_effector_point=ee_point,
+        gravity=description.gravity,
+        stiffness=K_support + K_beam + K_joint,
         support_stiffness=K_support,
-        boom_stiffness=K_boom,
-        drive_joint=6,
-        dependent_joints=(7, knuckle),
-        initial_q=q0,
+        beam_stiffness=K_beam,
+        drive_joint=names.index(description.drive_joint),
+        dependent_joints=(None if description.dependent is None
+                          else tuple(names.index(j) for j in description.dependent)),
+        initial_q=np.array(initial),
+        damping=D if np.any(D) else None,
+        actuated_joints=tuple(description.actuated),
+        flexible_links=tuple(flexible),
+        name=description.name,
     )
-

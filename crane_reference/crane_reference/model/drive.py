@@ -1,4 +1,4 @@
-"""Column drive: the generalized force t_dr^(2) on psi2 (positive increases psi2).
+"""The drive: the generalized force t_dr on its joint (the paper's column drive on psi2; positive along +q).
 
 * :class:`TorqueSource` - a prescribed torque profile (the paper's 4000 N m for 0 <= t < 1 s).
 * :class:`SpringDrive` - the paper's flexible drive, E_p,dr = 1/2 s_dr (psi_a - psi2)^2, i.e. the
@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .parameters import CraneParameters, FlexibleDrive, TorqueDrive
+from .description import CraneDescription
+from .parameters import FlexibleDrive, TorqueDrive
 from .profiles import Profile, QuinticRise
 
 
@@ -107,7 +108,7 @@ class Actuated:
 Drive = TorqueSource | SpringDrive | Actuated
 
 
-def column_drive(config: CraneParameters, torque: float | None = None,
+def column_drive(config: CraneDescription, torque: float | None = None,
                  duration: float | None = None) -> TorqueDrive | FlexibleDrive:
     """The column drive of ``config``: its flexible drive as it is, else its torque profile with
     ``torque`` [N m] applied for ``duration`` [s] from its start (by default the config's own)."""

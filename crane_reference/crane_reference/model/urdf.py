@@ -4,8 +4,9 @@ Mapping, chain model -> URDF:
 
 * Root link ``world`` (the world frame {0}).
 * Every coordinate k becomes one URDF joint with the same name, in the same order as
-  ``model.joint_names``: revolute coordinates as ``continuous`` joints (no limits), prismatic ones as
-  ``prismatic`` joints with generous limits (+-100 m).  The joint ``origin`` (xyz, and rpy with the URDF
+  ``model.joint_names``: revolute coordinates as ``revolute`` joints with their described limits or, without
+  limits, ``continuous`` joints; prismatic ones as ``prismatic`` joints with their described limits or
+  generous ones (+-100 m).  The joint ``origin`` (xyz, and rpy with the URDF
   convention R = Rz(yaw) Ry(pitch) Rx(roll)) is the constant transform ``Joint.origin`` and ``axis`` the
   local unit axis, so that the child frame of URDF joint k is the chain frame
   ``T_k = T_{k-1} @ origin_k @ motion_k(q_k)``.
@@ -34,8 +35,8 @@ from .chain import PRISMATIC, Body, ChainModel, Joint
 from .parameters import RigidBody
 
 PRISMATIC_LIMIT = 100.0  # [m], symmetric position limit of the base translations
-PRISMATIC_EFFORT = 1.0e9  # [N]
-PRISMATIC_VELOCITY = 100.0  # [m/s]
+PRISMATIC_EFFORT = 1.0e9  # [N or N m], URDF's required effort limit (the model sets none)
+PRISMATIC_VELOCITY = 100.0  # [m/s or rad/s], URDF's required velocity limit (the model sets none)
 MIN_VISUAL_SIZE = 0.05  # [m], smallest edge of a displayed box
 POINT_MASS_RADIUS = 0.15  # [m], sphere drawn for a point mass
 COLUMN_RADIUS = 0.2  # [m]
@@ -125,17 +126,21 @@ def _visual(link: ET.Element, model: ChainModel, attached: Body) -> None:
 
 
 def _movable_joint(robot: ET.Element, joint: Joint, parent: str, child: str) -> None:
-    kind = "prismatic" if joint.kind == PRISMATIC else "continuous"
+    if joint.kind == PRISMATIC:
+        kind, limits = "prismatic", joint.limits or (-PRISMATIC_LIMIT, PRISMATIC_LIMIT)
+    else:
+        kind, limits = ("revolute", joint.limits) if joint.limits else ("continuous", None)
     element = _joint(robot, joint.name, kind, parent, child, joint.origin)
     ET.SubElement(element, "axis", xyz=_numbers(np.eye(3)[joint.axis]))
-    if joint.kind == PRISMATIC:
-        ET.SubElement(element, "limit", lower=_numbers([-PRISMATIC_LIMIT]), upper=_numbers([PRISMATIC_LIMIT]),
+    if limits is not None:
+        ET.SubElement(element, "limit", lower=_numbers([limits[0]]), upper=_numbers([limits[1]]),
                       effort=_numbers([PRISMATIC_EFFORT]), velocity=_numbers([PRISMATIC_VELOCITY]))
 
 
-def model_to_urdf(model: ChainModel, name: str = "crane") -> str:
-    """URDF (pretty-printed XML) of the chain: same joints, frames and mass properties (see module doc)."""
-    robot = ET.Element("robot", name=name)
+def model_to_urdf(model: ChainModel) -> str:
+    """URDF (pretty-printed XML) of the chain, robot ``model.name``: same joints, frames and mass properties
+    (see module doc)."""
+    robot = ET.Element("robot", name=model.name)
     for color, rgba in COLORS.items():
         ET.SubElement(ET.SubElement(robot, "material", name=color), "color", rgba=rgba)
     _link(robot, "world")

@@ -1,12 +1,13 @@
 """Consistent start: static equilibrium of the constrained crane.
 
 At rest (qd = 0, so h = 0) the programmed motion equations (8) reduce to P^T Q(q) = 0 on the
-independent directions, together with Phi(q, 0) = 0.  The column is held by the drive at its initial
-angle, so the psi2 row is not balanced by the free system but by the drive's holding torque
-t_hold = -(P^T Q)_psi2, which is reported (zero for the symmetric default layout).  All other
-independent coordinates (base, RFE angles) are free and settle under gravity and the springs; the
-dependent coordinates follow from the constraints.  The drive's own torque is taken just before t0
-(off for the paper's torque step, zero for a spring drive whose motor angle starts at psi2).
+independent directions, together with Phi(q, 0) = 0.  The drive's joint (the paper's column) and the other
+independent actuated joints are held by their actuators at their initial positions, so their rows are not
+balanced by the free system but by the holding forces -(P^T Q) there; the drive's t_hold is reported (zero
+for the paper's symmetric layout).  All other independent coordinates (base, RFE angles, joints on springs)
+are free and settle under gravity and the springs; the dependent coordinates follow from the constraints.
+The drive's own torque is taken just before t0 (off for the paper's torque step, zero for a spring drive whose
+motor angle starts at the drive joint's initial angle).
 """
 
 from __future__ import annotations
@@ -25,9 +26,13 @@ class EquilibriumError(RuntimeError):
 
 @dataclass(frozen=True)
 class Equilibrium:
+    """The equilibrium ``q``; the drive's ``holding_torque`` t_hold [N m or N]; ``holding_forces`` by the name
+    of each held joint (the drive's among them) [N m or N]; the largest unbalanced generalized force left."""
+
     q: np.ndarray
     holding_torque: float
     max_force_residual: float
+    holding_forces: dict[str, float]
 
 
 def reduced_static_forces(motion: ProgrammedMotion, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -40,10 +45,13 @@ def reduced_static_forces(motion: ProgrammedMotion, t: float, q: np.ndarray) -> 
 
 def static_equilibrium(motion: ProgrammedMotion, q_start: np.ndarray, t0: float = 0.0,
                        force_tolerance: float = 1e-7) -> Equilibrium:
-    """Equilibrium near ``q_start`` with the drive coordinate held at its value in ``q_start``."""
+    """Equilibrium near ``q_start`` with the drive's coordinate and the independent actuated joints held at their
+    values in ``q_start``."""
     motion.require_holonomic("a static equilibrium")
-    drive = motion.dynamics.model.drive_joint
-    rows = np.flatnonzero(motion.independent != drive)
+    model = motion.dynamics.model
+    drive = model.drive_joint
+    held = {drive, *(model.index(name) for name in model.actuated_joints)}
+    rows = np.flatnonzero([k not in held for k in motion.independent])
     free = motion.independent[rows]
     q_base = q_start.copy()
 
@@ -61,5 +69,7 @@ def static_equilibrium(motion: ProgrammedMotion, q_start: np.ndarray, t0: float 
     if not worst <= force_tolerance:
         raise EquilibriumError(f"static equilibrium not found: largest unbalanced generalized force {worst:.3g} "
                                f"(solver: {result.message})")
-    held = int(np.flatnonzero(motion.independent == drive)[0])
-    return Equilibrium(q, -float(forces[held]), worst)
+    drive_row = int(np.flatnonzero(motion.independent == drive)[0])
+    holding = {model.joint_names[k]: -float(force) for k, force in zip(motion.independent, forces, strict=True)
+               if k in held}
+    return Equilibrium(q, -float(forces[drive_row]), worst, holding)

@@ -29,12 +29,15 @@ comes from the constraints; the velocity-level constraints hold exactly at every
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import combinations
 
 import numpy as np
 
 from ..dynamics import kernels
 from ..dynamics.chain_dynamics import CraneDynamics, DynamicsTerms
 from ..dynamics.structures import Evaluation, Partition
+from ..model.config import ConfigError
+from ..model.description import BASE_JOINTS
 from .constraints import ConstraintSet, ConstraintTerms
 
 
@@ -73,6 +76,66 @@ class MotionSolution:
     powers: np.ndarray
 
 
+MIN_SINGULAR_VALUE = 1e-3
+"""The smallest singular value of K_dc a programmed motion accepts (below it: a stretch/fold singularity)."""
+
+
+def _dependent_candidates(dynamics: CraneDynamics) -> list[int]:
+    """The coordinates that can be dependent: joints of the links (not the base's, not the drive's) free of
+    springs and dampers."""
+    model, chain = dynamics.model, dynamics.chain
+    free = [k for k in range(model.dof) if not (np.any(chain.stiffness[k]) or np.any(chain.stiffness[:, k])
+                                                or np.any(chain.damping[k]) or np.any(chain.damping[:, k]))]
+    return [k for k in free if k != model.drive_joint and model.joints[k].name not in BASE_JOINTS]
+
+
+def _minor_singular_value(dynamics: CraneDynamics, constraints: ConstraintSet, q: np.ndarray,
+                          columns: tuple[int, ...]) -> float:
+    p, C = dynamics.end_effector(np.ascontiguousarray(q, dtype=float))
+    K = constraints.position_jacobian(0.0, p) @ C[:, list(columns)]
+    return float(np.linalg.svd(K, compute_uv=False)[-1])
+
+
+def choose_dependent(dynamics: CraneDynamics, constraints: ConstraintSet, q: np.ndarray,
+                     minimum: float = MIN_SINGULAR_VALUE) -> tuple[int, ...]:
+    """The dependent coordinates (3.2) for ``constraints`` (holonomic) at the start q: of the joints that can be
+    (:func:`_dependent_candidates`), the set whose minor K_dc = Phi_p C[:, dc] of the task Jacobian at t = 0 has
+    the largest smallest singular value; :class:`~crane_reference.model.config.ConfigError` naming ``dependent`` when
+    none reaches ``minimum``."""
+    candidates = _dependent_candidates(dynamics)
+    names = dynamics.model.joint_names
+    best, chosen = -1.0, ()
+    for columns in combinations(candidates, constraints.size):
+        sigma = _minor_singular_value(dynamics, constraints, q, columns)
+        if sigma > best:
+            best, chosen = sigma, columns
+    if not best >= minimum:
+        raise ConfigError(f"dependent = auto: no {constraints.size} of the joints "
+                          f"{', '.join(names[k] for k in candidates)} "
+                         f"(free of springs and dampers, not the drive's) solve the task at the start: the best "
+                         f"minor of the task Jacobian, {[names[k] for k in chosen]}, has the smallest singular value "
+                         f"{best:.3g} < {minimum:g}; move the start away from a stretch/fold singularity or "
+                         "name the dependent joints")
+    return tuple(int(k) for k in chosen)
+
+
+def check_dependent(dynamics: CraneDynamics, constraints: ConstraintSet, q: np.ndarray, dependent: tuple[int, ...],
+                    minimum: float = MIN_SINGULAR_VALUE) -> None:
+    """:class:`~crane_reference.model.config.ConfigError` naming ``dependent`` unless the named coordinates can solve
+    the task at the start q: as many
+    as constraints, free of springs and dampers, and K_dc well conditioned (smallest singular value >=
+    ``minimum``)."""
+    names = dynamics.model.joint_names
+    listed = [names[k] for k in dependent]
+    if len(dependent) != constraints.size:
+        raise ConfigError(f"dependent = {listed}: the task has {constraints.size} constraints and needs as many "
+                         "dependent joints")
+    sigma = _minor_singular_value(dynamics, constraints, q, tuple(dependent))
+    if not sigma >= minimum:
+        raise ConfigError(f"dependent = {listed}: these joints cannot satisfy the task at the start (smallest "
+                         f"singular value of K_dc {sigma:.3g} < {minimum:g}); name other joints, or 'auto'")
+
+
 POSITION_TOLERANCE = 1e-13
 """[rad or m]: Newton on the position constraints outside the integrator (a start, a check of targets) stops after a
 correction this small."""
@@ -90,7 +153,7 @@ class ProgrammedMotion:
     """
 
     def __init__(self, dynamics: CraneDynamics, constraints: ConstraintSet,
-                 dependent: tuple[int, ...] | None = None, min_singular_value: float = 1e-3,
+                 dependent: tuple[int, ...] | None = None, min_singular_value: float = MIN_SINGULAR_VALUE,
                  realisation: str = "ideal"):
         if realisation not in REALISATIONS:
             raise ValueError(f"realisation = {realisation!r}: must be one of {', '.join(REALISATIONS)}")

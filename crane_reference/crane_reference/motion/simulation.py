@@ -1,9 +1,9 @@
 """The paper's scenario and its time integration, offline (whole runs) and step by step (online).
 
 :class:`Scenario` assembles model -> dynamics -> programmed constraints -> consistent start from a
-:class:`CraneParameters`.  :class:`MotionStepper` advances the integrator (:mod:`.integration`) on a fixed
-grid t_k = t0 + k h, lands exactly on the drive's jumps (restarting the method there) and
-accumulates the work of the drive, the constraint forces and the dampers with the trapezoidal rule
+:class:`~crane_reference.model.description.CraneDescription`.  :class:`MotionStepper` advances the integrator
+(:mod:`.integration`) on a fixed grid t_k = t0 + k h, lands exactly on the drive's jumps (restarting the method
+there) and accumulates the work of the drive, the constraint forces and the dampers with the trapezoidal rule
 (second order, like the integrator).  :func:`simulate` runs it to an end time; :func:`simulate_reference`
 integrates the same equations with scipy's DOP853 at tight tolerances (resolving every RFE mode), as
 the converged reference for accuracy checks.
@@ -12,6 +12,7 @@ the converged reference for accuracy checks.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from itertools import pairwise
 from typing import NamedTuple
 
@@ -19,21 +20,32 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from ..dynamics.chain_dynamics import CraneDynamics
+from ..dynamics.kinematics import forward_kinematics
 from ..dynamics.structures import ACCOUNTS, DRIVE_TORQUE, POWERS
-from ..model.chain import ChainModel, build_model
+from ..model.chain import REVOLUTE, ChainModel, build_model
+from ..model.config import ConfigError
+from ..model.description import BASE_JOINTS, CraneDescription
 from ..model.drive import make_drive
-from ..model.parameters import CraneParameters, Task
+from ..model.parameters import Task
 from ..model.profiles import Constant, QuinticRise
 from .constraints import ConstraintSet, paper_constraints
 from .equilibrium import Equilibrium, EquilibriumError, static_equilibrium
 from .integration import EVALUATIONS, ONLINE_TOLERANCE, ExactFrequencyTrapezoidal, IntegrationError, StepState
-from .programmed_motion import ConstraintSingularityError, ProgrammedMotion, ProjectionError
+from .programmed_motion import (
+    ConstraintSingularityError,
+    ProgrammedMotion,
+    ProjectionError,
+    check_dependent,
+    choose_dependent,
+)
 from .steps import ANALYSIS_STEP, ONLINE_STEP
 from .trajectory import Sample, Trajectory, make_sample, stack_samples
 
 SAMPLED_ACCOUNTS = ("kinetic_energy", "potential_energy", "drive_torque", "kdc_min_singular_value")
 """Accounts a sample carries under their own names."""
 
+VERTICAL_TOLERANCE = 1e-9
+"""How far from 1 |z . axis| of a slew joint may be (:attr:`Scenario.slew`)."""
 Progress = Callable[[float], None]
 TaskConstraints = Callable[[Task, float], ConstraintSet]
 """Builds the programmed constraints of a :class:`Task` given E's static height z_E,s [m]."""
@@ -49,20 +61,61 @@ def paper_task_constraints(task: Task, z_static: float) -> ConstraintSet:
                              QuinticRise(z_static, task.z_increment, 0.0, task.rise_time))
 
 
+class Slew(NamedTuple):
+    """A slew joint: E's azimuth atan2(y_E, x_E) = ``sign`` q[``joint``] + ``offset`` [rad] as the joint turns
+    (``sign`` +1 where its axis points up, -1 down)."""
+
+    joint: int
+    sign: float
+    offset: float
+
+
 class Scenario:
     """The crane of ``params`` (``variant`` flexible or rigid) under the programmed constraints of
-    ``task`` (default: the config's), started from its static equilibrium (the column held at
-    configuration (9)'s angle, E at the height z_E,s that configuration (9) gives it)."""
+    ``task`` (default: the description's), started from its static equilibrium (the actuated independent
+    joints held at their initial positions, E at the height z_E,s that the initial configuration gives it;
+    for the paper's crane configuration (9)).  Dependent coordinates the description leaves to be chosen
+    are chosen here (:func:`~.programmed_motion.choose_dependent`); named ones are checked
+    (:func:`~.programmed_motion.check_dependent`): a ConfigError names the field."""
 
-    def __init__(self, params: CraneParameters, variant: str = "flexible", task: Task | None = None):
+    def __init__(self, params: CraneDescription, variant: str = "flexible", task: Task | None = None):
         self.params = params
-        self.model: ChainModel = build_model(params, variant)
+        model = build_model(params, variant)
         self.task = task or params.task
-        drive = make_drive(params.drive, params.initial.column)
-        self.dynamics = CraneDynamics(self.model, drive, params.damping)
-        self.z_static = float(self.dynamics.end_effector(self.model.initial_q)[0][2])
-        self.motion = ProgrammedMotion(self.dynamics, paper_task_constraints(self.task, self.z_static))
+        drive = make_drive(params.drive, params.drive_start)
+        dynamics = CraneDynamics(model, drive)
+        self.z_static = float(dynamics.end_effector(model.initial_q)[0][2])
+        constraints = paper_task_constraints(self.task, self.z_static)
+        if model.dependent_joints is None:
+            model = replace(model, dependent_joints=choose_dependent(dynamics, constraints, model.initial_q))
+            dynamics = CraneDynamics(model, drive)
+        else:
+            check_dependent(dynamics, constraints, model.initial_q, model.dependent_joints)
+        self.model: ChainModel = model
+        self.dynamics = dynamics
+        self.motion = ProgrammedMotion(self.dynamics, constraints)
         self._equilibrium: Equilibrium | None = None
+
+    @property
+    def slew(self) -> Slew:
+        """The slew joint: the first independent revolute joint (the drive's, if it is one) whose axis is the
+        world's vertical at the initial configuration.  The task checks walk
+        the ellipse with it (:func:`crane_reference.stream.targets.check_task`); ConfigError naming ``links``
+        if the crane has none."""
+        model, q = self.model, self.model.initial_q
+        T, _ = forward_kinematics(np.ascontiguousarray(q, dtype=float), self.dynamics.chain.kinds,
+                                  self.dynamics.chain.axes, self.dynamics.chain.origins)
+        order = [model.drive_joint, *range(model.dof)]
+        for k in order:
+            joint = model.joints[k]
+            if (joint.kind == REVOLUTE and k in self.motion.independent and joint.name not in BASE_JOINTS
+                    and abs(T[k, 2, joint.axis]) >= 1.0 - VERTICAL_TOLERANCE):
+                p = self.dynamics.end_effector(q)[0]
+                sign = float(np.sign(T[k, 2, joint.axis]))
+                offset = np.arctan2(p[1], p[0]) - sign * q[k]
+                return Slew(k, sign, float((offset + np.pi) % (2.0 * np.pi) - np.pi))
+        raise ConfigError("links: the ellipse task needs a slew joint, a revolute joint (not a dependent one) "
+                          "whose axis is vertical at the initial configuration; the crane has none")
 
     @property
     def equilibrium(self) -> Equilibrium:

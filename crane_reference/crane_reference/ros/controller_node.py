@@ -29,7 +29,7 @@ from trajectory_msgs.msg import JointTrajectory
 from ..control.controller import JointGains
 from ..control.plant import default_gains
 from ..control.preview_tracking import Preview, PreviewTracker
-from ..model.chain import ACTUATED_JOINTS, VARIANTS
+from ..model.chain import VARIANTS
 from ..model.config import load_config
 from ..model.units import NANOSECONDS
 from ..motion.simulation import Scenario
@@ -80,13 +80,16 @@ class CraneControllerNode(Node):
                                                   "packaged default", empty_allowed=True, read_only=True))
         model = declare(self, ParameterSpec("model", STRING, "flexible", "Crane model variant (for the default "
                                             "gains)", choices=VARIANTS, read_only=True))
-        joints = tuple(declare(self, ParameterSpec("joints", STRING_ARRAY, list(ACTUATED_JOINTS), "The joints of "
-                                                   "the commands, in their order", read_only=True)))
-        if sorted(joints) != sorted(ACTUATED_JOINTS):
-            raise ParameterError(f"joints = {list(joints)}: must name each of {', '.join(ACTUATED_JOINTS)} once")
+        config = load_config(config_file or None)
+        actuated = config.actuated
+        joints = tuple(declare(self, ParameterSpec("joints", STRING_ARRAY, list(actuated), "The joints of "
+                                                   "the commands, in their order (default the crane's actuated "
+                                                   "joints)", read_only=True)))
+        if sorted(joints) != sorted(actuated):
+            raise ParameterError(f"joints = {list(joints)}: must name each of {', '.join(actuated)} once")
         rate = declare(self, ParameterSpec("control_rate", INTEGER, 1000, "The plant's control rate (the integral's "
                                            "period)", "Hz", (1, 1000), read_only=True))
-        defaults = default_gains(Scenario(load_config(config_file or None), model), joints)
+        defaults = default_gains(Scenario(config, model), joints)
         gains = []
         for joint, default in zip(joints, defaults, strict=True):
             p, d, i = (declare(self, ParameterSpec(f"gains.{joint}.{name}", DOUBLE, value, f"{what} of {joint}",

@@ -34,9 +34,11 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ..interface.messages import MAX_PUBLISH_RATE
-from ..model.chain import ACTUATED_JOINTS, VARIANTS
+from ..model.chain import VARIANTS
 from ..model.config import load_config
-from ..model.parameters import CraneParameters, Task, TorqueDrive
+from ..model.description import CraneDescription
+from ..model.paper_layout import ACTUATED as PAPER_ACTUATED
+from ..model.parameters import Task, TorqueDrive
 from ..motion.steps import ONLINE_STEP
 
 Value = bool | int | float | str | list[str]
@@ -50,7 +52,7 @@ class ParameterError(ValueError):
     """A parameter value that :func:`check` rejects (the message is the reason)."""
 
 
-def _torque_drive(config: CraneParameters) -> TorqueDrive:
+def _torque_drive(config: CraneDescription) -> TorqueDrive:
     """The config's torque drive, or the default torque profile if the config has a flexible drive."""
     return config.drive if isinstance(config.drive, TorqueDrive) else TorqueDrive()
 
@@ -70,9 +72,9 @@ class ParameterSpec:
     choices: tuple[str, ...] = ()
     empty_allowed: bool = False
     read_only: bool = False
-    from_config: Callable[[CraneParameters], Value] | None = None
+    from_config: Callable[[CraneDescription], Value] | None = None
 
-    def default_for(self, config: CraneParameters | None) -> Value:
+    def default_for(self, config: CraneDescription | None) -> Value:
         """Default value, taken from ``config`` where the parameter comes from the crane description."""
         if self.from_config is not None and config is not None:
             return self.coerce(self.from_config(config))
@@ -172,8 +174,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "stamp (header.stamp, time_from_start 0), then evenly spaced to the horizon", "", (2, 1000)),
     ParameterSpec("preview.rate", DOUBLE, 10.0, "Rate of ~/reference_preview (every round(publish_rate / "
                   "preview.rate)-th sample, at least every sample)", "Hz", (0.1, 1000.0)),
-    ParameterSpec("preview.joints", STRING_ARRAY, list(ACTUATED_JOINTS), "Joints of ~/reference_preview (names "
-                  "of the model's coordinates, see `crane-reference urdf`); default the actuated ones"),
+    ParameterSpec("preview.joints", STRING_ARRAY, list(PAPER_ACTUATED), "Joints of ~/reference_preview (names "
+                  "of the model's coordinates, see `crane-reference urdf`); default the crane's actuated joints",
+                  from_config=lambda c: list(c.actuated)),
     ParameterSpec("preview.effort", BOOL, False, "Fill the efforts of ~/reference_preview (the generalized "
                   "constraint and drive forces of the motion at its own speed)"),
     ParameterSpec("speed_scaling", DOUBLE, 1.0, "Speed of the reference relative to the programmed motion "
@@ -340,7 +343,7 @@ def refuse_unknown(node: Node, parameters: Iterable[Parameter]) -> None:
                                             f"{parameter_names(node)}")
 
 
-def declare(node: Node, spec: ParameterSpec, config: CraneParameters | None = None) -> Value:
+def declare(node: Node, spec: ParameterSpec, config: CraneDescription | None = None) -> Value:
     """Declare ``spec`` on ``node`` (override, else its default for ``config``) and return the value.
 
     The override may be an integer for a double parameter (see the module doc for the two-step

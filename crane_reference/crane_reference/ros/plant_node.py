@@ -54,7 +54,7 @@ from ..stream.health import CANNOT
 from ..stream.threads import real_time_switching, start_named
 from .message_types import rclpy_types
 from .parameters import check, pre_set_callback
-from .plant_parameters import PLANT_SPECS, declare_plant
+from .plant_parameters import declare_plant
 from .publishing import run_until_shutdown
 from .running import run_node
 from .settings import StartupError
@@ -76,8 +76,8 @@ class CranePlantNode(LifecycleNode):
         cannot configure).  ``kwargs`` go to :class:`rclpy.node.Node`."""
         super().__init__(node_name, **{"automatically_declare_parameters_from_overrides": True, **kwargs})
         self._types = rclpy_types()
-        self._params = declare_plant(self)
-        self.add_pre_set_parameters_callback(pre_set_callback(self, PLANT_SPECS))
+        self._params, self._specs = declare_plant(self)
+        self.add_pre_set_parameters_callback(pre_set_callback(self, self._specs))
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._server: PlantServer | None = None
@@ -287,7 +287,7 @@ class CranePlantNode(LifecycleNode):
     # -- parameters -------------------------------------------------------------------------------------
 
     def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        reason = check(parameters, PLANT_SPECS)
+        reason = check(parameters, self._specs)
         return SetParametersResult(successful=reason is None, reason=reason or "")
 
     def _apply_parameters(self, parameters: list[Parameter]) -> None:

@@ -8,14 +8,15 @@ names per-joint gains.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from rclpy.node import Node
 
 from ..control.plant import BANDWIDTH, DAMPING_RATIO
 from ..control.plant_server import PlantSettings, default_drive_damping
-from ..model.chain import ACTUATED_JOINTS, VARIANTS
+from ..model.chain import VARIANTS
 from ..model.config import load_config
+from ..model.paper_layout import ACTUATED as PAPER_ACTUATED
 from ..motion.simulation import Scenario
 from ..motion.steps import PLANT_STEP
 from .parameters import (
@@ -43,13 +44,9 @@ PLANT_PARAMETERS: tuple[ParameterSpec, ...] = (
                   "whole number of steps)", "s", (1e-5, 1e-2), read_only=True),
     ParameterSpec("control_rate", INTEGER, 1000, "Rate of the control periods: a command holds over one, and the "
                   "state is published after each", "Hz", (1, MAX_CONTROL_RATE), read_only=True),
-    ParameterSpec("joints", STRING_ARRAY, list(ACTUATED_JOINTS), "The joints of ~/commands, in their order (a "
-                  "permutation of the actuated joints), as a forward command controller's joints", read_only=True),
-    *(ParameterSpec(f"drive_damping.{joint}", DOUBLE, 0.0, f"Damping kd of the {joint} drive's velocity loop: "
-                    "the drive applies the commanded effort minus kd times the joint's velocity; default: the D "
-                    f"gain of a {BANDWIDTH:g} Hz, {DAMPING_RATIO:g}-damped joint loop on the crane (as "
-                    "`crane-reference track`)",
-                    "N m s/rad", (0.0, 1e9), read_only=True) for joint in ACTUATED_JOINTS),
+    ParameterSpec("joints", STRING_ARRAY, list(PAPER_ACTUATED), "The joints of ~/commands, in their order (a "
+                  "permutation of the crane's actuated joints, by default those), as a forward command controller's "
+                  "joints", read_only=True, from_config=lambda c: list(c.actuated)),
     ParameterSpec("command_timeout", DOUBLE, 0.1, "With no command accepted for this long (real time), the plant "
                   "applies the hold command (the efforts that hold the configuration where the timeout began) and "
                   "WARNs", "s", (0.001, 3600.0)),
@@ -66,7 +63,16 @@ PLANT_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("autostart", BOOL, True, "Configure and activate the (lifecycle) node at once", read_only=True),
 )
 PLANT_SPECS: dict[str, ParameterSpec] = {spec.name: spec for spec in PLANT_PARAMETERS}
-DAMPING = tuple(f"drive_damping.{joint}" for joint in ACTUATED_JOINTS)
+"""The table without the drives' damping, whose parameters follow the crane's actuated joints
+(:func:`drive_damping_spec`)."""
+
+
+def drive_damping_spec(joint: str, default: float) -> ParameterSpec:
+    """``drive_damping.<joint>``, with the crane's default."""
+    return ParameterSpec(f"drive_damping.{joint}", DOUBLE, default, f"Damping kd of the {joint} drive's velocity "
+                         "loop: the drive applies the commanded effort minus kd times the joint's velocity; default: "
+                         f"the D gain of a {BANDWIDTH:g} Hz, {DAMPING_RATIO:g}-damped joint loop on the crane (as "
+                         "`crane-reference track`)", "N m s/rad or N s/m", (0.0, 1e9), read_only=True)
 
 
 @dataclass(frozen=True)
@@ -96,23 +102,30 @@ class PlantParameters:
                              self.all_coordinates)
 
 
-def declare_plant(node: Node) -> PlantParameters:
-    """Declare the table on ``node`` (the damping's defaults from its config file and model) and return the
-    values; :class:`~.parameters.ParameterError` for a value the table refuses or an unknown override."""
+def declare_plant(node: Node) -> tuple[PlantParameters, dict[str, ParameterSpec]]:
+    """Declare the table on ``node`` (the joints and the damping's defaults from its config file and model, one
+    ``drive_damping.<joint>`` per actuated joint) and return the values and the table declared;
+    :class:`~.parameters.ParameterError` for a value the table refuses or an unknown override."""
     values = {}
+    specs = dict(PLANT_SPECS)
+    config = None
     for spec in PLANT_PARAMETERS:
-        if spec.name in DAMPING and DAMPING[0] not in values:
-            scenario = Scenario(load_config(values["config_file"] or None), values["model"])
-            defaults = dict(zip(DAMPING, default_drive_damping(scenario, ACTUATED_JOINTS), strict=True))
-        if spec.name in DAMPING:
-            spec = replace(spec, default=defaults[spec.name])
-        values[spec.name] = declare(node, spec)
-    unknown = unknown_overrides(node, PLANT_SPECS)
+        values[spec.name] = declare(node, spec, config)
+        if spec.name == "model":
+            config = load_config(values["config_file"] or None)
+            scenario = Scenario(config, values["model"])
+            damping = [drive_damping_spec(joint, kd) for joint, kd in
+                       zip(config.actuated, default_drive_damping(scenario, config.actuated), strict=True)]
+            specs.update({spec.name: spec for spec in damping})
+            for damping_spec in damping:
+                values[damping_spec.name] = declare(node, damping_spec)
+    unknown = unknown_overrides(node, specs)
     if unknown:
         raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
                              f"{parameter_names(node)}")
     return PlantParameters(values["config_file"], values["model"], values["integrator.step"],
                            values["control_rate"], tuple(values["joints"]),
-                           {joint: values[f"drive_damping.{joint}"] for joint in ACTUATED_JOINTS},
+                           {joint: values[f"drive_damping.{joint}"] for joint in config.actuated},
                            values["command_timeout"], values["clock_mode"], values["clock_start"],
-                           values["all_coordinates"], values["frame_id"], values["frame_prefix"], values["autostart"])
+                           values["all_coordinates"], values["frame_id"], values["frame_prefix"],
+                           values["autostart"]), specs

@@ -9,7 +9,7 @@ from collections.abc import Callable
 
 from rclpy.parameter import Parameter
 
-from ..model.parameters import CraneParameters
+from ..model.description import CraneDescription
 from ..motion.simulation import SOLVER_FAILURES
 from ..stream.server import CommandRefusedError, Preview, ReferenceServer
 from ..stream.solver import LocalSolver, SolverClient, SolverProcess, StreamSpec
@@ -39,14 +39,14 @@ def publish_settings(params: NodeParameters, joint_names: tuple[str, ...],
                            params.preview_effort)
 
 
-def stream_spec(params: NodeParameters, config: CraneParameters) -> StreamSpec:
+def stream_spec(params: NodeParameters, config: CraneDescription) -> StreamSpec:
     """The stream of ``params`` for the crane ``config``."""
     return StreamSpec(config=config, model=params.model, step=params.integrator_step, blend_time=params.blend_time,
                       targets=params.targets(), drive_torque=params.drive_torque, drive_duration=params.drive_duration,
                       speed_scaling=params.speed_scaling, ramp_time=params.speed_scaling_ramp_time)
 
 
-def start_solver(params: NodeParameters, config: CraneParameters, stopped: Callable[[], bool]) -> SolverClient:
+def start_solver(params: NodeParameters, config: CraneDescription, stopped: Callable[[], bool]) -> SolverClient:
     """The solver of the stream of ``params``, in its own process (``solver_process``; ``stopped()`` ends the
     wait for it) or here; :class:`StartupError` if the targets have no consistent start."""
     spec, targets = stream_spec(params, config), params.targets()

@@ -33,8 +33,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..model.chain import REVOLUTE
+from ..model.description import CraneDescription
 from ..model.drive import SpringDrive
-from ..model.parameters import CraneParameters, FlexibleDrive, Task, TorqueDrive
+from ..model.parameters import FlexibleDrive, Task, TorqueDrive
 from ..motion.constraints import ConstraintSet
 from ..motion.equilibrium import static_equilibrium
 from ..motion.programmed_motion import ProgrammedMotion
@@ -58,7 +59,7 @@ MIN_SINGULAR_VALUE = 1e-3
 class ReferenceStream:
     """The programmed motion of one crane variant, computed ahead and sampled on demand."""
 
-    def __init__(self, params: CraneParameters, variant: str = "flexible", step: float = ONLINE_STEP,
+    def __init__(self, params: CraneDescription, variant: str = "flexible", step: float = ONLINE_STEP,
                  blend_time: float = 2.0, targets: Task | None = None,
                  drive: TorqueDrive | FlexibleDrive | None = None,
                  singular_value_margin: float = 0.1, task_constraints: TaskConstraints = paper_task_constraints,

@@ -46,8 +46,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..model.description import CraneDescription
 from ..model.drive import column_drive
-from ..model.parameters import CraneParameters, Task
+from ..model.parameters import Task
 from ..model.urdf import model_to_urdf
 from ..motion.integration import stop_flag
 from .reference_stream import ReferenceStream
@@ -71,7 +72,7 @@ class StreamSpec:
     [N m] and duration [s] (None: the configuration's), speed scaling and its ramp time [s]; ``warm_up``:
     make every kernel ready first (and say how)."""
 
-    config: CraneParameters
+    config: CraneDescription
     model: str
     step: float
     blend_time: float

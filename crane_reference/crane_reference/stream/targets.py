@@ -14,7 +14,7 @@ from ..model.parameters import Task
 from ..model.profiles import Blend, Constant, Profile
 from ..motion.constraints import ConstraintSet, paper_constraints
 from ..motion.programmed_motion import POSITION_TOLERANCE, ProgrammedMotion
-from ..motion.simulation import Scenario
+from ..motion.simulation import Scenario, Slew
 
 ELLIPSE_POINTS = 145  # points per ellipse walked by the check
 CHECK_HEIGHTS = 3  # heights between the present and the new final target height
@@ -28,8 +28,9 @@ def check_task(scenario: Scenario, task: Task, z_now: float, margin: float) -> N
     """Raise :class:`UnreachableTargetError` unless E can follow the whole ellipse of ``task`` at every
     height between ``z_now`` [m] and its final height z_E,s + z_increment, with the smallest singular
     value of K_dc (the task Jacobian of the dependent coordinates) at least ``margin``.  Checked with the
-    model's own position constraints: walking around the ellipse with the column azimuth, solving for the
-    luff and knuckle angles by continuation from the model's initial configuration."""
+    model's own position constraints: walking around the ellipse with the slew joint
+    (:attr:`~crane_reference.motion.simulation.Scenario.slew`, the paper's column), solving for the dependent
+    coordinates (the paper's luff and knuckle angles) by continuation from the model's initial configuration."""
     for field in dataclasses.fields(Task):
         value = getattr(task, field.name)
         if not math.isfinite(value):
@@ -40,7 +41,7 @@ def check_task(scenario: Scenario, task: Task, z_now: float, margin: float) -> N
     phi = np.linspace(-0.5 * np.pi, 1.5 * np.pi, ELLIPSE_POINTS)
     for z in np.linspace(z_now, scenario.z_static + task.z_increment, CHECK_HEIGHTS):
         points = np.column_stack((task.ellipse_a * np.cos(phi), task.ellipse_b * np.sin(phi), np.full(phi.size, z)))
-        q = _hold(_motion(scenario, task.ellipse_a, task.ellipse_b, z), q, points, margin)
+        q = _hold(_motion(scenario, task.ellipse_a, task.ellipse_b, z), scenario.slew, q, points, margin)
 
 
 def _motion(scenario: Scenario, a: float, b: float, z: float) -> ProgrammedMotion:
@@ -49,14 +50,15 @@ def _motion(scenario: Scenario, a: float, b: float, z: float) -> ProgrammedMotio
                             min_singular_value=0.0)
 
 
-def _hold(check: ProgrammedMotion, q: np.ndarray, points: np.ndarray, margin: float) -> np.ndarray:
+def _hold(check: ProgrammedMotion, slew: Slew, q: np.ndarray, points: np.ndarray, margin: float) -> np.ndarray:
     """q with E held at each of ``points`` (N, 3) [m] in turn on ``check``'s constraints, by continuation from
-    ``q`` with the column azimuth atan2(y, x) (:func:`~crane_reference.dynamics.kernels.held_points`): the
+    ``q`` with the ``slew`` joint at the azimuth atan2(y, x)
+    (:func:`~crane_reference.dynamics.kernels.held_points`): the
     solution at the last point; :class:`UnreachableTargetError` at the first point where E cannot be held, or
     only with the smallest singular value of K_dc below ``margin``."""
     q, held, positions, singular_values = kernels.held_points(
         np.ascontiguousarray(q, dtype=float), points, check.constraints.coefficients(0.0), check.holonomic_dependent,
-        check.dynamics.chain, POSITION_TOLERANCE, kernels.PROJECTION_ITERATIONS)
+        check.dynamics.chain, np.array(slew, dtype=float), POSITION_TOLERANCE, kernels.PROJECTION_ITERATIONS)
     off = np.hypot(positions[:, 0] - points[:, 0], positions[:, 1] - points[:, 1])
     failed = np.flatnonzero(~held | ~(off <= POINT_TOLERANCE) | ~(singular_values >= margin))
     if failed.size:
@@ -88,7 +90,8 @@ def reach(scenario: Scenario, radius: float, heights: Iterable[float], margin: f
     for z in heights:
         bounds = []
         for direction in (-1.0, 1.0):
-            q = _hold(_motion(scenario, radius, radius, z), scenario.model.initial_q, np.array([[radius, 0.0, z]]),
+            q = _hold(_motion(scenario, radius, radius, z), scenario.slew, scenario.model.initial_q,
+                      np.array([[radius, 0.0, z]]),
                       margin)
             r, step = radius, REACH_FIRST_STEP
             while step >= REACH_RESOLUTION:
@@ -96,7 +99,8 @@ def reach(scenario: Scenario, radius: float, heights: Iterable[float], margin: f
                 try:
                     if trial <= 0.0:
                         raise UnreachableTargetError("E on the column's axis")
-                    q = _hold(_motion(scenario, trial, trial, z), q, np.array([[trial, 0.0, z]]), margin)
+                    q = _hold(_motion(scenario, trial, trial, z), scenario.slew, q, np.array([[trial, 0.0, z]]),
+                              margin)
                     r = trial
                 except UnreachableTargetError:
                     step *= 0.5

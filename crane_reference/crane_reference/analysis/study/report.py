@@ -17,10 +17,8 @@ import numpy as np
 import pandas as pd
 
 from ..figures import pyplot as plt
-from .case import METRICS
+from .case import metrics
 from .spec import StudySpec
-
-PLOTTED = tuple(m for m in METRICS if m not in ("feasible", "reason", "wall_s"))
 
 
 def write_report(spec: StudySpec, table: pd.DataFrame, out: str | Path) -> list[Path]:
@@ -28,14 +26,15 @@ def write_report(spec: StudySpec, table: pd.DataFrame, out: str | Path) -> list[
     out = Path(out)
     written = [out / "results.parquet"]
     table.to_parquet(written[0], index=False)
-    metrics = [m for m in PLOTTED if m in table and table[m].notna().any()]
+    plotted = [m for m in metrics(spec.joints) if m not in ("feasible", "reason", "wall_s")]
+    metrics_shown = [m for m in plotted if m in table and table[m].notna().any()]
     if len(spec.varied) == 2:
-        written.append(_heat_maps(table, spec.varied, metrics, out / "heatmaps.png", spec.limits))
-        limited = [m for m in metrics if m in spec.limits]
+        written.append(_heat_maps(table, spec.varied, metrics_shown, out / "heatmaps.png", spec.limits))
+        limited = [m for m in metrics_shown if m in spec.limits]
         if limited:
             written.append(_heat_maps(table, spec.varied, limited, out / "heatmaps_limits.png", spec.limits))
     else:
-        written.append(_curves(table, spec.varied, metrics, out / "metrics.png"))
+        written.append(_curves(table, spec.varied, metrics_shown, out / "metrics.png"))
     written.append(out / "summary.md")
     written[-1].write_text(summary(spec, table))
     return written
@@ -146,7 +145,7 @@ def summary(spec: StudySpec, table: pd.DataFrame) -> str:
                 lines.append("")
         lines.append("")
     lines += ["## Ranges of the metrics (feasible cases)", "", "| metric | min | max |", "|---|---|---|"]
-    for metric in PLOTTED:
+    for metric in (m for m in metrics(spec.joints) if m not in ("feasible", "reason", "wall_s")):
         if metric in table and table.loc[feasible, metric].notna().any():
             values = table.loc[feasible, metric]
             lines.append(f"| {metric} | {values.min():.4g} | {values.max():.4g} |")

@@ -18,14 +18,14 @@ from pathlib import Path
 import pandas as pd
 from tqdm import tqdm
 
-from .case import METRICS, run_case
+from .case import metrics, run_case
 from .spec import Case, StudySpec
 
 RESULTS = "results.csv"
 
 
 def columns(spec: StudySpec) -> list[str]:
-    return ["case", "key", *spec.varied, *METRICS]
+    return ["case", "key", *spec.varied, *metrics(spec.joints)]
 
 
 def finished_keys(out: Path) -> set[str]:

@@ -19,11 +19,13 @@ A study spec (YAML) names the crane, the run and the parameters to vary::
       feedforward: rigid    # damping_ratio; torque_limit [N m] (all actuated joints; omitted: none)
 
 Parameters that can vary (:data:`PARAMETERS`): the ellipse semi-axes, E's height rise and rise time, the
-column torque and its duration, the payload mass, the number of rigid finite elements, the boom's
-stiffness-proportional damping and the path speed (E's parametric-angle rate along the ellipse, rising
+drive's torque and its duration, the payload mass, the number of rigid finite elements of every flexible link,
+their stiffness-proportional damping (``damping_boom``: every flexible link's, the paper's boom's) and the path
+speed (E's parametric-angle rate along the ellipse, rising
 along a quintic over :data:`PATH_SPEED_RISE`, imposed by the first-order areal-rate constraint); and of the
 closed loop (:data:`TRACKING_PARAMETERS`, which switch the tracking on): the bandwidth of every actuated
-joint or of one, the damping ratio, the torque limit and the feedforward (0 none, 1 rigid inverse dynamics).
+joint or of one (``bandwidth_<joint>``, a joint of the crane's ``actuated``), the damping ratio, the torque
+limit and the feedforward (0 none, 1 rigid inverse dynamics).
 With tracking, the metrics of :class:`~crane_reference.analysis.tracking.closed_loop.TrackingRun` become
 columns ``track_*``.
 Grids combine as a full factorial; random ranges are sampled uniformly with the seed (integers for
@@ -43,7 +45,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ...model.chain import ACTUATED_JOINTS, VARIANTS
+from ...model.chain import VARIANTS
 from ...model.config import load_config
 from ...model.parameters import TorqueDrive
 from ...motion.programmed_motion import REALISATIONS
@@ -63,21 +65,30 @@ PARAMETERS: dict[str, tuple[str, float, float, bool]] = {
     "damping_boom": ("s", 0.0, 1.0, False),
     "path_speed": ("rad/s", 0.0, 10.0, False),
     "bandwidth": ("Hz", 0.05, 50.0, False),
-    "bandwidth_column_slew": ("Hz", 0.05, 50.0, False),
-    "bandwidth_boom_luff": ("Hz", 0.05, 50.0, False),
-    "bandwidth_knuckle": ("Hz", 0.05, 50.0, False),
     "damping_ratio": ("", 0.05, 5.0, False),
     "torque_limit": ("N m", 1.0, 1e8, False),
     "feedforward": ("", 0, 1, True),
 }
-TRACKING_PARAMETERS = ("bandwidth", *(f"bandwidth_{joint}" for joint in ACTUATED_JOINTS), "damping_ratio",
-                       "torque_limit", "feedforward")
+JOINT_BANDWIDTH = ("Hz", 0.05, 50.0, False)
+"""The range of ``bandwidth_<joint>``, one parameter per actuated joint of the crane."""
+TRACKING_PARAMETERS = ("bandwidth", "damping_ratio", "torque_limit", "feedforward")
+"""The closed loop's parameters (and every ``bandwidth_<joint>``)."""
 TRACKING_DEFAULTS = {"controller": "pd", "feedforward": "rigid", "rate": 1000.0, "bandwidth": 2.0,
                      "damping_ratio": 0.7, "torque_limit": math.inf}
-LIMITS = ("tip_deflection_m", "vibration_rms_m", "constraint_force_n", "drive_power_w", "ee_speed_m_s",
-          "track_ellipse_distance_max_m", "track_height_error_max_m", "track_tip_vibration_rms_m",
-          *(f"track_{joint}_torque_peak_nm" for joint in ACTUATED_JOINTS))
 CHOICES = (*VARIANTS, "both")
+
+
+def parameters(joints: tuple[str, ...]) -> dict[str, tuple[str, float, float, bool]]:
+    """The parameters a study of a crane with the actuated ``joints`` can vary (:data:`PARAMETERS` and a
+    ``bandwidth_<joint>`` per joint)."""
+    return {**PARAMETERS, **{f"bandwidth_{joint}": JOINT_BANDWIDTH for joint in joints}}
+
+
+def limits_allowed(joints: tuple[str, ...]) -> tuple[str, ...]:
+    """The metrics a design limit can be set on, for a crane with the actuated ``joints``."""
+    return ("tip_deflection_m", "vibration_rms_m", "constraint_force_n", "drive_power_w", "ee_speed_m_s",
+            "track_ellipse_distance_max_m", "track_height_error_max_m", "track_tip_vibration_rms_m",
+            *(f"track_{joint}_torque_peak_nm" for joint in joints))
 
 
 class StudyError(ValueError):
@@ -107,6 +118,8 @@ class StudySpec:
     limits: dict[str, float] = field(default_factory=dict)
     realisation: str = "ideal"
     tracking: dict[str, Any] | None = None
+    joints: tuple[str, ...] = ()
+    """The crane's actuated joints (read from ``config`` when the spec is parsed)."""
 
     @property
     def varied(self) -> list[str]:
@@ -121,7 +134,7 @@ class StudySpec:
             for _ in range(self.samples if self.ranges else 1):
                 values = dict(point)
                 for name, (low, high) in self.ranges.items():
-                    values[name] = (float(rng.integers(int(low), int(high) + 1)) if PARAMETERS[name][3]
+                    values[name] = (float(rng.integers(int(low), int(high) + 1)) if parameters(self.joints)[name][3]
                                     else float(rng.uniform(low, high)))
                 cases.append(Case(len(cases), values, self._key(values)))
         return cases
@@ -161,15 +174,17 @@ def parse_spec(data: Any, source: str = "study spec") -> StudySpec:
     realisation = data.get("realisation", "ideal")
     if realisation not in REALISATIONS:
         raise StudyError(f"realisation = {realisation!r}: must be one of {', '.join(map(repr, REALISATIONS))}")
+    base = load_config(config or None)  # a ConfigError names the file and the field
+    allowed = parameters(base.actuated)
     vary = data.get("vary")
     if not isinstance(vary, dict) or not vary:
-        raise StudyError(f"vary = {vary!r}: must map parameters ({', '.join(PARAMETERS)}) to "
+        raise StudyError(f"vary = {vary!r}: must map parameters ({', '.join(allowed)}) to "
                          "{values: [...]} or {low: ..., high: ...}")
     grid, ranges = {}, {}
     for name, how in vary.items():
-        if name not in PARAMETERS:
-            raise StudyError(f"vary.{name}: unknown parameter; allowed: {', '.join(PARAMETERS)}")
-        unit, low, high, integer = PARAMETERS[name]
+        if name not in allowed:
+            raise StudyError(f"vary.{name}: unknown parameter; allowed: {', '.join(allowed)}")
+        unit, low, high, integer = allowed[name]
         if isinstance(how, dict) and set(how) == {"values"} and isinstance(how["values"], list) and how["values"]:
             grid[name] = tuple(_number(v, f"vary.{name}.values[{i}]", low, high, integer)
                                for i, v in enumerate(how["values"]))
@@ -189,10 +204,10 @@ def parse_spec(data: Any, source: str = "study spec") -> StudySpec:
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise StudyError(f"seed = {seed!r}: must be a non-negative integer")
     limits = data.get("limits", {}) or {}
-    if not isinstance(limits, dict) or any(name not in LIMITS for name in limits):
-        raise StudyError(f"limits = {limits!r}: must map some of {', '.join(LIMITS)} to positive numbers")
+    if not isinstance(limits, dict) or any(name not in limits_allowed(base.actuated) for name in limits):
+        raise StudyError(f"limits = {limits!r}: must map some of {', '.join(limits_allowed(base.actuated))} to "
+                         "positive numbers")
     limits = {name: _number(value, f"limits.{name}", 0.0, math.inf) for name, value in limits.items()}
-    base = load_config(config or None)  # a ConfigError names the file and the field
     drive_varied = sorted({"drive_torque", "drive_duration"} & set(vary))
     if drive_varied and not isinstance(base.drive, TorqueDrive):
         raise StudyError(f"vary.{drive_varied[0]}: the crane of config = {config or 'the packaged default'!r} has a "
@@ -202,13 +217,13 @@ def parse_spec(data: Any, source: str = "study spec") -> StudySpec:
         raise StudyError(f"tracking.rate = {tracking['rate']:g} Hz: its period must be a whole number of steps "
                          f"(step = {step:g} s)")
     return StudySpec(config, variant, duration, step, grid, ranges, samples if ranges else 0, seed, limits,
-                     realisation, tracking)
+                     realisation, tracking, tuple(base.actuated))
 
 
 def _tracking(block: Any, varied: set[str]) -> dict[str, Any] | None:
     """The closed loop's fixed settings (:data:`TRACKING_DEFAULTS` for those not given), or None without a
     ``tracking`` block and with no tracking parameter varied."""
-    if block is None and not varied & set(TRACKING_PARAMETERS):
+    if block is None and not (varied & set(TRACKING_PARAMETERS) or any(v.startswith("bandwidth_") for v in varied)):
         return None
     block = {} if block is None else block
     if not isinstance(block, dict) or set(block) - set(TRACKING_DEFAULTS):

@@ -2,8 +2,9 @@
 joint-space feedback (:mod:`crane_reference.control.controller`) with optional feedforward
 (:mod:`crane_reference.control.feedforward`).
 
-The reference is the programmed motion the node publishes (ideal constraints; or realised by the luff
-and knuckle torques, ``realisation="servo"``) of the same crane, integrated with the same step; the
+The reference is the programmed motion the node publishes (ideal constraints; or realised by the dependent
+joints' torques, the paper's luff and knuckle, ``realisation="servo"``) of the same crane, integrated with the
+same step; the
 controller reads it as a downstream controller does, one sample per tick: q_ref, qd_ref of the actuated
 joints at t_k.  Its command holds over the period (zero-order hold; the D action acts in the joint
 drives, see :mod:`crane_reference.control.controller`), the feedforward runs linearly from its value at t_k
@@ -14,7 +15,7 @@ The plant starts at rest, held by its actuators with E on the task's start point
 Results (:class:`TrackingRun`): E's deviation from the programmed path (its distance to the ellipse in
 XY and its height error, the task's holonomic constraints in that order, first order in their residuals:
 Phi / |Phi_p|), the joint tracking
-errors, the boom tip deflection (flexible boom) and its 40-250 Hz RMS over the run's second half (and
+errors, the first flexible link's tip deflection (flexible model) and its 40-250 Hz RMS over the run's second half (and
 the reference's own, for comparison), the actuator torques and powers, the saturated share of ticks, and
 the plant's energy balance.
 """
@@ -32,10 +33,10 @@ from scipy.spatial.transform import Rotation
 from ...control.controller import CONTROLLERS, JointController, JointGains, bandwidth_gains
 from ...control.feedforward import FEEDFORWARDS, RigidInverseDynamics
 from ...control.plant import BANDWIDTH, DAMPING_RATIO, Plant, held_inertia, held_start, servo_motion
-from ...dynamics.deflection import boom_tip_deflection
+from ...dynamics.deflection import tip_deflection
 from ...interface.bringup import LoopRecording
-from ...model.chain import ACTUATED_JOINTS, VARIANTS
-from ...model.parameters import CraneParameters
+from ...model.chain import VARIANTS
+from ...model.description import CraneDescription
 from ...motion.constraints import ConstraintSet
 from ...motion.programmed_motion import REALISATIONS, ProgrammedMotion
 from ...motion.simulation import Scenario, simulated_runs
@@ -74,9 +75,6 @@ class TrackingSpec:
                                      ("feedforward", self.feedforward, FEEDFORWARDS)):
             if value not in allowed:
                 raise ValueError(f"{name} = {value!r}: must be one of {', '.join(allowed)}")
-        for name in (*self.gains, *self.limits, *self.joint_bandwidths):
-            if name not in ACTUATED_JOINTS:
-                raise ValueError(f"joint {name!r} in gains or limits: must be one of {', '.join(ACTUATED_JOINTS)}")
         for name in ("rate", "duration", "step"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
@@ -97,10 +95,19 @@ class TrackingSpec:
         """Reference steps per plant step."""
         return 1 if self.reference_step is None else max(1, round(self.step / self.reference_step))
 
-    def joint_gains(self, inertia: np.ndarray) -> list[JointGains]:
-        """The gains per actuated joint: given, or from the bandwidth with J = ``inertia`` (diagonal of M)."""
+    def check_joints(self, joints: tuple[str, ...]) -> None:
+        """ValueError unless the joints named in gains, limits and bandwidths are among ``joints`` (the actuated
+        ones)."""
+        for name in (*self.gains, *self.limits, *self.joint_bandwidths):
+            if name not in joints:
+                raise ValueError(f"joint {name!r} in gains or limits: must be one of {', '.join(joints)}")
+
+    def joint_gains(self, joints: tuple[str, ...], inertia: np.ndarray) -> list[JointGains]:
+        """The gains per joint of ``joints`` (the actuated ones): given, or from the bandwidth with J =
+        ``inertia`` (diagonal of M)."""
+        self.check_joints(joints)
         out = []
-        for name, J in zip(ACTUATED_JOINTS, inertia, strict=True):
+        for name, J in zip(joints, inertia, strict=True):
             limit = self.limits.get(name, math.inf)
             gains = self.gains.get(name) or bandwidth_gains(J, self.joint_bandwidths.get(name, self.bandwidth),
                                                             self.damping_ratio, self.controller == "pid")
@@ -108,23 +115,30 @@ class TrackingSpec:
         return out
 
 
-SUMMARY = ("ellipse_distance_max_m", "ellipse_distance_rms_m", "height_error_max_m", "height_error_rms_m",
-           *(f"{joint}_{metric}" for joint in ACTUATED_JOINTS
-             for metric in ("error_max_rad", "error_rms_rad", "torque_peak_nm", "power_peak_w", "saturated_share")),
-           "tip_deflection_max_m", "tip_vibration_rms_m", "reference_tip_vibration_rms_m", "energy_balance_error_j",
-           "real_time_factor")
-"""The names of :meth:`TrackingRun.summary`, in order."""
+JOINT_METRICS = ("error_max_rad", "error_rms_rad", "torque_peak_nm", "power_peak_w", "saturated_share")
+"""The metrics of each actuated joint in :meth:`TrackingRun.summary`, named ``<joint>_<metric>`` (on a prismatic
+joint the units are m and N)."""
+
+
+def summary_names(joints: tuple[str, ...]) -> tuple[str, ...]:
+    """The names of :meth:`TrackingRun.summary` for a crane with the actuated ``joints``, in order."""
+    return ("ellipse_distance_max_m", "ellipse_distance_rms_m", "height_error_max_m", "height_error_rms_m",
+            *(f"{joint}_{metric}" for joint in joints for metric in JOINT_METRICS),
+            "tip_deflection_max_m", "tip_vibration_rms_m", "reference_tip_vibration_rms_m", "energy_balance_error_j",
+            "real_time_factor")
 
 
 @dataclass(frozen=True)
 class TrackingRun:
-    """A closed-loop run: the spec, the gains used, the plant's trajectory and actuator torques (N, 3) [N m] per step,
-    the reference on the same times (its motion and E's pose; forces and energies not evaluated), E's distance
-    to the programmed path (N, 2) [m] (ellipse in XY, height), the boom tip deflection of the plant and of the
-    reference (N, 3) [m] (zeros for the rigid boom), the saturated share of ticks per joint, the wall time
-    [s] and the part of it spent in the compiled closed loop (NaN where not measured: a recorded run)."""
+    """A closed-loop run: the spec, the actuated ``joints`` and their gains, the plant's trajectory and actuator
+    torques (N, a) [N m] per step, the reference on the same times (its motion and E's pose; forces and energies
+    not evaluated), E's distance to the programmed path (N, 2) [m] (ellipse in XY, height), the first flexible
+    link's tip deflection of the plant and of the reference (N, 3) [m] (zeros for the rigid model), the saturated
+    share of ticks per joint, the wall time [s] and the part of it spent in the compiled closed loop (NaN where
+    not measured: a recorded run)."""
 
     spec: TrackingSpec
+    joints: tuple[str, ...]
     gains: list[JointGains]
     plant: Trajectory
     torques: np.ndarray
@@ -141,13 +155,13 @@ class TrackingRun:
         return self.plant.t
 
     def joint_errors(self) -> np.ndarray:
-        """q_ref - q of the actuated joints (N, 3) [rad]."""
-        columns = [self.plant.joint_names.index(name) for name in ACTUATED_JOINTS]
+        """q_ref - q of the actuated joints (N, a) [rad or m]."""
+        columns = [self.plant.joint_names.index(name) for name in self.joints]
         return self.reference.q[:, columns] - self.plant.q[:, columns]
 
     def powers(self) -> np.ndarray:
-        """tau qd of each actuator (N, 3) [W]."""
-        columns = [self.plant.joint_names.index(name) for name in ACTUATED_JOINTS]
+        """tau qd of each actuator (N, a) [W]."""
+        columns = [self.plant.joint_names.index(name) for name in self.joints]
         return self.torques * self.plant.qd[:, columns]
 
     def summary(self) -> dict[str, float]:
@@ -158,7 +172,7 @@ class TrackingRun:
                "height_error_max_m": float(np.abs(self.path_error[:, 1]).max()),
                "height_error_rms_m": float(np.sqrt(np.mean(self.path_error[:, 1] ** 2)))}
         errors, powers = self.joint_errors(), self.powers()
-        for k, name in enumerate(ACTUATED_JOINTS):
+        for k, name in enumerate(self.joints):
             out[f"{name}_error_max_rad"] = float(np.abs(errors[:, k]).max())
             out[f"{name}_error_rms_rad"] = float(np.sqrt(np.mean(errors[:, k] ** 2)))
             out[f"{name}_torque_peak_nm"] = float(np.abs(self.torques[:, k]).max())
@@ -171,7 +185,7 @@ class TrackingRun:
             out[f"{name}_vibration_rms_m"] = float(np.sqrt(np.mean(np.sum(vibration**2, axis=1))))
         out["energy_balance_error_j"] = float(np.abs(self.plant.energy_balance_error).max())
         out["real_time_factor"] = float(self.t[-1] / self.wall)
-        return {name: out[name] for name in SUMMARY}
+        return {name: out[name] for name in summary_names(self.joints)}
 
 
 Progress = Callable[[float], None]
@@ -179,7 +193,7 @@ TaskMotion = Callable[[Scenario], tuple[ProgrammedMotion, np.ndarray]]
 """The programmed motion of a scenario in the spec's realisation and its start q (e.g. a study case's)."""
 
 
-def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress | None = None,
+def run_tracking(params: CraneDescription, spec: TrackingSpec, progress: Progress | None = None,
                  task: TaskMotion | None = None) -> TrackingRun:
     """The closed-loop run of ``spec`` on the crane ``params`` (``progress`` gets the simulated time); the
     reference is the programmed motion ``task`` gives (default: the scenario's paper task).  The reference, and
@@ -195,7 +209,8 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
     ahead = ComputedAhead([motion for motion, _ in tasks],
                           [simulated_runs(motion, q0, spec.duration, step=spec.reference_step or spec.step,
                                           every_row=False) for motion, q0 in tasks])
-    gains = spec.joint_gains(held_inertia(scenario, ACTUATED_JOINTS, start))
+    joints = scenario.model.actuated_joints
+    gains = spec.joint_gains(joints, held_inertia(scenario, joints, start))
     controller = JointController(gains, 1.0 / spec.rate)
     plant = Plant(params, spec.variant, start, spec.step, controller.damping)
     actuated = plant.actuated
@@ -236,13 +251,14 @@ def run_tracking(params: CraneParameters, spec: TrackingSpec, progress: Progress
     reference_motion = tasks[0][0]
     constraints = ConstraintSet(tuple(c for c in reference_motion.constraints.constraints if c.order == 0))
     path_error = constraints.surface_offsets(trajectory.t, trajectory.ee_position)
-    deflections = [boom_tip_deflection(plant.model, plant.dynamics.chain, q) if spec.variant == "flexible"
-                   else np.zeros((len(trajectory.t), 3)) for q in (trajectory.q, reference.q)]
-    return TrackingRun(spec, gains, trajectory, torques, reference, path_error, *deflections,
+    deflections = [tip_deflection(plant.model, plant.dynamics.chain, q)
+                   if spec.variant == "flexible" and plant.model.flexible_links else np.zeros((len(trajectory.t), 3))
+                   for q in (trajectory.q, reference.q)]
+    return TrackingRun(spec, joints, gains, trajectory, torques, reference, path_error, *deflections,
                        controller.saturated_ticks / max(1, controller.ticks), time.perf_counter() - started, looped)
 
 
-def recorded_run(params: CraneParameters, spec: TrackingSpec, recording: LoopRecording) -> TrackingRun:
+def recorded_run(params: CraneDescription, spec: TrackingSpec, recording: LoopRecording) -> TrackingRun:
     """The :class:`TrackingRun` of a closed loop over ROS (``crane-reference loop``: the example controller with
     the default gains and no feedforward, ``spec`` saying so) from what it recorded: the plant's motion, efforts,
     E's pose and tip deflection, and the reference node's samples (their q and qd; the reference's E and tip
@@ -267,14 +283,15 @@ def recorded_run(params: CraneParameters, spec: TrackingSpec, recording: LoopRec
     plant = trajectory(recording.q, recording.qd, recording.ee_position, recording.ee_quaternion)
     reference = trajectory(recording.reference_q, recording.reference_qd, positions,
                            Rotation.from_matrix(rotations).as_quat())
-    actuated = [model.index(name) for name in ACTUATED_JOINTS]
+    joints = model.actuated_joints
+    actuated = [model.index(name) for name in joints]
     constraints = ConstraintSet(tuple(c for c in scenario.motion.constraints.constraints if c.order == 0))
-    gains = spec.joint_gains(held_inertia(scenario, ACTUATED_JOINTS))
-    reference_deflection = (boom_tip_deflection(model, dynamics.chain, recording.reference_q)
-                            if spec.variant == "flexible" else np.zeros((N, 3)))
+    gains = spec.joint_gains(joints, held_inertia(scenario, joints))
+    reference_deflection = (tip_deflection(model, dynamics.chain, recording.reference_q)
+                            if spec.variant == "flexible" and model.flexible_links else np.zeros((N, 3)))
     path_error = constraints.surface_offsets(t, recording.ee_position)
-    return TrackingRun(spec, gains, plant, recording.effort[:, actuated], reference, path_error, recording.deflection,
-                       reference_deflection, np.zeros(len(ACTUATED_JOINTS)), recording.wall)
+    return TrackingRun(spec, joints, gains, plant, recording.effort[:, actuated], reference, path_error,
+                       recording.deflection, reference_deflection, np.zeros(len(joints)), recording.wall)
 
 
 def _paper_task(scenario: Scenario, realisation: str) -> tuple[ProgrammedMotion, np.ndarray]:
@@ -287,10 +304,10 @@ def _paper_task(scenario: Scenario, realisation: str) -> tuple[ProgrammedMotion,
 def _feedforward(inverse: RigidInverseDynamics | None, step: float, reference: Trajectory,
                  motion: ProgrammedMotion, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """tau_ff of ``inverse`` (None: no feedforward) at the samples ``at`` (ticks' starts) of ``reference``, the
-    programmed motion ``motion`` at the plant's ``step`` (len(at), 3) [N m], as a command starts there and as one
-    ends there: they differ at a jump of the drive's torque, where the end takes the drive and the reference's
+    programmed motion ``motion`` at the plant's ``step`` (len(at), a) [N m or N], as a command starts there and as
+    one ends there: they differ at a jump of the drive's torque, where the end takes the drive and the reference's
     qdd from before it.  (A jump between ticks reaches the feedforward at the next tick.)"""
-    starts = np.zeros((at.size, len(ACTUATED_JOINTS)))
+    starts = np.zeros((at.size, len(motion.dynamics.model.actuated_joints)))
     if inverse is None:
         return starts, starts
     jumps = np.asarray(motion.dynamics.drive.breakpoints, dtype=float)

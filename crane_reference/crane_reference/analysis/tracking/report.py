@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ...model.chain import ACTUATED_JOINTS
 from ..figures import pyplot as plt
 from .closed_loop import TrackingRun
 
@@ -22,7 +21,7 @@ def series(run: TrackingRun) -> dict[str, np.ndarray]:
     columns = {"t_s": run.t}
     errors, powers = run.joint_errors(), run.powers()
     reference = run.reference
-    for k, name in enumerate(ACTUATED_JOINTS):
+    for k, name in enumerate(run.joints):
         j = run.plant.joint_names.index(name)
         columns[f"{name}_rad"] = run.plant.q[:, j]
         columns[f"{name}_reference_rad"] = reference.q[:, j]
@@ -51,7 +50,7 @@ def summary_markdown(runs: list[TrackingRun]) -> str:
     lines += ["", "Gains (kp [N m/rad], kd [N m s/rad, in the joint drive], ki [N m/(rad s)], limit [N m]):", ""]
     for name, run in zip(names, runs, strict=True):
         gains = ", ".join(f"{joint} {g.kp:.4g} / {g.kd:.4g} / {g.ki:.4g} / {g.limit:.4g}"
-                          for joint, g in zip(ACTUATED_JOINTS, run.gains, strict=True))
+                          for joint, g in zip(run.joints, run.gains, strict=True))
         lines.append(f"- {name}: {gains}")
     return "\n".join(lines) + "\n"
 
@@ -66,14 +65,14 @@ def plot(runs: list[TrackingRun], path: Path) -> None:
         t = run.t
         axes[0].plot(t, 1e3 * run.path_error[:, 0], style, color="C0", label=f"{name}: ellipse (XY)")
         axes[0].plot(t, 1e3 * run.path_error[:, 1], style, color="C1", label=f"{name}: height")
-        for k, joint in enumerate(ACTUATED_JOINTS):
+        for k, joint in enumerate(run.joints):
             axes[1].plot(t, 1e3 * run.joint_errors()[:, k], style, color=f"C{k}", label=f"{name}: {joint}")
             axes[4].plot(t, 1e-3 * run.torques[:, k], style, color=f"C{k}", label=f"{name}: {joint}")
         axes[2].plot(t, 1e3 * run.tip_deflection[:, 1], style, color="C0", label=f"{name}: luffing plane")
         axes[2].plot(t, 1e3 * run.tip_deflection[:, 2], style, color="C1", label=f"{name}: horizontal")
         axes[3].plot(t, 1e3 * np.linalg.norm(run.tip_deflection, axis=1), style, color="C2", label=name)
     titles = ["E's deviation from the programmed path [mm]", "joint errors q_ref - q [mrad]",
-              "boom tip deflection [mm]", "|tip deflection| [mm]", "actuator torques [kN m]"]
+              "tip deflection of the first flexible link [mm]", "|tip deflection| [mm]", "actuator torques [kN m]"]
     for ax, title in zip(axes, titles, strict=True):
         ax.set_title(title)
         ax.grid(True, alpha=0.3)
