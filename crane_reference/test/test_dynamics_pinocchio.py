@@ -2,7 +2,8 @@
 
 * Pinocchio, run on the URDF of the same chain (:func:`crane_reference.model.urdf.model_to_urdf`): mass matrix
   (CRBA), gravity and velocity terms (RNEA) and the end-effector frame, its Jacobian and its
-  velocity-product acceleration, at random configurations of both model variants.
+  velocity-product acceleration, at random configurations of both model variants of every packaged crane
+  (:data:`cranes.EXAMPLES`).
 * Finite differences (no Pinocchio): C = dp_E/dq, and d = d/dt (C qd) along q(t) = q + qd t.
 * Round trip of the URDF roll-pitch-yaw conversion.
 
@@ -17,10 +18,12 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 import pytest
+from cranes import CONFIG, EXAMPLES
 
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
-from crane_reference.model.chain import VARIANTS, ChainModel, build_model, rotation
+from crane_reference.model.chain import PRISMATIC, VARIANTS, ChainModel, build_model, rotation
 from crane_reference.model.config import load_config
+from crane_reference.model.description import BASE_JOINTS
 from crane_reference.model.drive import make_drive
 from crane_reference.model.urdf import matrix_to_rpy, model_to_urdf
 
@@ -44,25 +47,30 @@ class Case:
     pin_model: pin.Model
 
 
-@pytest.fixture(scope="module", params=VARIANTS)
+@pytest.fixture(scope="module", params=[(crane, variant) for crane in EXAMPLES for variant in VARIANTS],
+                ids=lambda p: f"{p[0]}-{p[1]}")
 def case(request: pytest.FixtureRequest) -> Case:
-    params = load_config()
-    model = build_model(params, request.param)
+    crane, variant = request.param
+    params = load_config(CONFIG / crane)
+    model = build_model(params, variant)
     pin_model = pin.buildModelFromXML(model_to_urdf(model))
     pin_model.gravity = pin.Motion(np.array([0.0, 0.0, -model.gravity]), np.zeros(3))
     return Case(model, CraneDynamics(model, make_drive(params.drive, params.drive_start)), pin_model)
 
 
 def random_state(model: ChainModel, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """q: base translations and angles ~1e-2 (m, rad), RFE angles ~0.05 rad, other angles in [-pi, pi];
-    qd: ~0.1 for the base, ~0.5 for the RFE angles, ~1 otherwise."""
+    """q: base translations and angles ~1e-2 (m, rad), RFE angles ~0.05 rad, other prismatic joints in
+    [-0.5, 0.5] m, other angles in [-pi, pi]; qd: ~0.1 for the base, ~0.5 for the RFE angles, ~1 otherwise."""
     q = np.empty(model.dof)
     qd_scale = np.empty(model.dof)
+    springs = {int(k) for link in model.flexible_links for k in link.springs}
     for k, name in enumerate(model.joint_names):
-        if name.startswith("base_"):
+        if name in BASE_JOINTS:
             q[k], qd_scale[k] = rng.normal(scale=1e-2), 0.1
-        elif name.startswith("boom_sde"):
+        elif k in springs:
             q[k], qd_scale[k] = rng.normal(scale=0.05), 0.5
+        elif model.joints[k].kind == PRISMATIC:
+            q[k], qd_scale[k] = rng.uniform(-0.5, 0.5), 1.0
         else:
             q[k], qd_scale[k] = rng.uniform(-np.pi, np.pi), 1.0
     return q, rng.normal(scale=qd_scale)

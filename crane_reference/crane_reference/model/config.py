@@ -15,6 +15,7 @@ field, the offending value and what is allowed, e.g.::
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 from collections.abc import Mapping
@@ -87,12 +88,17 @@ def read_yaml(path: str | os.PathLike[str]) -> Any:
 
 
 def load_config(path: str | os.PathLike[str] | None = None) -> CraneDescription:
-    """Read and validate a crane file; ``None`` loads :func:`default_config_path`.
+    """Read and validate a crane file; ``None`` loads :func:`default_config_path`; a relative path that does not
+    exist from the working directory is looked up in the package's ``config/`` (so ``loader_crane.yaml`` names
+    the packaged example).
 
     Raises :class:`ConfigError` (naming the file) if the file cannot be read, is not valid YAML or
     does not describe a valid crane.
     """
     file = default_config_path() if path is None else Path(path)
+    if not file.is_absolute() and not file.exists():
+        with contextlib.suppress(ConfigError):  # else reading the path as given names it in the error
+            file = packaged_file(DEFAULT_FILE.parent / file)
     return parse_config(read_yaml(file), source=str(file))
 
 

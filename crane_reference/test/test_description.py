@@ -1,0 +1,255 @@
+"""Crane descriptions (crane_reference.model.description_layout, .chain) against independent truths.
+
+* The paper's crane: config/crane.yaml (description layout) and data/paper_layout_crane.yaml (the paper's
+  layout) give the same chain, both variants.
+* The chain of a described joint about a general axis moves as a rotation about that axis (Rodrigues'
+  formula), whatever frame the builder gives it.
+* The constrained accelerations of the example loader crane (fixed base, two flexible links, a sprung
+  prismatic stage) against the Lagrange-multiplier (KKT) system at random consistent states.
+* The dependent coordinates chosen from the task Jacobian: the minor with the largest smallest singular
+  value, checked by enumerating the minors with numpy's SVD.
+* Every kind of bad description is refused with the field and what is allowed, before anything is computed.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import numpy as np
+import pytest
+from cranes import CONFIG, PAPER_LAYOUT
+
+from crane_reference.dynamics.chain_dynamics import CraneDynamics
+from crane_reference.dynamics.kinematics import forward_kinematics
+from crane_reference.model.chain import VARIANTS, build_model
+from crane_reference.model.config import ConfigError, load_config, parse_config, read_yaml
+from crane_reference.model.drive import TorqueSource
+from crane_reference.motion.simulation import Scenario
+
+LOADER = CONFIG / "loader_crane.yaml"
+SAMPLES = 6
+KKT_TOLERANCE = 1e-9  # relative
+
+
+@pytest.fixture(scope="module")
+def loader() -> dict[str, Scenario]:
+    params = load_config(LOADER)
+    return {variant: Scenario(params, variant) for variant in VARIANTS}
+
+
+@pytest.fixture
+def data() -> dict[str, Any]:
+    """A fresh, modifiable copy of the loader crane's file as parsed."""
+    return copy.deepcopy(_LOADER_DATA)
+
+
+_LOADER_DATA = read_yaml(LOADER)
+
+
+def expect_error(data: dict[str, Any], *fragments: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        parse_config(data, source="crane.yaml")
+    message = str(info.value)
+    assert message.startswith("crane.yaml: ")
+    for fragment in fragments:
+        assert fragment in message, f"{fragment!r} not in {message!r}"
+
+
+# --- the paper's crane in both layouts ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_both_layouts_of_the_paper_crane_give_the_same_chain(variant):
+    described, paper = (build_model(load_config(path), variant) for path in (CONFIG / "crane.yaml", PAPER_LAYOUT))
+    assert described.joint_names == paper.joint_names
+    for a, b in zip(described.joints, paper.joints, strict=True):
+        assert (a.kind, a.axis) == (b.kind, b.axis)
+        np.testing.assert_allclose(a.origin, b.origin, rtol=0.0, atol=1e-15)
+    assert [(body.name, body.joint) for body in described.bodies] == [(body.name, body.joint) for body in paper.bodies]
+    for a, b in zip(described.bodies, paper.bodies, strict=True):
+        np.testing.assert_array_equal(a.inertia.pseudo_inertia(), b.inertia.pseudo_inertia())
+    for name in ("stiffness", "support_stiffness", "beam_stiffness", "damping_matrix", "initial_q",
+                 "end_effector_point"):
+        np.testing.assert_array_equal(getattr(described, name), getattr(paper, name))
+    assert (described.end_effector_joint, described.drive_joint, described.dependent_joints,
+            described.actuated_joints) == (paper.end_effector_joint, paper.drive_joint, paper.dependent_joints,
+                                           paper.actuated_joints)
+
+
+# --- general axes --------------------------------------------------------------------------------------
+
+
+def _rodrigues(axis: np.ndarray, angle: float) -> np.ndarray:
+    K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * K @ K
+
+
+@pytest.mark.parametrize("axis", [[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0],
+                                  [0.6, 0.0, 0.8], [1 / 3, -2 / 3, 2 / 3]])
+def test_a_joint_about_any_axis_rotates_about_it(data, axis):
+    """The knuckle about ``axis``: E, the payload and the jib's tip turn about the knuckle's axis through the
+    knuckle's origin by R(axis, angle) (Rodrigues), the knuckle's frame being the stage's tip."""
+    data["links"][3]["joint"]["axis"] = axis
+    data["links"][3]["beam"]["rfe_count"] = 1
+    model = build_model(parse_config(data), "flexible")
+    chain = CraneDynamics(model, TorqueSource(0.0, 0.0, 0.0)).chain
+    knuckle = model.index("knuckle")
+    q = model.initial_q.copy()
+    q[knuckle] = 0.0
+    T0, _ = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
+    e0 = T0[model.end_effector_joint, :3, :3] @ model.end_effector_point + T0[model.end_effector_joint, :3, 3]
+    stage = T0[model.index("telescope")]  # the knuckle's origin is 0.5 m out along the stage's x axis
+    pivot = stage[:3, :3] @ np.array([0.5, 0.0, 0.0]) + stage[:3, 3]
+    world_axis = stage[:3, :3] @ np.asarray(axis) / np.linalg.norm(axis)
+    for angle in (0.3, -1.2, 2.5):
+        q[knuckle] = angle
+        T, _ = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
+        e = T[model.end_effector_joint, :3, :3] @ model.end_effector_point + T[model.end_effector_joint, :3, 3]
+        np.testing.assert_allclose(e, pivot + _rodrigues(world_axis, angle) @ (e0 - pivot), rtol=0.0, atol=1e-14)
+
+
+# --- the loader crane ----------------------------------------------------------------------------------
+
+
+def _random_consistent_state(scenario: Scenario, rng: np.random.Generator):
+    """(t, q, qd) on the constraints near the start: slew, stage and RFE angles perturbed, q_dc projected,
+    random velocities, qd_dc from (7)."""
+    motion, model = scenario.motion, scenario.model
+    t = rng.uniform(0.0, 1.0)
+    q = scenario.equilibrium.q.copy()
+    qd = rng.normal(scale=0.3, size=model.dof)
+    springs = [int(k) for link in model.flexible_links for k in link.springs]
+    q[springs] += rng.normal(scale=1e-2, size=len(springs))
+    q[model.index("column_slew")] += rng.uniform(-0.5, 0.5)
+    q[model.index("telescope")] += rng.uniform(-0.02, 0.02)
+    q, kinematics = motion.project_positions(t, q)
+    return t, q, motion.dependent_velocities(t, q, qd, kinematics)
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_loader_crane_accelerations_equal_the_kkt_system(loader, variant):
+    scenario = loader[variant]
+    motion, n = scenario.motion, scenario.model.dof
+    rng = np.random.default_rng(11)
+    for _ in range(SAMPLES):
+        t, q, qd = _random_consistent_state(scenario, rng)
+        solution = motion.solve(t, q, qd)
+        terms = scenario.dynamics.terms(t, q, qd)
+        A, c = solution.constraints.A, solution.constraints.c
+        m = A.shape[0]
+        kkt = np.block([[terms.M, -A.T], [A, np.zeros((m, m))]])
+        x = np.linalg.solve(kkt, np.concatenate((terms.Q - terms.h, c)))
+        assert np.linalg.norm(solution.qdd - x[:n]) <= KKT_TOLERANCE * np.linalg.norm(x[:n])
+        assert np.linalg.norm(solution.reactions - x[n:]) <= KKT_TOLERANCE * np.linalg.norm(x[n:])
+
+
+def test_loader_crane_chain(loader):
+    """What the description says, in the chain: a fixed base (no base coordinates), 3 RFE angles per
+    spring-damping element of each flexible link, the stage's spring and damper on its coordinate only."""
+    model = loader["flexible"].model
+    assert model.joint_names[:3] == ["column_slew", "main_luff", "main_boom_sde1_bend_vertical"]
+    assert model.dof == 4 + 3 * 3 + 3 * 3
+    assert [link.name for link in model.flexible_links] == ["main_boom", "jib"]
+    k = model.index("telescope")
+    assert model.stiffness[k, k] == 1.5e7 and model.damping_matrix[k, k] == 1.5e4
+    assert np.count_nonzero(model.stiffness[k]) == 1 and np.count_nonzero(model.damping_matrix[k]) == 1
+    assert np.all(model.support_stiffness == 0.0)
+    assert loader["rigid"].model.dof == 4
+
+
+def test_the_chosen_dependent_coordinates_are_the_best_minor(loader):
+    """Every pair of joints that may be dependent (free of springs and dampers, not the drive's), enumerated
+    here: the pair chosen has the largest smallest singular value of Phi_p C[:, pair] at the start."""
+    scenario = loader["flexible"]
+    model, dynamics = scenario.model, scenario.dynamics
+    p, C = dynamics.end_effector(model.initial_q)
+    A = scenario.motion.constraints.position_jacobian(0.0, p) @ C
+    free = [k for k in range(model.dof) if not np.any(dynamics.chain.stiffness[k]) and
+            not np.any(dynamics.chain.damping[k]) and k != model.drive_joint]
+    best = max(((i, j) for a, i in enumerate(free) for j in free[a + 1:]),
+               key=lambda pair: np.linalg.svd(A[:, pair], compute_uv=False)[-1])
+    assert tuple(model.dependent_joints) == best
+    assert [model.joint_names[k] for k in best] == ["main_luff", "knuckle"]
+
+
+def test_named_dependent_joints_that_cannot_solve_the_task_are_refused(data):
+    data["dependent"] = ["column_slew", "main_luff"]  # the slew cannot change E's height with the luff fixed
+    params = parse_config(data)
+    with pytest.raises(ConfigError, match=r"dependent = \['column_slew', 'main_luff'\]: these joints cannot"):
+        Scenario(params, "rigid")
+
+
+def test_no_joints_left_to_solve_the_task_is_refused(data):
+    data["links"][1]["joint"]["stiffness"] = 1e6  # the luff on a spring: only the knuckle is free
+    with pytest.raises(ConfigError, match="dependent = auto: no 2 of the joints knuckle"):
+        Scenario(parse_config(data), "rigid")
+
+
+# --- bad descriptions ----------------------------------------------------------------------------------
+
+
+def test_a_parent_that_is_no_link(data):
+    data["links"][2]["parent"] = "boom"
+    expect_error(data, "links:", "do not hang on the base", "telescope")
+
+
+def test_a_loop_of_parents(data):
+    data["links"][0]["parent"] = "jib"
+    expect_error(data, "links:", "a loop")
+
+
+def test_a_branch_is_not_a_serial_chain(data):
+    data["links"][3]["parent"] = "main_boom"
+    expect_error(data, "links:", "all hang on 'main_boom'", "one serial chain")
+
+
+def test_a_duplicated_link_name(data):
+    data["links"][3]["name"] = "main_boom"
+    expect_error(data, "links[3].name = 'main_boom'", "used once")
+
+
+def test_a_duplicated_joint_name(data):
+    data["links"][3]["joint"]["name"] = "main_luff"
+    expect_error(data, "links[3].joint.name = 'main_luff'", "used once")
+
+
+def test_an_unknown_key(data):
+    data["links"][1]["beam"]["colour"] = "red"
+    expect_error(data, "links[1].beam.colour: unknown key", "allowed keys")
+
+
+@pytest.mark.parametrize(("where", "value", "message"), [
+    (("links", 1, "beam", "section", "area"), -1.0, "links[1].beam.section.area = -1.0: must be a finite number > 0"),
+    (("links", 0, "inertial", "mass"), 0.0, "links[0].inertial.mass = 0.0: must be a finite number > 0 [kg]"),
+    (("links", 3, "beam", "rfe_count"), 0, "links[3].beam.rfe_count = 0: must be an integer >= 1"),
+    (("links", 2, "joint", "type"), "helical", "links[2].joint.type = 'helical': must be one of revolute, prismatic"),
+    (("links", 2, "joint", "axis"), [1.0, 1.0, 0.0], "links[2].joint.axis = [1.0, 1.0, 0.0]: must be a unit vector"),
+    (("links", 2, "joint", "stiffness"), -1.0, "links[2].joint.stiffness = -1.0: must be a finite number >= 0"),
+    (("end_effector", "link"), "base", "end_effector.link = 'base': must be a link of the chain (not the base)"),
+    (("drive", "joint"), "wrist", "drive.joint = 'wrist': must be a joint of the chain"),
+    (("actuated",), ["column_slew", "wrist"], "actuated[1] = 'wrist': must be a joint of the chain"),
+    (("dependent",), ["main_luff", "elbow"], "dependent[1] = 'elbow': must be a joint of the chain"),
+    (("base", "type"), "floating", "base.type = 'floating': must be one of fixed, sprung"),
+])
+def test_bad_fields_are_named(data, where, value, message):
+    target = data
+    for key in where[:-1]:
+        target = target[key]
+    target[where[-1]] = value
+    expect_error(data, message)
+
+
+def test_a_link_is_rigid_or_flexible(data):
+    data["links"][1]["inertial"] = data["links"][0]["inertial"]
+    expect_error(data, "links[1]: must have either 'inertial'", "not both or neither")
+
+
+def test_a_sprung_base_needs_its_mass_and_supports(data):
+    data["base"] = {"type": "sprung", "mass": 1000.0}
+    expect_error(data, "base.center_of_mass: missing")
+
+
+def test_the_packaged_examples_load_by_name():
+    """A bare file name that is not in the working directory is looked up in the package's config/."""
+    assert load_config("loader_crane.yaml").name == "loader_crane"
