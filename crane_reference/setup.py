@@ -20,7 +20,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.urdf")),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
         (f"share/{PACKAGE}/rviz", glob("rviz/*.rviz")),
         (f"lib/{PACKAGE}", ["scripts/node", "scripts/plant", "scripts/controller"]),
@@ -35,6 +35,7 @@ setup(
         "matplotlib>=3.6",
         "rosbags>=0.10",
         "tqdm>=4.60",
+        "urdf-parser-py>=0.0.4",
         "pandas>=2",
         "pyarrow>=14",
         "dask[distributed]>=2024.1",

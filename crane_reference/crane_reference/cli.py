@@ -10,12 +10,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 from tqdm import tqdm
 
 from .interface.messages import STORAGES
 from .model.chain import VARIANTS, build_model
 from .model.config import ConfigError, load_config
 from .model.urdf import model_to_urdf
+from .model.urdf_layout import description_to_urdf
 from .motion.programmed_motion import REALISATIONS
 from .motion.steps import ANALYSIS_STEP, ONLINE_STEP, PLANT_STEP
 
@@ -228,7 +230,15 @@ def compile_command(args: argparse.Namespace) -> int:
 
 
 def urdf_command(args: argparse.Namespace) -> int:
-    print(model_to_urdf(build_model(load_config(args.config), args.model)))
+    params = load_config(args.config)
+    if not args.links:
+        print(model_to_urdf(build_model(params, args.model)))
+        return 0
+    text, overlay = description_to_urdf(params)
+    print(text)
+    if args.overlay:
+        overlay = {"urdf": args.urdf_path or f"{params.name}.urdf", **overlay}
+        Path(args.overlay).write_text(yaml.safe_dump(overlay, sort_keys=False))
     return 0
 
 
@@ -334,9 +344,14 @@ def parser() -> argparse.ArgumentParser:
     lo.add_argument("--out", default="results/loop", help="output directory (default ./results/loop)")
     sub.add_parser("compile", help="compile the numba kernels ahead of the first run (fills the cache; run it "
                    "after installing, e.g. after colcon build)")
-    u = sub.add_parser("urdf", help="print the URDF of a model variant")
+    u = sub.add_parser("urdf", help="print the URDF of a model variant (every coordinate a joint: for "
+                       "robot_state_publisher), or with --links the URDF of the crane's links as described")
     u.add_argument("--config")
     u.add_argument("--model", choices=VARIANTS, default="flexible")
+    u.add_argument("--links", action="store_true", help="the links as described (a flexible link as one link), "
+                   "the form a crane file's `urdf` takes")
+    u.add_argument("--overlay", metavar="FILE", help="with --links: also write the overlay that makes it this crane")
+    u.add_argument("--urdf-path", metavar="PATH", help="with --overlay: the overlay's `urdf` (default <name>.urdf)")
     sub.add_parser("node", help="run the ROS 2 node (arguments after 'node' go to ROS)", add_help=False)
     sub.add_parser("plant", help="run the ROS 2 plant node: the actuated crane under effort commands (arguments "
                    "after 'plant' go to ROS)", add_help=False)

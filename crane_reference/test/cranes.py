@@ -8,5 +8,5 @@ from pathlib import Path
 CONFIG = Path(__file__).resolve().parent.parent / "config"
 PAPER_LAYOUT = Path(__file__).resolve().parent / "data" / "paper_layout_crane.yaml"
 """The packaged crane (config/crane.yaml) in the layout of the paper's crane family."""
-EXAMPLES = ("crane.yaml", "loader_crane.yaml")
+EXAMPLES = ("crane.yaml", "loader_crane.yaml", "knuckle_boom_crane.yaml")
 """The packaged cranes (files in :data:`CONFIG`): the paper's and the examples."""

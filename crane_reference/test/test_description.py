@@ -18,13 +18,16 @@ from typing import Any
 
 import numpy as np
 import pytest
-from cranes import CONFIG, PAPER_LAYOUT
+import yaml
+from cranes import CONFIG, EXAMPLES, PAPER_LAYOUT
 
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.dynamics.kinematics import forward_kinematics
 from crane_reference.model.chain import VARIANTS, build_model
 from crane_reference.model.config import ConfigError, load_config, parse_config, read_yaml
 from crane_reference.model.drive import TorqueSource
+from crane_reference.model.urdf import model_to_urdf
+from crane_reference.model.urdf_layout import description_to_urdf, parse_urdf_description
 from crane_reference.motion.simulation import Scenario
 
 LOADER = CONFIG / "loader_crane.yaml"
@@ -253,3 +256,103 @@ def test_a_sprung_base_needs_its_mass_and_supports(data):
 def test_the_packaged_examples_load_by_name():
     """A bare file name that is not in the working directory is looked up in the package's config/."""
     assert load_config("loader_crane.yaml").name == "loader_crane"
+
+
+# --- URDF ----------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("crane", EXAMPLES)
+def test_a_description_read_back_from_its_urdf_and_overlay_is_the_same_chain(tmp_path, crane):
+    """description -> (URDF of its links, overlay) -> description: the same chain, both variants."""
+    params = load_config(CONFIG / crane)
+    text, overlay = description_to_urdf(params)
+    (tmp_path / "robot.urdf").write_text(text)
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump({"urdf": "robot.urdf", **overlay}))
+    again = load_config(tmp_path / "robot.yaml")
+    for variant in VARIANTS:
+        assert_same_chain(build_model(again, variant), build_model(params, variant), atol=1e-14)
+
+
+def assert_same_chain(a, b, atol: float) -> None:
+    assert a.joint_names == b.joint_names
+    for x, y in zip(a.joints, b.joints, strict=True):
+        assert (x.kind, x.axis) == (y.kind, y.axis), x.name
+        np.testing.assert_allclose(x.origin, y.origin, rtol=0.0, atol=atol, err_msg=x.name)
+    assert [body.joint for body in a.bodies] == [body.joint for body in b.bodies]
+    for x, y in zip(a.bodies, b.bodies, strict=True):
+        np.testing.assert_allclose(x.inertia.pseudo_inertia(), y.inertia.pseudo_inertia(), rtol=1e-13, atol=atol)
+    for name in ("stiffness", "damping_matrix", "initial_q", "end_effector_point"):
+        np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=1e-14, atol=atol, err_msg=name)
+    assert (a.end_effector_joint, a.drive_joint, a.dependent_joints, a.actuated_joints) == (
+        b.end_effector_joint, b.drive_joint, b.dependent_joints, b.actuated_joints)
+
+
+@pytest.mark.parametrize("crane", EXAMPLES)
+def test_the_chain_urdf_reads_back_to_the_same_chain(tmp_path, crane):
+    """``crane-reference urdf`` (every coordinate a joint, every RFE a link) read by urdf_parser_py as a crane
+    file's URDF: the same joints, frames and bodies (its springs are the overlay's, so they are not compared)."""
+    params = load_config(CONFIG / crane)
+    model = build_model(params, "flexible")
+    (tmp_path / "chain.urdf").write_text(model_to_urdf(model))
+    read = build_model(parse_urdf_description(
+        {"urdf": "chain.urdf", "gravity": params.gravity, "base": {"type": "fixed"},
+         "drive": {"joint": model.joint_names[model.drive_joint], "type": "torque", "torque": 0.0, "start": 0.0,
+                   "end": 1.0},
+         "actuated": list(model.actuated_joints), "end_effector": {"link": "end_effector", "point": [0, 0, 0]}},
+        tmp_path / "overlay.yaml"), "flexible")
+    assert read.joint_names == model.joint_names
+    for x, y in zip(read.joints, model.joints, strict=True):
+        assert (x.kind, x.axis) == (y.kind, y.axis), x.name
+        np.testing.assert_allclose(x.origin, y.origin, rtol=0.0, atol=1e-14, err_msg=x.name)
+    mass = {b.joint: 0.0 for b in model.bodies}
+    for body in model.bodies:
+        mass[body.joint] += body.inertia.mass
+    assert {b.joint: b.inertia.mass for b in read.bodies} == pytest.approx(mass, rel=1e-14)
+    assert read.end_effector_joint == model.end_effector_joint
+    np.testing.assert_allclose(read.end_effector_point, model.end_effector_point, atol=1e-15)
+
+
+def test_a_urdf_link_named_flexible_must_exist(tmp_path):
+    data = read_yaml(CONFIG / "knuckle_boom_crane.yaml")
+    data["flexible"]["jib_2"] = data["flexible"].pop("main_boom")
+    data["urdf"] = str(CONFIG / data["urdf"])
+    expect_error(data, "flexible.jib_2: unknown key", "allowed keys of flexible: pedestal, king")
+
+
+def test_a_flexible_urdf_link_with_another_mass_is_refused():
+    data = read_yaml(CONFIG / "knuckle_boom_crane.yaml")
+    data["urdf"] = str(CONFIG / data["urdf"])
+    data["flexible"]["main_boom"]["density"] = 2700.0  # aluminium: a third of the URDF's 192.9 kg
+    expect_error(data, "flexible.main_boom: the URDF gives link 'main_boom' 192.9 kg", "rho A L", "66.3")
+
+
+def test_a_flexible_urdf_link_whose_child_is_off_its_axis_is_refused(tmp_path):
+    text = (CONFIG / "knuckle_boom_crane.urdf").read_text().replace('<origin xyz="4.0 0 0" rpy="0 0 0"/>',
+                                                                    '<origin xyz="4.0 0 0.2" rpy="0 0 0"/>')
+    (tmp_path / "crane.urdf").write_text(text)
+    data = read_yaml(CONFIG / "knuckle_boom_crane.yaml")
+    data["urdf"] = str(tmp_path / "crane.urdf")
+    expect_error(data, "flexible.main_boom: its child joint 'fold' is at [4.0, 0.0, 0.2]", "(L, 0, 0)")
+
+
+def test_a_missing_urdf_is_named():
+    data = read_yaml(CONFIG / "knuckle_boom_crane.yaml")
+    data["urdf"] = "/nowhere/crane.urdf"
+    expect_error(data, "urdf = '/nowhere/crane.urdf': cannot read")
+
+
+def test_urdf_fixed_links_are_merged_and_carry_their_points():
+    """The cab (fixed to the king post) adds its mass about the common centre of mass (parallel axes, written
+    out here); E on the hook (fixed to the jib) is the hook's origin in the jib's frame."""
+    params = load_config(CONFIG / "knuckle_boom_crane.yaml")
+    king = params.links[0].body
+    m1, c1, m2, c2 = 400.0, np.array([0.0, 0.0, 0.9]), 150.0, np.array([-0.5, 0.6, 0.8])
+    center = (m1 * c1 + m2 * c2) / (m1 + m2)
+    steiner = sum(m * (np.dot(c - center, c - center) * np.eye(3) - np.outer(c - center, c - center))
+                  for m, c in ((m1, c1), (m2, c2)))
+    own = np.diag([116.5, 116.5, 25.0]) + np.diag([17.5, 22.5, 17.5])
+    assert king.mass == 550.0
+    np.testing.assert_allclose(king.center_of_mass, center, rtol=0.0, atol=1e-15)
+    np.testing.assert_allclose(king.inertia, own + steiner, rtol=1e-14)
+    assert params.end_effector.link == "jib"
+    np.testing.assert_array_equal(params.end_effector.point, [2.5, 0.0, -0.3])

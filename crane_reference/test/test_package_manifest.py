@@ -16,7 +16,7 @@ SOURCES = [*sorted((ROOT / "crane_reference").rglob("*.py")), *sorted((ROOT / "l
 ROSDEP_KEYS = {
     "numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml",
     "matplotlib": "python3-matplotlib", "numba": "python3-numba", "tqdm": "python3-tqdm",
-    "pandas": "python3-pandas", "rosbags": "python3-rosbags-pip",
+    "pandas": "python3-pandas", "rosbags": "python3-rosbags-pip", "urdf_parser_py": "urdfdom_py",
 }
 """Python modules that are not ROS packages, with their keys in ros/rosdistro's rosdep/python.yaml."""
 
@@ -65,7 +65,7 @@ def test_declared_ros_packages_are_used():
     """No stale ROS dependency: each declared ROS package (not a python3-* key) is imported somewhere, or is
     a bring-up executable the launch file starts."""
     launched = {"robot_state_publisher", "rviz2"}
-    used = set().union(*(imported_modules(p) for p in SOURCES)) | launched
+    used = {ROSDEP_KEYS.get(m, m) for m in set().union(*(imported_modules(p) for p in SOURCES))} | launched
     ros_packages = {d for d in exec_depends() if not d.startswith("python3-")}
     assert ros_packages <= used, ros_packages - used
 

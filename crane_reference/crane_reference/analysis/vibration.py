@@ -77,7 +77,8 @@ def deflection_signals(model: ChainModel, chain: ChainData, trajectory: Trajecto
     out = {}
     for link in model.flexible_links:
         w = tip_deflection(model, chain, trajectory.q, link.name)
-        out.update({f"{link.name}_tip_vertical": w[:, 1], f"{link.name}_tip_horizontal": w[:, 2],
+        up = link.vertical
+        out.update({f"{link.name}_tip_vertical": w[:, up], f"{link.name}_tip_horizontal": w[:, 3 - up],
                     f"{link.name}_tip_torsion": trajectory.q[:, rfe_indices(model, "_twist", link.name)].sum(axis=1)})
     return out
 

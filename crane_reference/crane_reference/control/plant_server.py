@@ -157,7 +157,7 @@ class PlantServer:
         self.deflection_frame = (next(body.name for body in model.bodies if body.joint == flexible.root)
                                  if flexible is not None else "world")
         """The frame of the tip deflection: the URDF link of the first flexible link's first element."""
-        self._deflection = (TipDeflection(model, self.plant.dynamics.chain)
+        self._deflection = (TipDeflection(model, self.plant.dynamics.chain, link_frame=False)
                             if settings.variant == "flexible" and flexible is not None else None)
         self._command = start.torques.copy()  # u in the order of the actuated joints
         self._last_command = -math.inf  # when the last command was accepted [s, the caller's clock]

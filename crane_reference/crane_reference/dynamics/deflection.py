@@ -38,16 +38,20 @@ def rfe_indices(model: ChainModel, suffix: str = "", link: str | None = None) ->
 
 class TipDeflection:
     """w of the module docstring for the flexible link ``link`` (default the first) of ``model`` (``chain`` is
-    ``CraneDynamics.chain``)."""
+    ``CraneDynamics.chain``), in the link's own frame, or with ``link_frame`` False in its first element's frame
+    of the chain (its first link of the URDF; the same frame unless the link's joint axis is not +x, +y or +z)."""
 
-    def __init__(self, model: ChainModel, chain: ChainData, link: str | None = None):
+    def __init__(self, model: ChainModel, chain: ChainData, link: str | None = None, link_frame: bool = True):
         flexible = flexible_link(model, link)
         self._arguments = (flexible.springs, flexible.root, flexible.last, np.asarray(flexible.tip, dtype=float),
                            chain.kinds, chain.axes, chain.origins)
+        turned = link_frame and not np.array_equal(flexible.frame, np.eye(3))
+        self._frame = flexible.frame if turned else None
 
     def __call__(self, q: np.ndarray) -> np.ndarray:
         """w (N, 3) [m] for q (N, n) (one row for q (n,))."""
-        return _deflections(np.ascontiguousarray(np.atleast_2d(q), dtype=float), *self._arguments)
+        w = _deflections(np.ascontiguousarray(np.atleast_2d(q), dtype=float), *self._arguments)
+        return w if self._frame is None else w @ self._frame.T
 
 
 def tip_deflection(model: ChainModel, chain: ChainData, q: np.ndarray, link: str | None = None) -> np.ndarray:

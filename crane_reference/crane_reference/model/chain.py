@@ -31,7 +31,7 @@ its 6), the ``rigid`` variant one element per flexible link (9 DOF for the paper
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -52,9 +52,12 @@ PRISMATIC = 0
 REVOLUTE = 1
 AXES = {"x": 0, "y": 1, "z": 2}
 VARIANTS = ("flexible", "rigid")
-RFE_SPRINGS = (("bend_vertical", 2), ("bend_lateral", 1), ("twist", 0))
-"""The RFE angles of a spring-damping element, (name suffix, axis), in the order of :mod:`.rfe`: psi about z
-(bending in the beam's x-y plane, the luffing plane for a boom), theta about y, phi about x (torsion)."""
+RFE_AXES = (2, 1, 0)
+"""The axes of the RFE angles of a spring-damping element, in the order of :mod:`.rfe`: psi about z (bending in
+the beam's x-y plane), theta about y (in its x-z plane), phi about x (torsion)."""
+RFE_NAMES = {"y": ("bend_vertical", "bend_lateral", "twist"), "z": ("bend_lateral", "bend_vertical", "twist")}
+"""The names of those angles by the beam's vertical axis (:class:`~.description.Beam`): with y up (the paper's
+boom) psi bends it in the vertical (luffing) plane, with z up theta does."""
 
 
 @dataclass(frozen=True)
@@ -81,14 +84,18 @@ class Body:
 @dataclass(frozen=True)
 class FlexibleLink:
     """A flexible link in the chain: its joint ``root`` (the frame of its first element), the indices
-    ``springs`` of its RFE angles, the frame ``last`` of its last element and the beam's end ``tip`` (3,) in
-    that frame [m]."""
+    ``springs`` of its RFE angles, the frame ``last`` of its last element, the beam's end ``tip`` (3,) in
+    that frame [m], the index ``vertical`` (1 or 2) of its vertical axis in the link's frame and the rotation
+    ``frame`` (3, 3) of its first element's chain frame in the link's frame (the identity unless the link's joint
+    axis is not +x, +y or +z: :func:`axis_frame`)."""
 
     name: str
     root: int
     springs: np.ndarray
     last: int
     tip: np.ndarray
+    vertical: int = 1
+    frame: np.ndarray = field(default_factory=lambda: np.eye(3))
 
 
 @dataclass(frozen=True)
@@ -209,15 +216,16 @@ class _Attachment:
 def chain_order(links: Sequence[LinkDescription]) -> tuple[LinkDescription, ...]:
     """``links`` from the base out (each link's parent the one before it); ValueError naming the links where
     they are not one serial chain."""
-    children: dict[str, list[str]] = {}
+    children: dict[str | None, list[str]] = {}
     for link in links:
         children.setdefault(link.parent, []).append(link.name)
     by_name = {link.name: link for link in links}
-    order, parent = [], BASE
+    order: list[LinkDescription] = []
+    parent: str | None = None
     while parent in children:
         if len(children[parent]) > 1:
-            raise ValueError(f"links {', '.join(children[parent])} all hang on {parent!r}: the crane must be one "
-                             "serial chain (each link the parent of at most one other)")
+            raise ValueError(f"links {', '.join(children[parent])} all hang on {parent or BASE!r}: the crane must be "
+                             "one serial chain (each link the parent of at most one other)")
         parent = children[parent][0]
         order.append(by_name[parent])
         if len(order) > len(by_name):
@@ -241,7 +249,7 @@ def build_model(description: CraneDescription, variant: str = "flexible") -> Cha
     damper_diagonal: list[float] = []  # joint dampers, per coordinate
     beta_diagonal: list[float] = []  # the beams' Rayleigh beta, per coordinate
     flexible: list[FlexibleLink] = []
-    attachments: dict[str, _Attachment] = {}
+    attachments: dict[str | None, _Attachment] = {}
     frames: dict[str, np.ndarray] = {}  # per link: R_a of its joint (points in the link frame -> chain frame)
 
     def add(joint: Joint, value: float = 0.0, spring: float = 0.0, damper: float = 0.0, beta: float = 0.0) -> int:
@@ -258,7 +266,7 @@ def build_model(description: CraneDescription, variant: str = "flexible") -> Cha
                                                     (REVOLUTE, 1), (REVOLUTE, 0)), strict=True):
             add(Joint(name, kind, axis, np.eye(4)))
         bodies.append(Body("base", len(joints) - 1, base.body))
-    attachments[BASE] = _Attachment(len(joints) - 1, np.eye(4))
+    attachments[None] = _Attachment(len(joints) - 1, np.eye(4))
 
     for link in chain_order(description.links):
         described = link.joint
@@ -272,7 +280,8 @@ def build_model(description: CraneDescription, variant: str = "flexible") -> Cha
                    described.stiffness, described.damping)
         frames[link.name] = R
         if link.beam is None:
-            bodies.append(Body(link.name, root, transformed_body(link.body, R)))
+            if link.body is not None:  # a URDF link may carry no mass
+                bodies.append(Body(link.name, root, transformed_body(link.body, R)))
             attachments[link.name] = _Attachment(root, homogeneous(R.T))
             continue
         beam = link.beam
@@ -285,7 +294,8 @@ def build_model(description: CraneDescription, variant: str = "flexible") -> Cha
             at_spring = homogeneous(translation=(elements.lengths[r - 1], 0.0, 0.0))
             if r == 1 and not np.array_equal(R, np.eye(3)):
                 at_spring = homogeneous(R.T) @ at_spring
-            for (suffix, axis), s in zip(RFE_SPRINGS, elements.spring_stiffness[r - 1], strict=True):
+            for suffix, axis, s in zip(RFE_NAMES[beam.vertical_axis], RFE_AXES, elements.spring_stiffness[r - 1],
+                                       strict=True):
                 springs.append(add(Joint(f"{link.name}_sde{r}_{suffix}", REVOLUTE, axis,
                                          at_spring if axis == 2 else np.eye(4)), 0.0, s, 0.0, beam.damping))
             bodies.append(Body(f"{link.name}_rfe{r}", len(joints) - 1, elements.bodies[r]))
@@ -296,7 +306,7 @@ def build_model(description: CraneDescription, variant: str = "flexible") -> Cha
         attachments[link.name] = _Attachment(last, to_last)
         flexible.append(FlexibleLink(link.name, root, np.array(springs, dtype=np.int64), last,
                                      np.array([elements.lengths[-1], 0.0, 0.0]) if count > 1 else
-                                     R.T @ np.array([beam.length, 0.0, 0.0])))
+                                     R.T @ np.array([beam.length, 0.0, 0.0]), AXES[beam.vertical_axis], R))
 
     def placed(point: PointOnLink) -> tuple[int, np.ndarray]:
         attachment = attachments[point.link]

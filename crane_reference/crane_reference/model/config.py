@@ -4,6 +4,8 @@
 :class:`~crane_reference.model.description.CraneDescription` it describes.  Two layouts are read:
 
 * the description layout (:mod:`.description_layout`, a top-level ``links`` list): any serial crane;
+* a URDF and its overlay (:mod:`.urdf_layout`, a top-level ``urdf`` path): the chain from the URDF, the
+  flexible links, springs, drive and task from the overlay;
 * the paper's crane family (:mod:`.paper_layout`, top-level ``boom`` and ``link4``): the layout of the paper's
   crane with its numbers, read as the chain it describes.
 
@@ -28,10 +30,11 @@ from .description import CraneDescription
 from .description_layout import parse_description
 from .fields import FieldError
 from .paper_layout import paper_description, parse_parameters
+from .urdf_layout import parse_urdf_description
 
 PACKAGE = "crane_reference"
 DEFAULT_FILE = Path("config") / "crane.yaml"
-LAYOUTS = {"links": "the description layout", "boom": "the paper's crane layout"}
+LAYOUTS = {"links": "the description layout", "urdf": "a URDF and its overlay", "boom": "the paper's crane layout"}
 """The top-level key that marks each layout."""
 
 
@@ -111,6 +114,8 @@ def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> CraneDescri
     try:
         if isinstance(data, Mapping) and "links" in data:
             return parse_description(data)
+        if isinstance(data, Mapping) and "urdf" in data:
+            return parse_urdf_description(data, Path(source) if Path(source).is_file() else None)
         if isinstance(data, Mapping) and "boom" in data:
             return paper_description(parse_parameters(data))
         keys = ", ".join(f"'{key}' ({layout})" for key, layout in LAYOUTS.items())

@@ -30,7 +30,8 @@ REVOLUTE = "revolute"
 PRISMATIC = "prismatic"
 JOINT_TYPES = (REVOLUTE, PRISMATIC)
 BASE = "base"
-"""The name a link gives as its ``parent`` when it hangs on the base (the world frame for a fixed base)."""
+"""The name a crane file gives as a link's ``parent`` when it hangs on the base (the world frame for a fixed base);
+in a :class:`LinkDescription` that parent is None."""
 BASE_JOINTS = ("base_x", "base_y", "base_z", "base_yaw", "base_pitch", "base_roll")
 """The coordinates q~(1) of a sprung base, in the order of eq. (1)."""
 
@@ -55,8 +56,11 @@ class JointDescription:
 @dataclass(frozen=True)
 class Beam:
     """A uniform beam along its link's x axis, discretised by the RFE rule of :mod:`.rfe`: ``length`` [m],
-    ``section``, Young's and shear moduli [Pa], ``density`` [kg/m^3], ``rfe_count`` elements and the
-    stiffness-proportional (Rayleigh beta) ``damping`` [s] of its spring-damping elements."""
+    ``section`` (I_y, I_z about the link's y and z axes), Young's and shear moduli [Pa], ``density`` [kg/m^3],
+    ``rfe_count`` elements and the stiffness-proportional (Rayleigh beta) ``damping`` [s] of its spring-damping
+    elements.  ``vertical_axis`` ("y" or "z") is the link axis that is up in the beam's plane of motion (the
+    luffing plane): y for the paper's boom frames (z along the luff axis), z for link frames with z up; it names
+    the RFE angles (``bend_vertical``, bending in that plane, ``bend_lateral``) and the deflection signals."""
 
     length: float
     section: BeamSection
@@ -65,15 +69,16 @@ class Beam:
     density: float
     rfe_count: int
     damping: float = 0.0
+    vertical_axis: str = "y"
 
 
 @dataclass(frozen=True)
 class LinkDescription:
-    """A link on its ``parent`` (a link's name or :data:`BASE`) through ``joint``: a rigid ``body`` or a
-    flexible ``beam`` (exactly one of the two)."""
+    """A link on its ``parent`` (a link's name, or None: the base) through ``joint``: a rigid ``body`` or a
+    flexible ``beam`` (at most one of the two; neither: a frame without mass, as a URDF link may be)."""
 
     name: str
-    parent: str
+    parent: str | None
     joint: JointDescription
     body: RigidBody | None = None
     beam: Beam | None = None

@@ -48,6 +48,7 @@ SECTIONS = ("gravity", "base", "links", "drive", "actuated", "end_effector")
 OPTIONAL = ("name", "dependent", "payload", "task")
 AUTO = "auto"
 BASE_TYPES = ("fixed", "sprung")
+VERTICAL_AXES = ("y", "z")
 AXIS_TOLERANCE = 1e-9
 """How far from 1 the length of a joint axis may be (it is then normalised)."""
 
@@ -61,14 +62,14 @@ def parse_description(value: object) -> CraneDescription:
     joints = [link.joint.name for link in links] + (list(BASE_JOINTS) if base is not None else [])
     drive = f.section(data["drive"], "drive", ("joint", "type"), optional=tuple(
         dict.fromkeys(key for keys in f.DRIVE_KEYS.values() for key in keys)))
-    drive_joint = _joint_name(drive["joint"], "drive.joint", joints)
-    actuated = _names(data["actuated"], "actuated", joints)
-    end_effector = _point(data["end_effector"], "end_effector", names)
+    drive_joint = joint_name(drive["joint"], "drive.joint", joints)
+    actuated = listed_joints(data["actuated"], "actuated", joints)
+    end_effector = point_on_link(data["end_effector"], "end_effector", names)
     dependent = data.get("dependent", AUTO)
     payload = f.section(data.get("payload", {"mass": 0.0}), "payload", ("mass",), optional=("link", "point"))
     payload_at = None
     if "link" in payload or "point" in payload:
-        payload_at = _point({"link": payload.get("link", end_effector.link),
+        payload_at = point_on_link({"link": payload.get("link", end_effector.link),
                              "point": payload.get("point", end_effector.point)}, "payload", names)
     return CraneDescription(
         name=_name(data.get("name", "crane"), "name"),
@@ -79,7 +80,7 @@ def parse_description(value: object) -> CraneDescription:
         drive_joint=drive_joint,
         actuated=actuated,
         end_effector=end_effector,
-        dependent=None if dependent == AUTO else _names(dependent, "dependent", joints),
+        dependent=None if dependent == AUTO else listed_joints(dependent, "dependent", joints),
         payload=f.number(payload["mass"], "payload.mass", "kg", f.NON_NEGATIVE),
         payload_at=payload_at,
         task=f.optional_section(data.get("task", {}), "task", Task, f.TASK_FIELDS),
@@ -92,22 +93,22 @@ def _name(value: object, path: str) -> str:
     return value
 
 
-def _names(value: object, path: str, allowed: list[str]) -> tuple[str, ...]:
+def listed_joints(value: object, path: str, allowed: list[str]) -> tuple[str, ...]:
     if not isinstance(value, (list, tuple)) or not value:
         raise f.invalid(path, value, f"must be a list of joint names (the joints: {', '.join(allowed)})")
-    names = tuple(_joint_name(item, f"{path}[{i}]", allowed) for i, item in enumerate(value))
+    names = tuple(joint_name(item, f"{path}[{i}]", allowed) for i, item in enumerate(value))
     if len(set(names)) != len(names):
         raise f.invalid(path, list(value), "must name each joint once")
     return names
 
 
-def _joint_name(value: object, path: str, allowed: list[str]) -> str:
+def joint_name(value: object, path: str, allowed: list[str]) -> str:
     if value not in allowed:
         raise f.invalid(path, value, f"must be a joint of the chain: {', '.join(allowed)}")
     return str(value)
 
 
-def _point(value: object, path: str, links: list[str]) -> PointOnLink:
+def point_on_link(value: object, path: str, links: list[str]) -> PointOnLink:
     data = f.section(value, path, ("link", "point"))
     if data["link"] not in links:
         raise f.invalid(f.join(path, "link"), data["link"], f"must be a link of the chain (not the base): "
@@ -132,7 +133,7 @@ def _links(value: object, path: str) -> tuple[LinkDescription, ...]:
         raise f.invalid(path, value, "must be a list of links {name, parent, joint, inertial or beam}")
     links: list[LinkDescription] = []
     for i, item in enumerate(value):
-        parent = links[-1].name if links else BASE
+        parent = links[-1].name if links else None
         links.append(_link(item, f"{path}[{i}]", parent))
     for kind, names in (("link", [link.name for link in links]), ("joint", [link.joint.name for link in links])):
         seen: set[str] = set()
@@ -148,14 +149,15 @@ def _links(value: object, path: str) -> tuple[LinkDescription, ...]:
         raise f.FieldError(f"{path}: {err}") from None
 
 
-def _link(value: object, path: str, parent: str) -> LinkDescription:
+def _link(value: object, path: str, parent: str | None) -> LinkDescription:
     data = f.section(value, path, ("name", "joint"), optional=("parent", "inertial", "beam"))
     if ("inertial" in data) == ("beam" in data):
         raise f.FieldError(f"{path}: must have either 'inertial' (a rigid link) or 'beam' (a flexible link), "
                            "not both or neither")
     parent_name = data.get("parent", parent)
-    if not isinstance(parent_name, str):
-        raise f.invalid(f.join(path, "parent"), parent_name, "must be the name of a link, or 'base'")
+    if parent_name is not None and not isinstance(parent_name, str):
+        raise f.invalid(f.join(path, "parent"), parent_name, f"must be the name of a link, or {BASE!r}")
+    parent_name = None if parent_name == BASE else parent_name
     body = beam = None
     if "inertial" in data:
         inertial = f.join(path, "inertial")
@@ -218,7 +220,7 @@ def rpy_matrix(rpy: np.ndarray) -> np.ndarray:
 
 def _beam(value: Mapping[str, Any], path: str) -> Beam:
     data = f.section(value, path, ("length", "section", "youngs_modulus", "shear_modulus", "density", "rfe_count"),
-                     optional=("damping",))
+                     optional=("damping", "vertical_axis"))
     return Beam(
         length=f.number(data["length"], f.join(path, "length"), "m", f.POSITIVE),
         section=f.beam_section(data["section"], f.join(path, "section")),
@@ -227,4 +229,13 @@ def _beam(value: Mapping[str, Any], path: str) -> Beam:
         density=f.number(data["density"], f.join(path, "density"), "kg/m^3", f.POSITIVE),
         rfe_count=f.integer(data["rfe_count"], f.join(path, "rfe_count"), 1),
         damping=f.number(data.get("damping", 0.0), f.join(path, "damping"), "s", f.NON_NEGATIVE),
+        vertical_axis=vertical_axis(data.get("vertical_axis", "y"), f.join(path, "vertical_axis")),
     )
+
+
+def vertical_axis(value: object, path: str) -> str:
+    """A beam's vertical axis, "y" or "z" (:class:`~.description.Beam`)."""
+    if value not in VERTICAL_AXES:
+        raise f.invalid(path, value, f"must be one of {', '.join(VERTICAL_AXES)} (the link axis that is up in the "
+                                     "beam's plane of motion)")
+    return str(value)

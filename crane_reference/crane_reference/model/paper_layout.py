@@ -91,7 +91,7 @@ def paper_description(params: CraneParameters) -> CraneDescription:
     knuckle = _frame(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([boom.length, 0.0, 0.0]))
     initial = params.initial
     links = (
-        LinkDescription("column", "base", JointDescription("column_slew", REVOLUTE, Z_AXIS, np.eye(4), initial.column),
+        LinkDescription("column", None, JointDescription("column_slew", REVOLUTE, Z_AXIS, np.eye(4), initial.column),
                         body=params.column),
         LinkDescription("boom", "column", JointDescription("boom_luff", REVOLUTE, Z_AXIS, luff, initial.boom),
                         beam=Beam(boom.length, boom.section, boom.youngs_modulus, boom.shear_modulus, boom.density,

@@ -31,9 +31,14 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from .chain import PRISMATIC, Body, ChainModel, Joint
+from .chain import PRISMATIC, Body, ChainModel
+from .description import BASE, CraneDescription
+from .description import PRISMATIC as PRISMATIC_JOINT
 from .parameters import RigidBody
+from .rfe import segment_body
 
+WORLD = "world"
+"""The URDF's root link."""
 PRISMATIC_LIMIT = 100.0  # [m], symmetric position limit of the base translations
 PRISMATIC_EFFORT = 1.0e9  # [N or N m], URDF's required effort limit (the model sets none)
 PRISMATIC_VELOCITY = 100.0  # [m/s or rad/s], URDF's required velocity limit (the model sets none)
@@ -125,13 +130,15 @@ def _visual(link: ET.Element, model: ChainModel, attached: Body) -> None:
     ET.SubElement(visual, "material", name=color)
 
 
-def _movable_joint(robot: ET.Element, joint: Joint, parent: str, child: str) -> None:
-    if joint.kind == PRISMATIC:
-        kind, limits = "prismatic", joint.limits or (-PRISMATIC_LIMIT, PRISMATIC_LIMIT)
+def _movable_joint(robot: ET.Element, name: str, prismatic: bool, axis: np.ndarray,
+                   limits: tuple[float, float] | None, parent: str, child: str, origin: np.ndarray) -> None:
+    """A revolute (``continuous`` without limits) or prismatic (generous limits without) URDF joint."""
+    if prismatic:
+        kind, limits = "prismatic", limits or (-PRISMATIC_LIMIT, PRISMATIC_LIMIT)
     else:
-        kind, limits = ("revolute", joint.limits) if joint.limits else ("continuous", None)
-    element = _joint(robot, joint.name, kind, parent, child, joint.origin)
-    ET.SubElement(element, "axis", xyz=_numbers(np.eye(3)[joint.axis]))
+        kind = "revolute" if limits else "continuous"
+    element = _joint(robot, name, kind, parent, child, origin)
+    ET.SubElement(element, "axis", xyz=_numbers(axis))
     if limits is not None:
         ET.SubElement(element, "limit", lower=_numbers([limits[0]]), upper=_numbers([limits[1]]),
                       effort=_numbers([PRISMATIC_EFFORT]), velocity=_numbers([PRISMATIC_VELOCITY]))
@@ -143,13 +150,14 @@ def model_to_urdf(model: ChainModel) -> str:
     robot = ET.Element("robot", name=model.name)
     for color, rgba in COLORS.items():
         ET.SubElement(ET.SubElement(robot, "material", name=color), "color", rgba=rgba)
-    _link(robot, "world")
-    parent = "world"
+    _link(robot, WORLD)
+    parent = WORLD
     frame_links = []
     for k, joint in enumerate(model.joints):
         bodies = [b for b in model.bodies if b.joint == k]
         child = bodies[0].name if bodies else f"{joint.name}_link"
-        _movable_joint(robot, joint, parent, child)
+        _movable_joint(robot, joint.name, joint.kind == PRISMATIC, np.eye(3)[joint.axis], joint.limits, parent, child,
+                       joint.origin)
         link = _link(robot, child)
         for i, body in enumerate(bodies):
             if i > 0:
@@ -163,5 +171,35 @@ def model_to_urdf(model: ChainModel) -> str:
     ee[:3, 3] = model.end_effector_point
     _joint(robot, "end_effector_fixed", "fixed", frame_links[model.end_effector_joint], "end_effector", ee)
     _link(robot, "end_effector")
+    ET.indent(robot)
+    return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
+
+
+def description_links_urdf(description: CraneDescription) -> str:
+    """URDF of a description's links as described (before the RFE cut): root link ``world`` (a fixed base) or
+    ``base`` with the sprung base's mass on the floating joint ``base_floating`` from it, each link on its joint
+    with the described origin, axis and limits, a
+    flexible link as one link with its beam's mass (rho A L, centre at L/2, :func:`~.rfe.segment_body`); what
+    URDF cannot say (springs, supports, the beams' sections, the task) is the overlay's
+    (:func:`~.urdf_layout.description_to_urdf`)."""
+    taken = {WORLD, BASE} & {link.name for link in description.links}
+    if taken:
+        raise ValueError(f"links {', '.join(sorted(taken))}: {WORLD!r} and {BASE!r} name the URDF's root and base")
+    robot = ET.Element("robot", name=description.name)
+    _link(robot, WORLD)
+    base = WORLD
+    if description.base is not None:
+        _joint(robot, "base_floating", "floating", WORLD, BASE, np.eye(4))
+        _inertial(_link(robot, BASE), description.base.body)
+        base = BASE
+    for link in description.links:
+        joint = link.joint
+        _movable_joint(robot, joint.name, joint.kind == PRISMATIC_JOINT, joint.axis, joint.limits,
+                       link.parent or base, link.name, joint.origin)
+        body = link.body if link.beam is None else segment_body(link.beam.length, link.beam.density,
+                                                                 link.beam.section)
+        element = _link(robot, link.name)
+        if body is not None:
+            _inertial(element, body)
     ET.indent(robot)
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"

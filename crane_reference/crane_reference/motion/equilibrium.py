@@ -61,14 +61,16 @@ def static_equilibrium(motion: ProgrammedMotion, q_start: np.ndarray, t0: float 
         forces, _ = reduced_static_forces(motion, t0, q)
         return forces[rows]
 
-    result = root(residual, q_start[free], method="hybr", options={"xtol": 1e-15})
     q = q_base.copy()
-    q[free] = result.x
+    message = "no free coordinate: the held joints and the task fix the crane"
+    if free.size:
+        result = root(residual, q_start[free], method="hybr", options={"xtol": 1e-15})
+        q[free], message = result.x, result.message
     forces, q = reduced_static_forces(motion, t0, q)
-    worst = float(np.max(np.abs(forces[rows])))
+    worst = float(np.max(np.abs(forces[rows]), initial=0.0))
     if not worst <= force_tolerance:
         raise EquilibriumError(f"static equilibrium not found: largest unbalanced generalized force {worst:.3g} "
-                               f"(solver: {result.message})")
+                               f"(solver: {message})")
     drive_row = int(np.flatnonzero(motion.independent == drive)[0])
     holding = {model.joint_names[k]: -float(force) for k, force in zip(motion.independent, forces, strict=True)
                if k in held}
