@@ -63,7 +63,8 @@ from scipy.signal import butter, sosfiltfilt
 from crane_reference.analysis.modal import linearise, modal_analysis, modes_at
 from crane_reference.dynamics import kernels
 from crane_reference.model.config import load_config
-from crane_reference.model.parameters import CraneParameters, Damping, FlexibleDrive
+from crane_reference.model.description import CraneDescription
+from crane_reference.model.parameters import Damping, FlexibleDrive
 from crane_reference.model.profiles import Constant, QuinticRise
 from crane_reference.motion.constraints import ArealRate, ConstraintSet, EllipseXY, HeightZ
 from crane_reference.motion.integration import EVALUATIONS, ONLINE_TOLERANCE, REFRESH_INTERVAL
@@ -82,7 +83,7 @@ STEPS = (1e-3, 5e-4, 2.5e-4)  # [s]
 BOOM_DAMPING_RATIO, BASE_DAMPING_RATIO = 0.02, 0.05  # of critical, at the first boom bending / base mode
 
 
-def realistic_damping(params: CraneParameters) -> Damping:
+def realistic_damping(params: CraneDescription) -> Damping:
     """Stiffness-proportional damping (beta = 2 zeta / omega) with zeta = 2 % at the first boom bending mode
     (boom springs) and 5 % at the first base mode (support springs), the modes taken from the constrained
     modal analysis at the static equilibrium: the first whose strain energy is mostly boom bending, resp.
@@ -98,11 +99,16 @@ def realistic_damping(params: CraneParameters) -> Damping:
                    boom=2.0 * BOOM_DAMPING_RATIO / (2.0 * np.pi * f_boom))
 
 
-def with_rfe(params: CraneParameters, n_rfe: int) -> CraneParameters:
-    return replace(params, boom=replace(params.boom, rfe_count=n_rfe))
+def with_rfe(params: CraneDescription, n_rfe: int) -> CraneDescription:
+    return params.with_rfe_count(n_rfe)
 
 
-def reference_run(params: CraneParameters, duration: float, cache: Path, label: str,
+def with_damping(params: CraneDescription, damping: Damping) -> CraneDescription:
+    """The crane with the Rayleigh beta ``damping.support`` on its supports and ``damping.boom`` on its beams."""
+    return replace(params, base=replace(params.base, damping=damping.support)).with_beam_damping(damping.boom)
+
+
+def reference_run(params: CraneDescription, duration: float, cache: Path, label: str,
                   rtol: float = 1e-10) -> Trajectory:
     """The converged DOP853 run of the flexible crane over ``duration`` s (cached as NPZ under ``label``)."""
     path = cache / f"dop853_{label}_{duration:g}s_rtol{rtol:g}.npz"
@@ -161,7 +167,7 @@ def _triple(x: np.ndarray, form: str = ".1e") -> str:
     return "/".join(f"{v:{form}}" for v in x)
 
 
-def undamped_crane(params: CraneParameters, n_rfe: int, duration: float, cache: Path) -> tuple[Trajectory, Scenario]:
+def undamped_crane(params: CraneDescription, n_rfe: int, duration: float, cache: Path) -> tuple[Trajectory, Scenario]:
     """The undamped crane with ``n_rfe`` boom elements: its converged run and its scenario (kernels ready)."""
     p = with_rfe(params, n_rfe)
     reference = reference_run(p, duration, cache, "undamped" if n_rfe == 6 else f"undamped-nrfe{n_rfe}")
@@ -170,7 +176,7 @@ def undamped_crane(params: CraneParameters, n_rfe: int, duration: float, cache: 
     return reference, scenario
 
 
-def vibration(params: CraneParameters, duration: float, cache: Path, rfe_counts: tuple[int, ...]) -> None:
+def vibration(params: CraneDescription, duration: float, cache: Path, rfe_counts: tuple[int, ...]) -> None:
     """[vibration] The 40-250 Hz RMS kept per window, raw and controller-band errors, per n_rfe."""
     for n_rfe in rfe_counts:
         reference, scenario = undamped_crane(params, n_rfe, duration, cache)
@@ -188,7 +194,7 @@ def vibration(params: CraneParameters, duration: float, cache: Path, rfe_counts:
                   f"max |error| {_triple(raw)} rad, E {ee:.1e} m")
 
 
-def growth(params: CraneParameters) -> None:
+def growth(params: CraneDescription) -> None:
     """[growth] 60 s of the undamped default crane: the late vibration against the early one, and the energy."""
     scenario = Scenario(params, "flexible")
     q0 = scenario.equilibrium.q
@@ -202,7 +208,7 @@ def growth(params: CraneParameters) -> None:
               f"{means[0]:.4f} J, 58-60 s {means[1]:.4f} J")
 
 
-def long_run(params: CraneParameters, hours: float, chunk: float = 10.0) -> None:
+def long_run(params: CraneDescription, hours: float, chunk: float = 10.0) -> None:
     """[long] ``hours`` of the undamped default crane at the node's step, computed in chunks and kept only
     around two 10 s windows: 5-15 s and the last 10 s (each recorded with 1 s on both sides for the
     filter): their 40-250 Hz RMS and mean energy."""
@@ -229,10 +235,10 @@ def long_run(params: CraneParameters, hours: float, chunk: float = 10.0) -> None
           f"{_triple(late / early, '.1%')}; energy mean {early_energy:.4f} J and {late_energy:.4f} J")
 
 
-def damped(params: CraneParameters, duration: float, cache: Path) -> None:
+def damped(params: CraneDescription, duration: float, cache: Path) -> None:
     """[damped] Realistic damping, h = 1 ms and 0.5 ms."""
     damping = realistic_damping(params)
-    p = replace(params, damping=damping)
+    p = with_damping(params, damping)
     label = f"damped-base{damping.support:.3e}s-boom{damping.boom:.3e}s"
     reference = reference_run(p, duration, cache, label)
     scenario = Scenario(p, "flexible")
@@ -246,7 +252,7 @@ def damped(params: CraneParameters, duration: float, cache: Path) -> None:
               f"{ee_slow:.1e} m; 40-250 Hz RMS kept over 5-10 s {_triple(kept, '.0%')}")
 
 
-def iteration_rules(params: CraneParameters, duration: float, cache: Path, rfe_counts: tuple[int, ...]) -> None:
+def iteration_rules(params: CraneDescription, duration: float, cache: Path, rfe_counts: tuple[int, ...]) -> None:
     """[iterations] The Newton rules at the node's step (ONLINE_STEP) against the DOP853 reference, per n_rfe."""
     for n_rfe in rfe_counts:
         reference, scenario = undamped_crane(params, n_rfe, duration, cache)
@@ -267,7 +273,7 @@ def iteration_rules(params: CraneParameters, duration: float, cache: Path, rfe_c
                   f"{ee_slow:.1e} m; 40-250 Hz RMS kept over 5-10 s {_triple(kept, '.0%')}")
 
 
-def newton_matrix(params: CraneParameters) -> None:
+def newton_matrix(params: CraneDescription) -> None:
     """[matrix] The Newton iteration of a step: the 2-norm and spectral radius of its error operator
     I - F^-1 J (J the Jacobian of the step's residual in a1, by central differences) for the iteration matrix F
     with M and B at the step's first iterate (the integrator's) and at its start, at steps from t = 0.5, 1, 3
@@ -309,7 +315,7 @@ def newton_matrix(params: CraneParameters) -> None:
             print(f"[matrix] h={step * 1e3:g} ms, step from t={t:g} s: " + "; ".join(parts))
 
 
-def newton_tolerance(params: CraneParameters, duration: float, step: float = 1e-3) -> None:
+def newton_tolerance(params: CraneDescription, duration: float, step: float = 1e-3) -> None:
     """[newton] Differences between Newton tolerances."""
     scenario = Scenario(params, "flexible")
     q0 = scenario.equilibrium.q
@@ -325,7 +331,7 @@ def newton_tolerance(params: CraneParameters, duration: float, step: float = 1e-
               f"vs 1e-12: largest difference over {duration:g} s psi2/psi30/psi4 = {_triple(difference)} rad")
 
 
-def first_order(params: CraneParameters, duration: float = 2.0) -> None:
+def first_order(params: CraneDescription, duration: float = 2.0) -> None:
     """[first-order] A first-order task constraint (E's speed along the ellipse)."""
     omega = QuinticRise(0.0, 0.8, 0.0, 1.0)
     a, b = params.task.ellipse_a, params.task.ellipse_b
@@ -349,7 +355,7 @@ def first_order(params: CraneParameters, duration: float = 2.0) -> None:
               f"{np.max(np.abs(tr.energy_balance_error)) / work:.1e} of the constraint work {work:.0f} J")
 
 
-def reference_check(params: CraneParameters, duration: float, cache: Path) -> None:
+def reference_check(params: CraneDescription, duration: float, cache: Path) -> None:
     """[reference] The reference's own error."""
     tight = reference_run(params, duration, cache, "undamped")
     loose = reference_run(params, duration, cache, "undamped", rtol=1e-9)
@@ -358,17 +364,17 @@ def reference_check(params: CraneParameters, duration: float, cache: Path) -> No
           f"{_triple(difference)} rad")
 
 
-def sensitivity(params: CraneParameters, duration: float, cache: Path) -> None:
+def sensitivity(params: CraneDescription, duration: float, cache: Path) -> None:
     """[sensitivity] How well-conditioned the 40-250 Hz RMS is: the crane with its payload mass changed by
     -1, -0.5, +0.5, +1 % and its boom's Young's modulus by -1, +1 % (h = 0.25 ms, converged Newton), as a
     share of the nominal converged run's; then the nominal crane at h = 1, 0.5, 1/3 and 0.25 ms (converged
     Newton) for comparison: a step's deviation is that of a model this many percent off."""
     reference = reference_run(params, duration, cache, "undamped")
     kept_reference = [band_rms(reference, w) for w in WINDOWS]
-    changes = [(f"payload mass {100 * (s - 1):+.1f} %", replace(params, payload_mass=params.payload_mass * s))
+    changes = [(f"payload mass {100 * (s - 1):+.1f} %", replace(params, payload=params.payload * s))
                for s in (0.99, 0.995, 1.005, 1.01)]
     changes += [(f"boom Young's modulus {100 * (s - 1):+.0f} %",
-                 replace(params, boom=replace(params.boom, youngs_modulus=params.boom.youngs_modulus * s)))
+                 params.with_beam_stiffness(s))
                 for s in (0.99, 1.01)]
     runs = [(f"{name}, h=0.25 ms", p, 2.5e-4) for name, p in changes]
     runs += [(f"nominal, h={step * 1e3:.2f} ms", params, step) for step in (1e-3, 5e-4, 1e-3 / 3, 2.5e-4)]
@@ -380,7 +386,7 @@ def sensitivity(params: CraneParameters, duration: float, cache: Path) -> None:
         print(f"[sensitivity] {name}: 40-250 Hz RMS psi2/psi30/psi4 {shares} of the nominal converged run's")
 
 
-def mechanism(params: CraneParameters, duration: float, cache: Path) -> None:
+def mechanism(params: CraneDescription, duration: float, cache: Path) -> None:
     """[mechanism] Internal resonances along the run; plain trapezoidal rule against exact frequencies."""
     scenario = Scenario(params, "flexible")
     q0 = scenario.equilibrium.q
@@ -405,7 +411,7 @@ def mechanism(params: CraneParameters, duration: float, cache: Path) -> None:
                   f"{_triple(shares, '.0%')} of the converged run's")
 
 
-def slow_motion(params: CraneParameters, duration: float, cache: Path) -> None:
+def slow_motion(params: CraneDescription, duration: float, cache: Path) -> None:
     """[slow] Where the controller-band error comes from, on the undamped and the damped crane: the
     integrator at 0.5 and 1 ms with its modal correction computed every step, every 5 ms, every
     REFRESH_INTERVAL (default) and every 20 ms, and the plain trapezoidal rule; the controller-band error of
@@ -415,7 +421,7 @@ def slow_motion(params: CraneParameters, duration: float, cache: Path) -> None:
     over 0.1 s against DOP853."""
     damping = realistic_damping(params)
     for label, p in (("undamped", params),
-                     (f"damped-base{damping.support:.3e}s-boom{damping.boom:.3e}s", replace(params, damping=damping))):
+                     (f"damped-base{damping.support:.3e}s-boom{damping.boom:.3e}s", with_damping(params, damping))):
         reference = reference_run(p, duration, cache, label)
         scenario = Scenario(p, "flexible")
         q0 = scenario.equilibrium.q

@@ -23,12 +23,13 @@ process and, after a warm-up, records for ``--duration`` seconds (default 30):
   below were made (held_late_commands), and during each kind (``held_late_retargets`` for these changes,
   ``held_late_goals``, ``held_late_stream_commands`` for the pause, resume, speed change and re-target of the
   smoothness windows);
-* the ~/retarget action, over ``--changes`` goals (alternating ellipse.a 3.1 / 3.0 m, blend 0.5 s): the time from
-  sending a goal to its acceptance (``goal_accepted_max_ms``), the result's ``path_stamp`` - ``blend_stamp`` less
-  the blend time (``goal_blend_span_error_max_ms``: 0 at speed 1, a period at most from rounding, more where
-  samples were held), and the time from the reception of the sample stamped ``path_stamp`` to the reception of
-  the result (``goal_result_after_path_max_ms``: the action's poll of 0.1 s at most, plus delivery);
-* smoothness of the commands: the largest change of the column's velocity between two received samples
+* the ~/retarget action, over ``--changes`` goals (alternating ellipse.a 3.1 / 3.0 m on the paper's crane, blend
+  0.5 s; with ``--config`` another crane, the changes relative to its task): the time from sending a goal to
+  its acceptance (``goal_accepted_max_ms``), the result's ``path_stamp`` - ``blend_stamp`` less the blend time
+  (``goal_blend_span_error_max_ms``: 0 at speed 1, a period at most from rounding, more where samples were held),
+  and the time from the reception of the sample stamped ``path_stamp`` to the reception of the result
+  (``goal_result_after_path_max_ms``: the action's poll of 0.1 s at most, plus delivery);
+* smoothness of the commands: the largest change of the slew's velocity between two received samples
   (rad/s) in normal running and after ~/pause, resume, a speed_scaling change to 0.5 and a re-target
   (each window: the ramp time plus 0.5 s; the flexible boom's 70 Hz bending makes the column's velocity
   oscillate between samples in normal running too);
@@ -100,6 +101,7 @@ from visualization_msgs.msg import MarkerArray
 from crane_reference.interface import messages
 from crane_reference.interface.serialized import SerializedJointState, SerializedPose
 from crane_reference.model.config import load_config
+from crane_reference.model.parameters import Task
 from crane_reference.motion.simulation import Scenario
 from crane_reference.motion.steps import ONLINE_STEP
 from crane_reference.ros.message_types import rclpy_types
@@ -115,11 +117,36 @@ NODE = "crane_reference"
 WARM_UP = 2.0  # [s] after the first message
 
 
+@dataclass(frozen=True)
+class Crane:
+    """The crane under test: its file (None: the packaged one), its targets and its slew joint (whose velocity
+    measures the commands' smoothness).  The parameter changes are relative to its targets: the paper's crane's
+    ellipse.a goes 3.0 -> 3.1 -> 3.0 m."""
+
+    config: str | None
+    task: Task
+    slew: str
+
+    @staticmethod
+    def of(config: str | None, model: str) -> Crane:
+        scenario = Scenario(load_config(config), model)
+        return Crane(config, scenario.task, scenario.model.joint_names[scenario.slew.joint])
+
+    def ellipse_a(self, share: float) -> float:
+        """ellipse.a stretched by ``share`` of its third (the paper's crane: 3 m + share x 1 m)."""
+        return self.task.ellipse_a * (1.0 + share / 3.0)
+
+    @property
+    def node_parameters(self) -> list[str]:
+        return [] if self.config is None else ["-p", f"config_file:={self.config}"]
+
+
 @dataclass
 class Recorder:
-    """Receptions of joint_states (monotonic and system time, stamp), the last diagnostics values and every
-    real-time factor reported (monotonic time [ns], value)."""
+    """Receptions of joint_states (monotonic and system time, stamp, the ``slew`` joint's velocity), the last
+    diagnostics values and every real-time factor reported (monotonic time [ns], value)."""
 
+    slew: str
     monotonic: list[int] = field(default_factory=list)
     system: list[int] = field(default_factory=list)
     stamps: list[int] = field(default_factory=list)
@@ -133,7 +160,7 @@ class Recorder:
         self.monotonic.append(time.monotonic_ns())
         self.system.append(time.time_ns())
         self.stamps.append(msg.header.stamp.sec * NS + msg.header.stamp.nanosec)
-        self.slew_velocity.append(msg.velocity[list(msg.name).index("column_slew")])
+        self.slew_velocity.append(msg.velocity[list(msg.name).index(self.slew)])
         self.finite.append(bool(np.all(np.isfinite(msg.position)) and np.all(np.isfinite(msg.velocity))))
 
     def diagnostic(self, msg: DiagnosticArray) -> None:
@@ -204,7 +231,7 @@ def held_late_now(executor: SingleThreadedExecutor, recorder: Recorder) -> float
 
 
 def measure_latency(executor: SingleThreadedExecutor, client: AsyncParameterClient, recorder: Recorder,
-                    changes: int) -> tuple[list[float], list[float], list[float]]:
+                    changes: int, crane: Crane) -> tuple[list[float], list[float], list[float]]:
     """Seconds from sending each ellipse.a change to receiving the first sample that uses it, from its
     acceptance by the node (its clock, /diagnostics retarget_accepted_s) to that sample's stamp, and how
     long before that stamp the node had the sample ready (retarget_margin_s)."""
@@ -212,7 +239,7 @@ def measure_latency(executor: SingleThreadedExecutor, client: AsyncParameterClie
     for i in range(changes):
         previous = recorder.diagnostics.get("retarget_stamp_s")
         sent = time.monotonic_ns()
-        future = client.set_parameters([Parameter("ellipse.a", value=3.1 if i % 2 == 0 else 3.0)])
+        future = client.set_parameters([Parameter("ellipse.a", value=crane.ellipse_a(0.1 if i % 2 == 0 else 0.0))])
         if not spin_until(executor, future.done, 10.0) or not future.result().results[0].successful:
             raise RuntimeError(f"parameter change {i} failed: {future.result() if future.done() else 'timeout'}")
         if not spin_until(executor, lambda p=previous: recorder.diagnostics.get("retarget_stamp_s") not in (None, p),
@@ -230,7 +257,7 @@ def measure_latency(executor: SingleThreadedExecutor, client: AsyncParameterClie
     return latencies, after_acceptance, margins
 
 
-def measure_goals(executor: SingleThreadedExecutor, subscriber: Node, recorder: Recorder, goals: int,
+def measure_goals(executor: SingleThreadedExecutor, subscriber: Node, recorder: Recorder, goals: int, crane: Crane,
                   blend: float = 0.5) -> dict[str, float]:
     """``goals`` re-targets through ~/retarget: acceptance time, blend span error and result delay (module doc)."""
     action = ActionClient(subscriber, Retarget, f"/{NODE}/retarget")
@@ -239,8 +266,10 @@ def measure_goals(executor: SingleThreadedExecutor, subscriber: Node, recorder: 
     accepted, span_error, after_path = [], [], []
     for i in range(goals):
         sent = time.monotonic_ns()
-        future = action.send_goal_async(Retarget.Goal(ellipse_a=3.1 if i % 2 == 0 else 3.0, ellipse_b=2.0,
-                                                      z_increment=0.2, z_rise_time=5.0, blend_time=blend))
+        task = crane.task
+        future = action.send_goal_async(Retarget.Goal(ellipse_a=crane.ellipse_a(0.1 if i % 2 == 0 else 0.0),
+                                                      ellipse_b=task.ellipse_b, z_increment=task.z_increment,
+                                                      z_rise_time=task.rise_time, blend_time=blend))
         if not spin_until(executor, future.done, 10.0) or not future.result().accepted:
             raise RuntimeError(f"goal {i} not accepted")
         accepted.append((time.monotonic_ns() - sent) / NS)
@@ -272,8 +301,8 @@ def call(executor: SingleThreadedExecutor, client, request, timeout: float = 10.
 
 
 def command_smoothness(executor: SingleThreadedExecutor, subscriber: Node, client: AsyncParameterClient,
-                       recorder: Recorder, ramp: float) -> dict[str, float]:
-    """Largest per-sample change of the column's velocity in normal running and after each command."""
+                       recorder: Recorder, ramp: float, crane: Crane) -> dict[str, float]:
+    """Largest per-sample change of the slew's velocity in normal running and after each command."""
     pause = subscriber.create_client(SetBool, f"/{NODE}/pause")
     windows, margins = {}, {}
 
@@ -295,7 +324,7 @@ def command_smoothness(executor: SingleThreadedExecutor, subscriber: Node, clien
         spin_until(executor, client.set_parameters([Parameter(name, value=value)]).done, 10.0)
 
     window("speed_0.5", lambda: set_parameter("speed_scaling", 0.5))
-    window("retarget", lambda: set_parameter("ellipse.a", 3.05))
+    window("retarget", lambda: set_parameter("ellipse.a", crane.ellipse_a(0.05)))
     set_parameter("speed_scaling", 1.0)
     velocity = np.array(recorder.slew_velocity)
     return {**{f"dv_{name}_rad_s": float(np.max(np.abs(np.diff(velocity[a:b])))) for name, (a, b) in windows.items()},
@@ -303,11 +332,13 @@ def command_smoothness(executor: SingleThreadedExecutor, subscriber: Node, clien
 
 
 def flood(executor: SingleThreadedExecutor, client: AsyncParameterClient, recorder: Recorder, requests: int,
-          rate: int) -> dict[str, float]:
-    """``requests`` random parameter requests at 50 Hz; then gaps, NaN, unanswered and a valid change."""
+          rate: int, crane: Crane) -> dict[str, float]:
+    """``requests`` random parameter requests at 50 Hz; then gaps, NaN, unanswered and a valid change (the
+    values' ranges scaled to the crane's targets: the paper's ellipse.a 2.5-3.5 m, ellipse.b 1.6-2.4 m)."""
     rng = np.random.default_rng(7)
-    values = {"ellipse.a": (2.5, 3.5, 40.0), "ellipse.b": (1.6, 2.4, -1.0), "z.increment": (0.0, 0.4, 9.0),
-              "z.rise_time": (2.0, 8.0, 0.0), "speed_scaling": (0.3, 1.0, 2.0)}
+    a, b = crane.task.ellipse_a, crane.task.ellipse_b
+    values = {"ellipse.a": (a * 2.5 / 3.0, a * 3.5 / 3.0, 40.0), "ellipse.b": (0.8 * b, 1.2 * b, -1.0),
+              "z.increment": (0.0, 0.4, 9.0), "z.rise_time": (2.0, 8.0, 0.0), "speed_scaling": (0.3, 1.0, 2.0)}
     first = len(recorder.stamps)
     futures = []
     for i in range(requests):
@@ -325,24 +356,24 @@ def flood(executor: SingleThreadedExecutor, client: AsyncParameterClient, record
     spin_until(executor, lambda: all(f.done() for f in futures), 120.0)
     unanswered = sum(not f.done() for f in futures)
     spin_for(executor, 2.0)
-    check = client.set_parameters([Parameter("ellipse.a", value=3.0), Parameter("ellipse.b", value=2.0),
+    check = client.set_parameters([Parameter("ellipse.a", value=a), Parameter("ellipse.b", value=b),
                                    Parameter("speed_scaling", value=1.0)])
     spin_until(executor, check.done, 30.0)
-    spin_until(executor, lambda: recorder.diagnostics.get("target_ellipse_a_m") == "3", 10.0)
+    spin_until(executor, lambda: float(recorder.diagnostics.get("target_ellipse_a_m", "nan")) == a, 10.0)
     stamps = np.array(recorder.stamps[first:])
     gaps = np.diff(stamps) > 2 * NS // rate
     return {"flood_requests": requests, "flood_unanswered": unanswered, "flood_gaps": int(gaps.sum()),
             "flood_non_finite": int(len(stamps) - sum(recorder.finite[first:])),
             "flood_valid_change_after": bool(check.done() and all(r.successful for r in check.result().results)
-                                              and recorder.diagnostics.get("target_ellipse_a_m") == "3")}
+                                              and float(recorder.diagnostics.get("target_ellipse_a_m", "nan")) == a)}
 
 
 def run(rate: int, duration: float, model: str, changes: int, domain: int, flood_requests: int,
-        parameters: list[str]) -> dict[str, float]:
+        parameters: list[str], crane: Crane) -> dict[str, float]:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     node = subprocess.Popen([sys.executable, "-m", "crane_reference.ros.node", "--ros-args", "-p",
                              f"publish_rate:={rate}", "-p", f"model:={model}", "-p", "status_period:=3600.0",
-                             *(arg for parameter in parameters for arg in ("-p", parameter))],
+                             *crane.node_parameters, *(arg for parameter in parameters for arg in ("-p", parameter))],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     context = rclpy.Context()
@@ -350,7 +381,7 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
     subscriber = Node("bench_subscriber", context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(subscriber)
-    recorder = Recorder()
+    recorder = Recorder(crane.slew)
     subscriber.create_subscription(JointState, "/crane_reference/joint_states", recorder.joint_state, 10000)
     subscriber.create_subscription(DiagnosticArray, "/diagnostics", recorder.diagnostic, 100)
     client = AsyncParameterClient(subscriber, NODE)
@@ -374,14 +405,14 @@ def run(rate: int, duration: float, model: str, changes: int, domain: int, flood
         factors = [value for at, value in recorder.real_time_factors
                    if t0 * NS < at <= (t0 + wall) * NS and math.isfinite(value)]  # inf: nothing computed
         held = [held_late_now(executor, recorder)]  # after normal running, then after each kind of command
-        latencies, after_acceptance, margins = (measure_latency(executor, client, recorder, changes) if changes
-                                                else ([float("nan")],) * 3)
+        latencies, after_acceptance, margins = (measure_latency(executor, client, recorder, changes, crane)
+                                                if changes else ([float("nan")],) * 3)
         held.append(held_late_now(executor, recorder))
-        goals = measure_goals(executor, subscriber, recorder, changes) if changes else {}
+        goals = measure_goals(executor, subscriber, recorder, changes, crane) if changes else {}
         held.append(held_late_now(executor, recorder))
-        smoothness = command_smoothness(executor, subscriber, client, recorder, 1.0)
+        smoothness = command_smoothness(executor, subscriber, client, recorder, 1.0, crane)
         held.append(held_late_now(executor, recorder))
-        flooded = flood(executor, client, recorder, flood_requests, rate) if flood_requests else {}
+        flooded = flood(executor, client, recorder, flood_requests, rate, crane) if flood_requests else {}
     finally:
         signalled = time.monotonic()
         node.send_signal(signal.SIGINT)
@@ -437,7 +468,8 @@ except (KeyboardInterrupt, ExternalShutdownException):
 TARGET_OVER_FLOOR, TARGET_REAL_TIME_FACTOR, TARGET_P99_MS, TARGET_MAX_MS_100HZ = 1.3, 10.0, 2.0, 5.0
 
 
-def message_costs(model: str, domain: int, rates: list[int], details: bool) -> dict[int, float]:
+def message_costs(model: str, domain: int, rates: list[int], details: bool, config: str | None = None
+                  ) -> dict[int, float]:
     """This process's CPU share [%] when it only publishes the node's messages at each of ``rates``, with a
     subscriber in another process on the joint states and the diagnostics, as the node's run has (the floor of the
     node's publishing in rclpy: no stream, no clock, no schedule): ~/joint_states and ~/end_effector_pose as rows
@@ -452,7 +484,7 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
     node = Node("bench_messages", context=context)
     subscriber = None
     try:
-        types, stream = rclpy_types(), ReferenceStream(load_config(), model)
+        types, stream = rclpy_types(), ReferenceStream(load_config(config), model)
         stream.compute(0.1)
         sample, names = stream.sample(0.05), list(stream.joint_names)
         joints = node.create_publisher(JointState, "/bench_joint_states", 10)
@@ -463,7 +495,7 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
         joint_rows = SerializedJointState(serialize_message(messages.joint_state(types, 0, names, sample))).rows(batch)
         pose_rows = SerializedPose(serialize_message(messages.end_effector_pose(types, 0, "world", sample))).rows(batch)
         kept = {"joint": None, "pose": None}
-        preview_joints, points = SPECS["preview.joints"].default, SPECS["preview.points"].default
+        preview_joints, points = list(stream.model.actuated_joints), SPECS["preview.points"].default
         preview = messages.reference_preview(
             types, 0, "world", preview_joints, [names.index(j) for j in preview_joints],
             messages.preview_offsets(SPECS["preview.horizon"].default, points - 1), [sample] * points)
@@ -546,23 +578,25 @@ def message_costs(model: str, domain: int, rates: list[int], details: bool) -> d
         context.try_shutdown()
 
 
-def steps_alone_percent(model: str, step: float, seconds: float = 5.0, paced: bool = False) -> float:
+def steps_alone_percent(model: str, step: float, seconds: float = 5.0, paced: bool = False,
+                        config: str | None = None) -> float:
     """CPU share [%] of the integrator's compiled steps alone at ``step`` [s] for motion in real time (compiled
     runs of 0.25 s from rest, only each run's last row evaluated): the least a solver of this motion spends.
     ``paced``: runs of the node's REFILL seconds, each when its motion is due in wall time, as the node's solver
     computes (information beside the floor: this machine spends more on the same runs after idle gaps)."""
-    scenario = Scenario(load_config(), model)
+    scenario = Scenario(load_config(config), model)
     run_times(scenario, step, 0.25, every_row=False)  # kernels loaded
     cpu = time.process_time()
     run_times(scenario, step, seconds, every_row=False, chunk=REFILL if paced else 0.25, paced=paced)
     return 100.0 * (time.process_time() - cpu) / seconds
 
 
-def floor_parts(model: str, domain: int, rate: int, step: float) -> tuple[float, float]:
+def floor_parts(model: str, domain: int, rate: int, step: float, config: str | None = None) -> tuple[float, float]:
     """The two parts of the node's floor at ``rate`` Hz [% of a core]: a paced process that only publishes the
     node's serialized messages (:func:`message_costs`) and the compiled steps alone (:func:`steps_alone_percent`).
     Measured before and after each node run: this machine's speed drifts within minutes."""
-    return message_costs(model, domain, [rate], False)[rate], steps_alone_percent(model, step)
+    return (message_costs(model, domain, [rate], False, config)[rate],
+            steps_alone_percent(model, step, config=config))
 
 
 def node_step(parameters: list[str]) -> float:
@@ -586,6 +620,7 @@ def main() -> int:
     parser.add_argument("--duration", type=float, default=30.0, help="measured seconds per rate (default 30)")
     parser.add_argument("--rates", type=int, nargs="+", default=[100, 500, 1000])
     parser.add_argument("--model", choices=("flexible", "rigid"), default="flexible")
+    parser.add_argument("--config", help="crane file (default: the packaged crane, the paper's)")
     parser.add_argument("--changes", type=int, default=5, help="parameter changes for the latency (default 5)")
     parser.add_argument("--domain-id", type=int, default=os.getpid() % 100 + 1)
     parser.add_argument("--message-costs", action="store_true", help="first print the publisher's message costs")
@@ -596,26 +631,27 @@ def main() -> int:
                         help="a further node parameter, e.g. -p command_lead:=0.05 (repeatable)")
     args = parser.parse_args()
     if args.message_costs:
-        message_costs(args.model, args.domain_id, args.rates, True)
+        message_costs(args.model, args.domain_id, args.rates, True, args.config)
     step = node_step(args.parameter)
-    scenario = Scenario(load_config(), args.model)
+    scenario = Scenario(load_config(args.config), args.model)
+    crane = Crane.of(args.config, args.model)
     rows = []
     for rate in args.rates:
-        before, aba_before = floor_parts(args.model, args.domain_id, rate, step), aba_time(scenario)
+        before, aba_before = floor_parts(args.model, args.domain_id, rate, step, args.config), aba_time(scenario)
         busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
         try:
-            row = run(rate, args.duration, args.model, args.changes, args.domain_id, args.flood, args.parameter)
+            row = run(rate, args.duration, args.model, args.changes, args.domain_id, args.flood, args.parameter, crane)
         finally:
             for process in busy:
                 process.kill()
                 process.wait()
-        after, aba_after = floor_parts(args.model, args.domain_id, rate, step), aba_time(scenario)
+        after, aba_after = floor_parts(args.model, args.domain_id, rate, step, args.config), aba_time(scenario)
         publishing, steps = ((a + b) / 2 for a, b in zip(before, after, strict=True))
         aba = (aba_before + aba_after) / 2
         print(f"[floor] {rate} Hz: publish-only {before[0]:.1f} / {after[0]:.1f} %, compiled steps alone at "
               f"h = {step * 1e3:g} ms {before[1]:.1f} / {after[1]:.1f} % (before / after the node's run); the same "
               f"steps paced in {REFILL:g} s runs as the node's solver computes them: "
-              f"{steps_alone_percent(args.model, step, paced=True):.1f} % (not part of the floor)")
+              f"{steps_alone_percent(args.model, step, paced=True, config=args.config):.1f} % (not part of the floor)")
         row.update(floor_publish_percent=publishing, floor_steps_percent=steps, floor_percent=publishing + steps,
                    node_over_publish_floor=row["cpu_node_process_percent"] / publishing,
                    solver_over_steps=row["cpu_solver_process_percent"] / steps,
@@ -623,7 +659,8 @@ def main() -> int:
                    aba_us=1e6 * aba, steps_alone_step_aba=steps / 100.0 * step / aba,
                    solver_step_aba=step / (row["real_time_factor"] * aba))
         rows.append(row)
-    print_table(f"crane_reference node, {args.model} model, {args.duration:g} s per rate, {os.cpu_count()} CPUs"
+    print_table(f"crane_reference node, {scenario.params.name} {args.model} model ({scenario.model.dof} DOF), "
+                f"{args.duration:g} s per rate, {os.cpu_count()} CPUs"
                 + (f", {args.busy} busy processes beside it" if args.busy else ""), rows)
     print(f"targets (issue 29): cpu_over_floor <= {TARGET_OVER_FLOOR}, real_time_factor >= {TARGET_REAL_TIME_FACTOR}, "
           f"period_error_p99_ms <= {TARGET_P99_MS}, period_error_max_ms <= {TARGET_MAX_MS_100HZ} at 100 Hz, "

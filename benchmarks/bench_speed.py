@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from dataclasses import replace
 
 import numpy as np
 from common import aba_time, call_seconds, newton_iterations, run_times
@@ -35,7 +34,7 @@ from crane_reference.dynamics.inertia import world_pseudo_inertias
 from crane_reference.dynamics.structures import Coefficients
 from crane_reference.dynamics.terms import chain_terms, end_effector_jacobian, position_terms
 from crane_reference.model.config import load_config
-from crane_reference.model.parameters import CraneParameters
+from crane_reference.model.description import CraneDescription
 from crane_reference.motion.integration import REFRESH_INTERVAL, ExactFrequencyTrapezoidal, stop_flag
 from crane_reference.motion.simulation import MotionStepper, Scenario, simulate
 from crane_reference.motion.steps import ONLINE_STEP
@@ -52,7 +51,7 @@ def _read_fields(kinds, axes, origins, body_joint, body_H, gravity, ee_joint, ee
     return gravity
 
 
-def evaluation_times(params: CraneParameters) -> None:
+def evaluation_times(params: CraneDescription) -> None:
     scenario = Scenario(params, "flexible")
     q = scenario.equilibrium.q
     qd = np.full_like(q, 0.01)
@@ -93,21 +92,20 @@ def step_times(scenario: Scenario, step: float, duration: float, after: float = 
     return walls
 
 
-def speed(params: CraneParameters, duration: float, repeats: int) -> None:
+def speed(params: CraneDescription, duration: float, repeats: int) -> None:
     """[speed] Per case: the steps alone (compiled runs of 0.25 s from rest, past the drive's torque jumps of
     the paper's task, best of ``repeats``) per step as a multiple of one Pinocchio ABA call on the same chain,
     measured in this run, and as a real-time factor; the same with every row evaluated (``simulate``'s
     records); single steps (one compiled call each, from 1 s on): median, worst and 99.9 % quantile; the
     mean Newton evaluations per step and the largest constraint residual."""
-    cases = [("rigid", params), *(("flexible", replace(params, boom=replace(params.boom, rfe_count=n)))
-                                  for n in (6, 12, 24))]
+    cases = [("rigid", params), *(("flexible", params.with_rfe_count(n)) for n in (6, 12, 24))]
     for variant, p in cases:
         scenario = Scenario(p, variant)
         q0 = scenario.equilibrium.q
         simulate(scenario.motion, q0, 0.01, step=1e-3)  # compile / load the kernels
         aba = aba_time(scenario)
-        label = f"[speed] {variant:8s} n_rfe={p.boom.rfe_count if variant == 'flexible' else 1:2d} " \
-                f"dof={scenario.model.dof:2d}"
+        n_rfe = p.flexible_links[0].beam.rfe_count if variant == "flexible" and p.flexible_links else 1
+        label = f"[speed] {p.name} {variant:8s} n_rfe={n_rfe:2d} dof={scenario.model.dof:2d}"
         print(f"{label}: Pinocchio ABA on the exported URDF {aba * 1e6:.2f} us/call")
         for step in (ONLINE_STEP, 1e-3):
             steps = round(duration / step)
@@ -198,13 +196,13 @@ def _repeat_read_row(q, qd, qdd, k, drives, partition, chain, n):
     return total
 
 
-def component_times(params: CraneParameters, rfe_count: int, repeat: int = 3000) -> None:
+def component_times(params: CraneDescription, rfe_count: int, repeat: int = 3000) -> None:
     """[profile] Compiled cost of the parts of a step (flexible, ``rfe_count`` RFEs), each timed in a compiled
     loop (no Python call overhead), best of 5, also as a multiple of one Pinocchio ABA call on the same chain
     in this run: a step is a factor, per Newton evaluation a projection and a residual, and at its end a
     projection and a full evaluation with the integrator's qdd; every REFRESH_INTERVAL of motion the modal
     correction."""
-    scenario = Scenario(replace(params, boom=replace(params.boom, rfe_count=rfe_count)), "flexible")
+    scenario = Scenario(params.with_rfe_count(rfe_count), "flexible")
     motion = scenario.motion
     q, chain, partition = scenario.equilibrium.q, motion.dynamics.chain, motion.partition
     qd = np.full_like(q, 0.01)
@@ -251,8 +249,10 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--only", nargs="+", choices=SECTIONS, default=SECTIONS, help="sections to run")
     parser.add_argument("--rfe", nargs="+", type=int, default=[6], help="[profile]: the cranes' RFE counts")
+    parser.add_argument("--config", help="crane file (default: the packaged crane, the paper's); a crane's step is "
+                        "stated in ABA of its own chain")
     args = parser.parse_args()
-    params = load_config()
+    params = load_config(args.config)
     if "eval" in args.only:
         evaluation_times(params)
     if "profile" in args.only:

@@ -30,15 +30,15 @@ from common import aba_time
 
 from crane_reference.analysis.tracking.closed_loop import TrackingSpec, run_tracking
 from crane_reference.control.controller import JointGains
-from crane_reference.control.plant import ACTUATED_JOINTS, held_start
+from crane_reference.control.plant import held_start
 from crane_reference.model.config import load_config
-from crane_reference.model.parameters import CraneParameters
+from crane_reference.model.description import CraneDescription
 from crane_reference.motion.simulation import Scenario, simulate
 
 SECTIONS = ("speed", "exact", "energy", "inertia")
 
 
-def speed(params: CraneParameters, duration: float) -> None:
+def speed(params: CraneDescription, duration: float) -> None:
     """[speed] of the module docstring."""
     args = argparse.Namespace(duration=duration)
     for variant in ("rigid", "flexible"):
@@ -67,9 +67,9 @@ def speed(params: CraneParameters, duration: float) -> None:
                   f"{summary['height_error_max_m'] * 1e3:.2f} mm")
 
 
-def exact(params: CraneParameters) -> None:
+def exact(params: CraneDescription) -> None:
     """[exact] of the module docstring (the task written out as in crane_reference/test/test_simulation.py)."""
-    zero = {name: JointGains(0.0, 0.0) for name in ACTUATED_JOINTS}
+    zero = {name: JointGains(0.0, 0.0) for name in params.actuated}
     scenario, task = Scenario(params, "rigid"), params.task
     for step in (1e-3, 5e-4):
         run = run_tracking(params, TrackingSpec(variant="rigid", realisation="servo", gains=zero, duration=2.0,
@@ -82,7 +82,7 @@ def exact(params: CraneParameters) -> None:
               f"|z - z_a| <= {np.abs(z - z_a).max():.2e} m")
 
 
-def energy(params: CraneParameters, duration: float) -> None:
+def energy(params: CraneDescription, duration: float) -> None:
     """[energy] of the module docstring."""
     for step in (1e-3, 5e-4):
         plant = run_tracking(params, TrackingSpec(duration=duration, step=step, rate=1.0 / step)).plant
@@ -91,15 +91,15 @@ def energy(params: CraneParameters, duration: float) -> None:
               f"{plant.work_drive[-1]:.4g} J, dampers took {-plant.work_damping[-1]:.4g} J")
 
 
-def inertia(params: CraneParameters) -> None:
+def inertia(params: CraneDescription) -> None:
     """[inertia] of the module docstring."""
     scenario = Scenario(params, "flexible")
     start = held_start(scenario)
     M = scenario.dynamics.terms(0.0, start.q, np.zeros_like(start.q)).M
-    diagonal = np.array([M[j, j] for j in map(scenario.model.index, ACTUATED_JOINTS)])
+    diagonal = np.array([M[j, j] for j in map(scenario.model.index, params.actuated)])
     gains = TrackingSpec().joint_gains(diagonal)
     inverse = np.linalg.inv(M)
-    for name, J, g in zip(ACTUATED_JOINTS, diagonal, gains, strict=True):
+    for name, J, g in zip(params.actuated, diagonal, gains, strict=True):
         local = 1.0 / inverse[scenario.model.index(name), scenario.model.index(name)]
         print(f"[inertia] {name}: diag M {J:.4g} kg m^2, 1/(M^-1)_jj {local:.4g} kg m^2, kd {g.kd:.4g} N m s/rad, "
               f"kd h / J at 1 ms {g.kd * 1e-3 / local:.3g}")

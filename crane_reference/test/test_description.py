@@ -21,6 +21,7 @@ import pytest
 import yaml
 from cranes import CONFIG, EXAMPLES, PAPER_LAYOUT
 
+from crane_reference.analysis.study.case import SINGULARITY_MARGIN
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.dynamics.kinematics import forward_kinematics
 from crane_reference.model.chain import VARIANTS, build_model
@@ -28,7 +29,8 @@ from crane_reference.model.config import ConfigError, load_config, parse_config,
 from crane_reference.model.drive import TorqueSource
 from crane_reference.model.urdf import model_to_urdf
 from crane_reference.model.urdf_layout import description_to_urdf, parse_urdf_description
-from crane_reference.motion.simulation import Scenario
+from crane_reference.motion.simulation import Scenario, simulate
+from crane_reference.stream.targets import check_task
 
 LOADER = CONFIG / "loader_crane.yaml"
 SAMPLES = 6
@@ -356,3 +358,16 @@ def test_urdf_fixed_links_are_merged_and_carry_their_points():
     np.testing.assert_allclose(king.inertia, own + steiner, rtol=1e-14)
     assert params.end_effector.link == "jib"
     np.testing.assert_array_equal(params.end_effector.point, [2.5, 0.0, -0.3])
+
+
+def test_the_readmes_example_crane_runs():
+    """The crane file the README shows under "Your own crane" (copied from there): it loads, its whole task is
+    reachable, and a second of its motion stays on the constraints."""
+    readme = (CONFIG.parent.parent / "README.md").read_text()
+    section = readme[readme.index("## Your own crane"):]
+    start = section.index("```yaml") + len("```yaml")
+    params = parse_config(yaml.safe_load(section[start:section.index("```", start)]), source="README.md")
+    scenario = Scenario(params, "flexible")
+    check_task(scenario, scenario.task, scenario.z_static, SINGULARITY_MARGIN)
+    trajectory = simulate(scenario.motion, scenario.equilibrium.q, 1.0, step=5e-4)
+    assert trajectory.residual_distance.max() <= 1e-12

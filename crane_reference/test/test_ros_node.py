@@ -43,9 +43,11 @@ from visualization_msgs.msg import MarkerArray
 
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.interface import messages
+from crane_reference.model.chain import build_model
 from crane_reference.model.config import load_config
 from crane_reference.model.drive import make_drive
 from crane_reference.model.parameters import Task
+from crane_reference.model.urdf import model_to_urdf
 from crane_reference.ros.message_types import rclpy_types
 from crane_reference.ros.node import CraneReferenceNode
 from crane_reference.ros.parameters import PARAMETERS, SPECS, NodeParameters, field_name
@@ -984,3 +986,26 @@ def test_the_publisher_reads_the_node_clock_as_rclpy_does(ros: Harness) -> None:
         ros.probe.set_parameters([Parameter("use_sim_time", value=False)])
         assert not clock.ros_time_is_active
         system_time(now)
+
+
+def test_a_crane_of_its_own_from_a_urdf_and_its_overlay(ros: Harness) -> None:
+    """The example crane (b) (config/knuckle_boom_crane.yaml: a URDF and its overlay; a spring drive; a fixed
+    base): the joint states name its coordinates, the preview its actuated joints, E stays on its ellipse (its
+    pose from the published positions by the chain's kinematics, checked against Pinocchio in
+    test_dynamics_pinocchio) and ~/robot_description is its chain."""
+    ros.start(config_file="knuckle_boom_crane.yaml", publish_rate=100)
+    ros.wait_for(lambda: len(ros.received["joint_states"]) >= 50 and len(ros.received["preview"]) >= 2,
+                 "50 joint states and previews")
+    config = load_config("knuckle_boom_crane.yaml")
+    model = build_model(config, "flexible")
+    dynamics = CraneDynamics(model, make_drive(config.drive, config.drive_start))
+    for _, state in list(ros.received["joint_states"]):
+        assert list(state.name) == model.joint_names
+        x, y, _ = dynamics.end_effector(np.array(state.position))[0]
+        assert (x / config.task.ellipse_a) ** 2 + (y / config.task.ellipse_b) ** 2 == pytest.approx(1.0, abs=1e-9)
+    assert all(list(p.joint_names) == ["slew", "luff", "fold"] for _, p in list(ros.received["preview"]))
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    descriptions: list[String] = []
+    ros.probe.create_subscription(String, f"/{NODE}/robot_description", descriptions.append, latched)
+    ros.wait_for(lambda: descriptions, "the latched robot_description")
+    assert descriptions[0].data == model_to_urdf(model)

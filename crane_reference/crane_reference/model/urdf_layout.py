@@ -22,9 +22,10 @@ limits; its links their bodies (the inertial's mass, centre of mass and inertia,
 into the link's frame).  A link on a ``fixed`` joint is merged into its parent (masses added about the common
 centre of mass), and a point on it (E, the payload) is carried into the parent's frame.  The base is the root
 link (a fixed base), or the link on a ``floating`` joint from the root at the identity (a sprung base, whose
-mass it carries; without a floating joint a sprung base's mass is the root link's).  A link named in ``flexible`` is a uniform beam along its x axis:
-its length is the x of its child joint's origin (or ``length``, which must then agree), and the URDF's mass for
-it, if any, must be the beam's rho A L within :data:`MASS_TOLERANCE`.
+mass it carries; without a floating joint a sprung base's mass is the root link's).  A link named in
+``flexible`` is a uniform beam along its x axis: its length is the x of its child joint's origin (or
+``length``, which must then agree), and the URDF's mass for it, if any, must be the beam's rho A L within
+:data:`MASS_TOLERANCE`.
 """
 
 from __future__ import annotations
