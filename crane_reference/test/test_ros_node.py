@@ -1009,3 +1009,25 @@ def test_a_crane_of_its_own_from_a_urdf_and_its_overlay(ros: Harness) -> None:
     ros.probe.create_subscription(String, f"/{NODE}/robot_description", descriptions.append, latched)
     ros.wait_for(lambda: descriptions, "the latched robot_description")
     assert descriptions[0].data == model_to_urdf(model)
+
+
+def test_a_bad_crane_file_leaves_the_node_unconfigured_until_it_is_mended(ros: Harness, tmp_path: Path) -> None:
+    """A crane file that names a joint it lacks (without autostart): configure fails, the node stays unconfigured
+    with the file, the field and what is allowed at ERROR in /diagnostics; once the file is mended, configure
+    succeeds."""
+    crane = tmp_path / "crane.yaml"
+    text = (Path(__file__).resolve().parent.parent / "config" / "loader_crane.yaml").read_text()
+    crane.write_text(text.replace("joint: column_slew\n", "joint: wrist\n"))
+    node = CraneReferenceNode(context=ros.context, parameter_overrides=[
+        Parameter("autostart", value=False), Parameter("config_file", value=str(crane))])
+    ros.node = node
+    ros.spin(node)
+    assert not change_state(ros, Transition.TRANSITION_CONFIGURE)
+    assert lifecycle_state(ros) == "unconfigured"
+    ros.wait_for(lambda: any("drive.joint = 'wrist': must be a joint of the chain" in m
+                             for m in diagnostic_messages(ros)), "the reason in /diagnostics")
+    error = next(d.status[0] for _, d in list(ros.received["diagnostics"]) if "wrist" in d.status[0].message)
+    assert error.level == rclpy_types().byte(Level.ERROR) and str(crane) in error.message
+    crane.write_text(text)
+    assert change_state(ros, Transition.TRANSITION_CONFIGURE)
+    assert lifecycle_state(ros) == "inactive"

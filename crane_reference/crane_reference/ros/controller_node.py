@@ -76,8 +76,8 @@ class CraneControllerNode(Node):
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs) -> None:
         super().__init__(node_name, **{"automatically_declare_parameters_from_overrides": True, **kwargs})
-        config_file = declare(self, ParameterSpec("config_file", STRING, "", "Crane description YAML; '' loads the "
-                                                  "packaged default", empty_allowed=True, read_only=True))
+        config_file = declare(self, ParameterSpec("config_file", STRING, "", "Crane file (docs/description.md); '' "
+                                                  "loads the packaged default", empty_allowed=True, read_only=True))
         model = declare(self, ParameterSpec("model", STRING, "flexible", "Crane model variant (for the default "
                                             "gains)", choices=VARIANTS, read_only=True))
         config = load_config(config_file or None)

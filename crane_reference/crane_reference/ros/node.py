@@ -37,7 +37,14 @@ from ..stream.server import CommandRefusedError, ReferenceServer, Reply
 from ..stream.solver import SolverStoppedError
 from . import settings
 from .message_types import rclpy_types
-from .parameters import SPECS, ParameterError, declare_all, pre_set_callback, reach_descriptor
+from .parameters import (
+    SPECS,
+    ParameterError,
+    declare_all,
+    declare_from_config,
+    pre_set_callback,
+    reach_descriptor,
+)
 from .publishing import DiagnosticsPublisher, SamplePublisher
 from .retarget_action import RetargetActionServer
 from .running import spin_once
@@ -61,7 +68,7 @@ class CraneReferenceNode(LifecycleNode):
         self._starting = "unconfigured"  # the diagnostics' message while not publishing
         self._diagnostics = DiagnosticsPublisher(self, self._types, self._doing, lambda: self._server, self._stop)
         try:
-            self._params = declare_all(self)
+            self._params, self._pending = declare_all(self)
         except Exception as error:
             self._fail_start(error)
             raise
@@ -118,14 +125,18 @@ class CraneReferenceNode(LifecycleNode):
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Load the crane and the task, start the solver (kernels made ready, the start and the first second
         of motion computed), create the publishers; the server computes ahead from here on."""
-        v = self._params
         try:
+            config = load_config(self._params.config_file or None)
+            if self._pending:  # the crane file could not be loaded at construction: its defaults now
+                self._params = declare_from_config(self, self._pending, config, self._params)
+                self._pending = ()
+            v = self._params
             where = "in its own process" if v.solver_process else "in this process"
             self._starting = (f"configuring: starting the solver {where}; it makes its kernels ready (compiled on a "
                               "first start, else loaded) and computes the start")
             self.get_logger().info(f"starting the solver {where} (with an empty kernel cache it compiles for a minute "
                                    "or two; `crane-reference compile` after installing does it ahead)")
-            solver = settings.start_solver(v, load_config(v.config_file or None), self._stopping)
+            solver = settings.start_solver(v, config, self._stopping)
             server = ReferenceServer(solver, v.publish_rate, v.command_lead, settings.preview(v))
             messages_settings = settings.publish_settings(v, server.info.joint_names)
         except (StartupError, ConfigError, ParameterError) as error:

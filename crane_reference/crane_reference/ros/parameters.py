@@ -35,7 +35,7 @@ from rclpy.parameter import Parameter
 
 from ..interface.messages import MAX_PUBLISH_RATE
 from ..model.chain import VARIANTS
-from ..model.config import load_config
+from ..model.config import ConfigError, load_config
 from ..model.description import CraneDescription
 from ..model.paper_layout import ACTUATED as PAPER_ACTUATED
 from ..model.parameters import Task, TorqueDrive
@@ -130,10 +130,11 @@ class ParameterSpec:
 
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
-    ParameterSpec("config_file", STRING, "", "Crane description YAML (format of config/crane.yaml); "
+    ParameterSpec("config_file", STRING, "", "Crane file (docs/description.md; a bare name is looked up in the "
+                  "package's config/, e.g. loader_crane.yaml); "
                   "'' loads the packaged default", empty_allowed=True, read_only=True),
-    ParameterSpec("model", STRING, "flexible", "Crane model variant: 'flexible' (rigid finite element boom) "
-                  "or 'rigid' (one boom element)", choices=VARIANTS, read_only=True),
+    ParameterSpec("model", STRING, "flexible", "Crane model variant: 'flexible' (each flexible link cut into its "
+                  "rigid finite elements) or 'rigid' (one element each)", choices=VARIANTS, read_only=True),
     ParameterSpec("integrator.step", DOUBLE, ONLINE_STEP, "Step of the integrator", "s",
                   (1e-5, 1e-2), read_only=True),
     ParameterSpec("publish_rate", INTEGER, 100, "Rate of joint_states and ~/end_effector_pose; sample k is "
@@ -285,19 +286,35 @@ def check(parameters: Iterable[Parameter], specs: dict[str, ParameterSpec] = SPE
     return None
 
 
-def declare_all(node: Node) -> NodeParameters:
+def declare_all(node: Node) -> tuple[NodeParameters, tuple[ParameterSpec, ...]]:
     """Declare every parameter of the table on ``node`` (``config_file`` first: it gives the others'
     defaults, see :attr:`ParameterSpec.from_config`) and return their values; :class:`ParameterError` for an
-    override of a name the node lacks (:func:`unknown_overrides`)."""
+    override of a name the node lacks (:func:`unknown_overrides`).  Also the parameters left to declare: where the
+    crane file cannot be loaded, those whose defaults come from it and that have no override are declared once
+    it loads (:func:`declare_from_config`, at configure, which reports why it cannot); their values meanwhile are
+    the table's defaults."""
     config_file = declare(node, SPECS["config_file"])
-    config = load_config(config_file or None)
+    try:
+        config = load_config(config_file or None)
+    except ConfigError:
+        config = None
+    pending = tuple(spec for spec in PARAMETERS if config is None and spec.from_config is not None
+                    and not node.has_parameter(spec.name))
     values = NodeParameters.from_values({"config_file": config_file, **{
-        spec.name: declare(node, spec, config) for spec in PARAMETERS if spec.name != "config_file"}})
+        spec.name: spec.default if spec in pending else declare(node, spec, config)
+        for spec in PARAMETERS if spec.name != "config_file"}})
     unknown = unknown_overrides(node)
     if unknown:
         raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
                              f"{parameter_names(node)}")
-    return values
+    return values, pending
+
+
+def declare_from_config(node: Node, pending: tuple[ParameterSpec, ...], config: CraneDescription,
+                        values: NodeParameters) -> NodeParameters:
+    """Declare the ``pending`` parameters of :func:`declare_all` with their defaults from ``config``; ``values``
+    with theirs."""
+    return values.changed([Parameter(spec.name, value=declare(node, spec, config)) for spec in pending])
 
 
 def pre_set_callback(node: Node, specs: dict[str, ParameterSpec] = SPECS) -> Callable[[list[Parameter]],

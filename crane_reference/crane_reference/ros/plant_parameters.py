@@ -36,10 +36,10 @@ CLOCK_MODES = ("realtime", "lockstep")
 MAX_CONTROL_RATE = 1000  # [Hz]
 
 PLANT_PARAMETERS: tuple[ParameterSpec, ...] = (
-    ParameterSpec("config_file", STRING, "", "Crane description YAML (format of config/crane.yaml); '' loads the "
-                  "packaged default", empty_allowed=True, read_only=True),
-    ParameterSpec("model", STRING, "flexible", "Crane model variant: 'flexible' (rigid finite element boom) or "
-                  "'rigid'", choices=VARIANTS, read_only=True),
+    ParameterSpec("config_file", STRING, "", "Crane file (docs/description.md; a bare name is looked up in the "
+                  "package's config/); '' loads the packaged default", empty_allowed=True, read_only=True),
+    ParameterSpec("model", STRING, "flexible", "Crane model variant: 'flexible' (each flexible link cut into its "
+                  "rigid finite elements) or 'rigid' (one element each)", choices=VARIANTS, read_only=True),
     ParameterSpec("integrator.step", DOUBLE, PLANT_STEP, "Step of the plant's integrator (a control period is a "
                   "whole number of steps)", "s", (1e-5, 1e-2), read_only=True),
     ParameterSpec("control_rate", INTEGER, 1000, "Rate of the control periods: a command holds over one, and the "
