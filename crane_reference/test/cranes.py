@@ -5,8 +5,24 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
+from crane_reference.model.config import ConfigError, parse_config
+
 CONFIG = Path(__file__).resolve().parent.parent / "config"
 PAPER_LAYOUT = Path(__file__).resolve().parent / "data" / "paper_layout_crane.yaml"
 """The packaged crane (config/crane.yaml) in the layout of the paper's crane family."""
 EXAMPLES = ("crane.yaml", "loader_crane.yaml", "knuckle_boom_crane.yaml")
 """The packaged cranes (files in :data:`CONFIG`): the paper's and the examples."""
+
+
+def expect_config_error(data: object, *fragments: str) -> str:
+    """parse_config(data) raises ConfigError naming the source ``crane.yaml`` and containing every fragment; the
+    message."""
+    with pytest.raises(ConfigError) as info:
+        parse_config(data, source="crane.yaml")
+    message = str(info.value)
+    assert message.startswith("crane.yaml: ")
+    for fragment in fragments:
+        assert fragment in message, f"{fragment!r} not in {message!r}"
+    return message

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from cranes import PAPER_LAYOUT
+from cranes import PAPER_LAYOUT, expect_config_error
 
 from crane_reference.model.chain import build_model
 from crane_reference.model.config import ConfigError, default_config_path, load_config, parse_config
@@ -35,15 +35,6 @@ def data() -> dict[str, Any]:
     return copy.deepcopy(_DEFAULT_DATA)
 
 
-def expect_error(data: dict[str, Any], *fragments: str) -> str:
-    """parse_config(data) raises ConfigError whose message contains every fragment."""
-    with pytest.raises(ConfigError) as info:
-        parse_config(data, source="crane.yaml")
-    message = str(info.value)
-    assert message.startswith("crane.yaml: ")
-    for fragment in fragments:
-        assert fragment in message, f"{fragment!r} not in {message!r}"
-    return message
 
 
 # --- the default crane ----------------------------------------------------------------------------
@@ -173,107 +164,107 @@ def test_flexible_drive(data: dict[str, Any]) -> None:
 
 def test_negative_mass(data: dict[str, Any]) -> None:
     data["base"]["mass"] = -3.0
-    message = expect_error(data, "base.mass = -3.0", "must be a finite number > 0 [kg]")
+    message = expect_config_error(data, "base.mass = -3.0", "must be a finite number > 0 [kg]")
     assert message == "crane.yaml: base.mass = -3.0: must be a finite number > 0 [kg]"
 
 
 def test_negative_payload_mass(data: dict[str, Any]) -> None:
     data["payload"]["mass"] = -1.0
-    expect_error(data, "payload.mass = -1.0", ">= 0 [kg]")
+    expect_config_error(data, "payload.mass = -1.0", ">= 0 [kg]")
 
 
 def test_inertia_not_positive_definite(data: dict[str, Any]) -> None:
     data["column"]["inertia"]["ixy"] = 70.0  # eigenvalues 62.25 -+ 70 -> one negative
-    expect_error(data, "column.inertia", "must be positive definite", "I1 = -7.75")
+    expect_config_error(data, "column.inertia", "must be positive definite", "I1 = -7.75")
 
 
 def test_inertia_triangle_inequality(data: dict[str, Any]) -> None:
     data["base"]["inertia"] = {"ixx": 1000.0, "iyy": 2000.0, "izz": 5000.0}
-    expect_error(data, "base.inertia", "triangle inequality I1 + I2 >= I3", "I1 = 1000", "I2 = 2000",
+    expect_config_error(data, "base.inertia", "triangle inequality I1 + I2 >= I3", "I1 = 1000", "I2 = 2000",
                  "I3 = 5000")
 
 
 @pytest.mark.parametrize("count", [0, 2.5, True])
 def test_rfe_count(data: dict[str, Any], count: object) -> None:
     data["boom"]["rfe_count"] = count
-    expect_error(data, f"boom.rfe_count = {count!r}", "must be an integer >= 1")
+    expect_config_error(data, f"boom.rfe_count = {count!r}", "must be an integer >= 1")
 
 
 def test_missing_key(data: dict[str, Any]) -> None:
     del data["boom"]["section"]["area"]
-    expect_error(data, "boom.section.area", "missing", "torsion_constant")
+    expect_config_error(data, "boom.section.area", "missing", "torsion_constant")
 
 
 def test_missing_section(data: dict[str, Any]) -> None:
     del data["drive"]
-    expect_error(data, "drive: missing")
+    expect_config_error(data, "drive: missing")
 
 
 def test_unknown_key(data: dict[str, Any]) -> None:
     data["base"]["colour"] = "yellow"
-    expect_error(data, "base.colour: unknown key",
+    expect_config_error(data, "base.colour: unknown key",
                  "allowed keys of base: mass, center_of_mass, inertia, supports")
 
 
 def test_string_for_a_number(data: dict[str, Any]) -> None:
     data["boom"]["length"] = "long"
-    expect_error(data, "boom.length = 'long'", "must be a finite number > 0 [m]", "not a str")
+    expect_config_error(data, "boom.length = 'long'", "must be a finite number > 0 [m]", "not a str")
 
 
 def test_yaml_exponent_without_sign_is_explained(data: dict[str, Any]) -> None:
     data["boom"]["youngs_modulus"] = "2.1e11"  # what PyYAML makes of 2.1e11
-    expect_error(data, "boom.youngs_modulus = '2.1e11'", "> 0 [Pa]", "2.1e+11")
+    expect_config_error(data, "boom.youngs_modulus = '2.1e11'", "> 0 [Pa]", "2.1e+11")
 
 
 def test_bool_for_a_number(data: dict[str, Any]) -> None:
     data["payload"]["mass"] = True
-    expect_error(data, "payload.mass = True", "must be a finite number >= 0 [kg]", "not a bool")
+    expect_config_error(data, "payload.mass = True", "must be a finite number >= 0 [kg]", "not a bool")
 
 
 @pytest.mark.parametrize("value", [math.nan, math.inf])
 def test_not_finite(data: dict[str, Any], value: float) -> None:
     data["base"]["supports"][3]["stiffness"][2] = value
-    expect_error(data, f"base.supports[3].stiffness[2] = {value!r}", "must be a finite number >= 0 [N/m]")
+    expect_config_error(data, f"base.supports[3].stiffness[2] = {value!r}", "must be a finite number >= 0 [N/m]")
 
 
 def test_support_without_stiffness(data: dict[str, Any]) -> None:
     data["base"]["supports"][5]["stiffness"] = [0.0, 0.0, 0.0]
-    expect_error(data, "base.supports[5].stiffness", "sum > 0")
+    expect_config_error(data, "base.supports[5].stiffness", "sum > 0")
 
 
 def test_vector_of_wrong_length(data: dict[str, Any]) -> None:
     data["link4"]["end_effector"] = [1.2, 0.0]
-    expect_error(data, "link4.end_effector = [1.2, 0.0]", "list of 3 finite numbers [m]")
+    expect_config_error(data, "link4.end_effector = [1.2, 0.0]", "list of 3 finite numbers [m]")
 
 
 def test_unknown_drive_type(data: dict[str, Any]) -> None:
     data["drive"]["type"] = "hydraulic"
-    expect_error(data, "drive.type = 'hydraulic'", "must be one of 'torque', 'flexible'")
+    expect_config_error(data, "drive.type = 'hydraulic'", "must be one of 'torque', 'flexible'")
 
 
 def test_drive_ends_before_it_starts(data: dict[str, Any]) -> None:
     data["drive"]["end"] = 0.0
-    expect_error(data, "drive.end = 0.0", "must be > drive.start = 0.0 [s]")
+    expect_config_error(data, "drive.end = 0.0", "must be > drive.start = 0.0 [s]")
 
 
 def test_keys_of_the_other_drive_type(data: dict[str, Any]) -> None:
     data["drive"]["duration"] = 2.0
-    expect_error(data, "drive.duration: unknown key", "type, torque, start, end")
+    expect_config_error(data, "drive.duration: unknown key", "type, torque, start, end")
 
 
 def test_collinear_supports(data: dict[str, Any]) -> None:
     for spring in data["base"]["supports"]:
         spring["position"][1] = 0.0
-    expect_error(data, "base.supports = ", "collinear", "at least 3")
+    expect_config_error(data, "base.supports = ", "collinear", "at least 3")
 
 
 def test_too_few_supports(data: dict[str, Any]) -> None:
     data["base"]["supports"] = data["base"]["supports"][:2]
-    expect_error(data, "base.supports", "at least 3 support springs")
+    expect_config_error(data, "base.supports", "at least 3 support springs")
 
 
 def test_top_level_not_a_mapping() -> None:
-    expect_error([], "must be a mapping")  # type: ignore[arg-type]
+    expect_config_error([], "must be a mapping")  # type: ignore[arg-type]
 
 
 def test_yaml_syntax_error_names_the_file(tmp_path: Path) -> None:

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from cranes import CONFIG, EXAMPLES, PAPER_LAYOUT
+from cranes import CONFIG, EXAMPLES, PAPER_LAYOUT, expect_config_error
 
 from crane_reference.analysis.study.case import SINGULARITY_MARGIN
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
@@ -52,13 +52,6 @@ def data() -> dict[str, Any]:
 _LOADER_DATA = read_yaml(LOADER)
 
 
-def expect_error(data: dict[str, Any], *fragments: str) -> None:
-    with pytest.raises(ConfigError) as info:
-        parse_config(data, source="crane.yaml")
-    message = str(info.value)
-    assert message.startswith("crane.yaml: ")
-    for fragment in fragments:
-        assert fragment in message, f"{fragment!r} not in {message!r}"
 
 
 # --- the paper's crane in both layouts ----------------------------------------------------------------
@@ -194,34 +187,25 @@ def test_no_joints_left_to_solve_the_task_is_refused(data):
 # --- bad descriptions ----------------------------------------------------------------------------------
 
 
-def test_a_parent_that_is_no_link(data):
-    data["links"][2]["parent"] = "boom"
-    expect_error(data, "links:", "do not hang on the base", "telescope")
-
-
-def test_a_loop_of_parents(data):
-    data["links"][0]["parent"] = "jib"
-    expect_error(data, "links:", "a loop")
-
-
-def test_a_branch_is_not_a_serial_chain(data):
-    data["links"][3]["parent"] = "main_boom"
-    expect_error(data, "links:", "all hang on 'main_boom'", "one serial chain")
-
-
-def test_a_duplicated_link_name(data):
-    data["links"][3]["name"] = "main_boom"
-    expect_error(data, "links[3].name = 'main_boom'", "used once")
+@pytest.mark.parametrize(("where", "value", "fragments"), [
+    ((2, "parent"), "boom", ("links:", "do not hang on the base", "telescope")),  # a parent that is no link
+    ((0, "parent"), "jib", ("links:", "a loop")),
+    ((3, "parent"), "main_boom", ("links:", "all hang on 'main_boom'", "one serial chain")),  # a branch
+    ((3, "name"), "main_boom", ("links[3].name = 'main_boom'", "used once")),
+])
+def test_links_that_are_not_one_serial_chain_of_distinct_names(data, where, value, fragments):
+    data["links"][where[0]][where[1]] = value
+    expect_config_error(data, *fragments)
 
 
 def test_a_duplicated_joint_name(data):
     data["links"][3]["joint"]["name"] = "main_luff"
-    expect_error(data, "links[3].joint.name = 'main_luff'", "used once")
+    expect_config_error(data, "links[3].joint.name = 'main_luff'", "used once")
 
 
 def test_an_unknown_key(data):
     data["links"][1]["beam"]["colour"] = "red"
-    expect_error(data, "links[1].beam.colour: unknown key", "allowed keys")
+    expect_config_error(data, "links[1].beam.colour: unknown key", "allowed keys")
 
 
 @pytest.mark.parametrize(("where", "value", "message"), [
@@ -242,17 +226,17 @@ def test_bad_fields_are_named(data, where, value, message):
     for key in where[:-1]:
         target = target[key]
     target[where[-1]] = value
-    expect_error(data, message)
+    expect_config_error(data, message)
 
 
 def test_a_link_is_rigid_or_flexible(data):
     data["links"][1]["inertial"] = data["links"][0]["inertial"]
-    expect_error(data, "links[1]: must have either 'inertial'", "not both or neither")
+    expect_config_error(data, "links[1]: must have either 'inertial'", "not both or neither")
 
 
 def test_a_sprung_base_needs_its_mass_and_supports(data):
     data["base"] = {"type": "sprung", "mass": 1000.0}
-    expect_error(data, "base.center_of_mass: missing")
+    expect_config_error(data, "base.center_of_mass: missing")
 
 
 def test_the_packaged_examples_load_by_name():
@@ -318,14 +302,14 @@ def test_a_urdf_link_named_flexible_must_exist(tmp_path):
     data = read_yaml(CONFIG / "knuckle_boom_crane.yaml")
     data["flexible"]["jib_2"] = data["flexible"].pop("main_boom")
     data["urdf"] = str(CONFIG / data["urdf"])
-    expect_error(data, "flexible.jib_2: unknown key", "allowed keys of flexible: pedestal, king")
+    expect_config_error(data, "flexible.jib_2: unknown key", "allowed keys of flexible: pedestal, king")
 
 
 def test_a_flexible_urdf_link_with_another_mass_is_refused():
     data = read_yaml(CONFIG / "knuckle_boom_crane.yaml")
     data["urdf"] = str(CONFIG / data["urdf"])
     data["flexible"]["main_boom"]["density"] = 2700.0  # aluminium: a third of the URDF's 192.9 kg
-    expect_error(data, "flexible.main_boom: the URDF gives link 'main_boom' 192.9 kg", "rho A L", "66.3")
+    expect_config_error(data, "flexible.main_boom: the URDF gives link 'main_boom' 192.9 kg", "rho A L", "66.3")
 
 
 def test_a_flexible_urdf_link_whose_child_is_off_its_axis_is_refused(tmp_path):
@@ -334,13 +318,13 @@ def test_a_flexible_urdf_link_whose_child_is_off_its_axis_is_refused(tmp_path):
     (tmp_path / "crane.urdf").write_text(text)
     data = read_yaml(CONFIG / "knuckle_boom_crane.yaml")
     data["urdf"] = str(tmp_path / "crane.urdf")
-    expect_error(data, "flexible.main_boom: its child joint 'fold' is at [4.0, 0.0, 0.2]", "(L, 0, 0)")
+    expect_config_error(data, "flexible.main_boom: its child joint 'fold' is at [4.0, 0.0, 0.2]", "(L, 0, 0)")
 
 
 def test_a_missing_urdf_is_named():
     data = read_yaml(CONFIG / "knuckle_boom_crane.yaml")
     data["urdf"] = "/nowhere/crane.urdf"
-    expect_error(data, "urdf = '/nowhere/crane.urdf': cannot read")
+    expect_config_error(data, "urdf = '/nowhere/crane.urdf': cannot read")
 
 
 def test_urdf_fixed_links_are_merged_and_carry_their_points():

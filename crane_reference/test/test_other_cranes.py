@@ -18,6 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from convergence import errors_against_dop853
 from cranes import CONFIG
 
 from crane_reference.analysis.modal import linearise, modal_analysis
@@ -27,7 +28,7 @@ from crane_reference.model.profiles import Constant
 from crane_reference.motion.constraints import paper_constraints
 from crane_reference.motion.integration import ExactFrequencyTrapezoidal
 from crane_reference.motion.programmed_motion import ProgrammedMotion
-from crane_reference.motion.simulation import MotionStepper, Scenario, simulate, simulate_reference
+from crane_reference.motion.simulation import MotionStepper, Scenario, simulate
 
 ROUND_OFF_VELOCITY = 1e-10  # [rad/s, m/s], as the paper crane's rest test
 HELD = 100.0  # [s] a drive start beyond every run: the motor holds its start angle
@@ -50,13 +51,7 @@ def test_loader_energy_balance_is_second_order(loader):
 
 
 def test_loader_converges_with_second_order_against_dop853(loader):
-    times = np.round(np.arange(0.0, 1.5 + 1e-9, 4e-3), 9)
-    reference = simulate_reference(loader.motion, loader.equilibrium.q, 1.5, times, rtol=1e-11, atol=1e-13)
-    errors = []
-    for step in (4e-3, 2e-3):
-        tr = simulate(loader.motion, loader.equilibrium.q, 1.5, step=step)
-        on_reference = np.array([np.interp(times, tr.t, tr.q[:, k]) for k in range(tr.q.shape[1])]).T
-        errors.append(np.max(np.abs(on_reference - reference.q)))
+    errors = errors_against_dop853(loader.motion, loader.equilibrium.q, 1.5, (4e-3, 2e-3), 4e-3)
     assert errors[0] / errors[1] >= 3.5, f"errors {errors}: not second order"
 
 
