@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import signal
 import threading
 import time
 from collections.abc import Iterator
@@ -18,6 +19,7 @@ from crane_reference.model.config import load_config
 from crane_reference.model.parameters import Task
 from crane_reference.motion.programmed_motion import ConstraintSingularityError
 from crane_reference.motion.simulation import MotionStepper
+from crane_reference.stream import solver as solver_module
 from crane_reference.stream.health import Health, Level, serving_health, startup_health
 from crane_reference.stream.reference_stream import ERROR, PAUSED, RUNNING, ReferenceStream
 from crane_reference.stream.schedule import URGENT_PART, FrameSchedule
@@ -301,6 +303,36 @@ def test_the_solver_process_obeys_an_interrupt_that_comes_before_or_during_a_fra
         assert process.refresh_status() is not None
     finally:
         process.close()
+
+
+def test_a_hung_solver_process_is_killed_and_reported_and_the_server_holds(monkeypatch) -> None:
+    """The solver process stopped (SIGSTOP, as a debugger, swapping or a stuck process leaves it): a request to it
+    raises SolverHungError once no beat came for HUNG_AFTER (a bound the test shortens), the process is killed
+    and reaped, and the server holds its last sample, stopped, reporting the reason; closing it does not wait."""
+    monkeypatch.setattr(solver_module, "HUNG_AFTER", 0.3)
+    process = SolverProcess(spec())
+    server = ReferenceServer(process, RATE, LEAD, Preview(0.2, 4, 10))
+    try:
+        server.begin(NS)
+        publish(server, NS, 0.2)
+        os.kill(process.pid, signal.SIGSTOP)
+        with pytest.raises(CommandRefusedError, match=r"gave no sign of life .* killed"):
+            server.check_targets(Task(3.1, 2.0, 0.2, 5.0))
+        assert process.exit_code == -signal.SIGKILL  # reaped: its exit status collected
+        assert not server.computing and "gave no sign of life" in server.schedule.fault
+        assert not server.come_to_rest(NS + 30 * PERIOD)  # nothing to ramp: the last sample is held
+    finally:
+        server.close()
+    with pytest.raises(ProcessLookupError):
+        os.kill(process.pid, 0)
+
+
+def test_closing_a_stopped_solver_process_kills_it_at_once() -> None:
+    process = SolverProcess(spec())
+    os.kill(process.pid, signal.SIGSTOP)
+    time.sleep(3 * solver_module.HEARTBEAT_PERIOD + solver_module.POLL_PERIOD)  # no beat since
+    process.close(timeout=60.0)  # without its beats it is not waited for
+    assert process.exit_code == -signal.SIGKILL
 
 
 def test_health_ranks_what_is_wrong_worst_first() -> None:

@@ -176,10 +176,15 @@ class CraneReferenceNode(LifecycleNode):
         stop publishing (the reference is held there)."""
         stream = self._server.stream
         self._resume_on_activate = stream.state == RUNNING and stream.target_speed > 0.0
-        self._server.come_to_rest(self._now(), self._stop)
+        at_rest = self._server.come_to_rest(self._now(), self._stop)
         self._stop_publishing()
         self._starting = "inactive: publishing stopped; activate to publish again"
-        self.get_logger().info("deactivated: the reference is at rest and no longer published")
+        if at_rest:
+            self.get_logger().info("deactivated: the reference is at rest and no longer published")
+        else:
+            self.get_logger().error(f"deactivated: the solver stopped ({self._server.schedule.fault or 'closed'}), so "
+                                    "the reference stopped at its held sample, not at rest; cleanup and configure "
+                                    "start a new solver")
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:

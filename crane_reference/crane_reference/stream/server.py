@@ -561,21 +561,28 @@ class ReferenceServer:
         verb = "coming to rest" if hold else "resuming"
         return Reply(True, f"{verb} from the sample stamped {self.stamp_of(k):.6f} s over {self.stream.ramp_time:g} s")
 
-    def come_to_rest(self, accepted_ns: int, stop: threading.Event | None = None) -> None:
+    def come_to_rest(self, accepted_ns: int, stop: threading.Event | None = None) -> bool:
         """Pause a moving stream (a speed ramp to rest) and wait, while publishing, until its first sample at
         rest is published (at most the ramp, the lead and REST_MARGIN; sooner if ``stop`` is set).  Nothing to
-        do once computing ahead has stopped (the solver ended or failed: the last sample is held already)."""
+        do once computing ahead has stopped (the solver ended, failed or hung: the last sample is held already).
+        Whether the reference is brought to rest (False: it stopped at the held sample)."""
         stream = self.stream
-        if stream.state != RUNNING or stream.target_speed <= 0.0 or not self._worker.is_alive():
-            return
-        point = self._at_command_point("pause", accepted_ns)
+        if not self.computing:
+            return False
+        if stream.state != RUNNING or stream.target_speed <= 0.0:
+            return True
+        try:
+            point = self._at_command_point("pause", accepted_ns)
+        except CommandRefusedError:  # the solver stopped while the pause waited for it
+            return False
         stream = self.stream
         rest_k = point.k + math.ceil((stream.settled_at - point.tau) * self.rate - 1e-9) + 1
         deadline = time.monotonic() + stream.ramp_time + self.schedule.lead + REST_MARGIN
         stop = stop or threading.Event()
         while self.publishing and self.schedule.next_k <= rest_k and time.monotonic() < deadline:
             if stop.wait(1.0 / self.rate):
-                return
+                break
+        return True
 
     # -- status ---------------------------------------------------------------------------------------
 

@@ -24,11 +24,21 @@ while another request waits, so that one comes next).
 The child runs in a session of its own and ignores SIGINT (a Ctrl-C is the caller's to handle), and exits when
 its request pipe closes, also if the caller dies.  It runs at a lower scheduling priority
 (:data:`SOLVER_NICENESS`): it computes seconds of frames ahead and can wait, the caller's publisher cannot.
+
+A hung solver.  The child beats a counter in the shared memory every :data:`HEARTBEAT_PERIOD` from a thread of
+its own, beside the kernels (which run without Python's lock).  A live solver always answers: each Newton
+iteration, projection and compiled run of it is bounded.  So a caller waiting for a reply that sees no beat for
+:data:`HUNG_AFTER` holds the process hung (stopped by a signal or a debugger, swapped out, stuck holding
+Python's lock), kills and reaps it and raises :class:`SolverHungError` (a :class:`SolverStoppedError`: the
+server holds the last sample and reports it).  The bound is not applied while the process starts (compiling
+the kernels can hold Python's lock for seconds), and :meth:`SolverProcess.close` kills a process without beats
+at once instead of waiting for it to end.
 """
 
 from __future__ import annotations
 
 import gc
+import math
 import mmap
 import os
 import pickle
@@ -37,6 +47,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -59,10 +70,20 @@ from .warmup import warm_up
 
 POLL_PERIOD = 0.1  # [s] between checks of the caller's stop flag while it waits for the solver process
 SOLVER_NICENESS = 5  # added to the solver process's nice value: the caller's threads win a contended core
+HEARTBEAT_PERIOD = 0.05
+"""[s] between the solver process's beats."""
+HUNG_AFTER = 1.0
+"""[s] without a beat after which a solver process that owes a reply is held hung (twenty beats missed)."""
+SHARED_BYTES = 16
+"""The memory the caller and the solver process share: the stop flag (byte 0) and the beat counter (bytes 8-15)."""
 
 
 class SolverStoppedError(RuntimeError):
     """The caller stopped waiting for the solver (shutting down), or the solver process is gone."""
+
+
+class SolverHungError(SolverStoppedError):
+    """The solver process gave no sign of life for :data:`HUNG_AFTER` while a reply was due: it was killed."""
 
 
 @dataclass(frozen=True)
@@ -280,10 +301,19 @@ class LocalSolver(SolverClient):
         pass
 
 
-def shared_flag(fd: int) -> np.ndarray:
-    """A stop flag (:func:`~crane_reference.motion.integration.stop_flag`) over the first byte of the file
-    ``fd``, mapped shared: what one process sets there, another that maps the same file reads."""
-    return np.frombuffer(mmap.mmap(fd, 1), dtype=np.uint8)
+def shared_memory(fd: int) -> tuple[np.ndarray, np.ndarray]:
+    """The stop flag (:func:`~crane_reference.motion.integration.stop_flag`) and the beat counter over the
+    :data:`SHARED_BYTES` of the file ``fd``, mapped shared: what one process writes there, another that maps the
+    same file reads."""
+    memory = mmap.mmap(fd, SHARED_BYTES)
+    return np.frombuffer(memory, dtype=np.uint8, count=1), np.frombuffer(memory, dtype=np.uint64, count=1, offset=8)
+
+
+def beat(counter: np.ndarray) -> None:
+    """The solver process's heartbeat: count every :data:`HEARTBEAT_PERIOD` for as long as the process lives."""
+    while True:
+        counter[0] += 1
+        time.sleep(HEARTBEAT_PERIOD)
 
 
 def _serve(requests: Connection, replies: Connection, stop: np.ndarray) -> None:
@@ -339,9 +369,9 @@ class SolverProcess(SolverClient):
         ``stopped()`` turns true meanwhile (checked every POLL_PERIOD) or the process dies."""
         package_root = str(Path(__file__).resolve().parents[2])
         path = os.pathsep.join(p for p in (package_root, os.environ.get("PYTHONPATH", "")) if p)
-        with tempfile.TemporaryFile() as shared:  # the stop flag's byte, mapped by both processes
-            shared.truncate(1)
-            self._stop = shared_flag(shared.fileno())
+        with tempfile.TemporaryFile() as shared:  # the stop flag and the beats, mapped by both processes
+            shared.truncate(SHARED_BYTES)
+            self._stop, self._beats = shared_memory(shared.fileno())
             request_read, request_write = os.pipe()
             reply_read, reply_write = os.pipe()
             self._process = subprocess.Popen(
@@ -354,9 +384,11 @@ class SolverProcess(SolverClient):
         self._replies = Connection(reply_read, writable=False)
         self._stopped = stopped
         self._lock = threading.Lock()
+        self._last_beat = (int(self._beats[0]), time.monotonic())  # the count and when it was seen to change
+        self._hung = ""  # why the process was killed as hung
         try:
             self._requests.send(spec)
-            self.info = self._reply()
+            self.info = self._reply(hung_after=math.inf)  # compiling may hold the process's Python lock
         except BaseException:
             self.close()
             raise
@@ -365,13 +397,37 @@ class SolverProcess(SolverClient):
     def pid(self) -> int:
         return self._process.pid
 
-    def _reply(self) -> Any:
+    @property
+    def exit_code(self) -> int | None:
+        """The process's exit status once it ended and was reaped (negative: the signal that ended it), else None."""
+        return self._process.poll()
+
+    def silent_for(self) -> float:
+        """[s] since the process's beat counter was last seen to change (0 if it changed now)."""
+        count, seen = self._last_beat
+        now, latest = time.monotonic(), int(self._beats[0])
+        if latest != count:
+            self._last_beat = (latest, now)
+            return 0.0
+        return now - seen
+
+    def _reply(self, hung_after: float | None = None) -> Any:
+        """The reply to the request sent; a process silent for ``hung_after`` [s] (default :data:`HUNG_AFTER`)
+        meanwhile is killed (:class:`SolverHungError`)."""
+        hung_after = HUNG_AFTER if hung_after is None else hung_after
+        self.silent_for()  # the silence counts from the request on
         try:
             while not self._replies.poll(POLL_PERIOD):
                 if self._stopped():
                     raise SolverStoppedError("stopped while waiting for the solver process")
                 if self._process.poll() is not None:
                     raise SolverStoppedError(f"the solver process ended (exit code {self._process.returncode})")
+                silent = self.silent_for()
+                if silent > hung_after:
+                    self._hung = (f"the solver process gave no sign of life for {silent:.1f} s while a reply was due "
+                                  f"(stopped, swapped out or stuck): killed (pid {self.pid})")
+                    self._kill()
+                    raise SolverHungError(self._hung)
             ok, result, status = self._replies.recv()
         except (EOFError, OSError, ValueError) as error:  # closed meanwhile (ValueError: a closed handle)
             raise SolverStoppedError(f"the solver process ended: {error}") from error
@@ -388,15 +444,25 @@ class SolverProcess(SolverClient):
     def _call(self, method: Callable[..., Any], *args: Any) -> Any:
         """``method(solver, *args)`` in the process; :attr:`status` is the stream's after it."""
         with self._lock:
+            if self._hung:
+                raise SolverHungError(self._hung)
             try:
                 self._requests.send((method, args))
             except (OSError, ValueError) as error:
                 raise SolverStoppedError(f"the solver process ended: {error}") from error
             return self._reply()
 
+    def _kill(self) -> None:
+        """Kill the process and reap it."""
+        self._process.kill()
+        self._process.wait()
+
     def close(self, timeout: float = 1.0) -> None:
-        """End the process: ask it, then wait up to ``timeout`` s, then kill it."""
-        if self._lock.acquire(timeout=timeout):
+        """End the process: ask it, then wait up to ``timeout`` s, then kill it; a process that has not beaten for
+        two periods and more (stopped, or hung) is killed at once."""
+        if self.silent_for() > 2.0 * HEARTBEAT_PERIOD + POLL_PERIOD:
+            self._kill()
+        if self._process.poll() is None and self._lock.acquire(timeout=timeout):
             try:
                 self._requests.send(None)
             except (OSError, ValueError):
@@ -419,6 +485,7 @@ if __name__ == "__main__":
     from crane_reference.stream.threads import name_this_thread
 
     name_this_thread("ref_solver")
+    stop_flag, beats = solver.shared_memory(int(sys.argv[3]))
+    threading.Thread(target=solver.beat, args=(beats,), name="ref_heartbeat", daemon=True).start()
 
-    solver._serve(Connection(int(sys.argv[1]), writable=False), Connection(int(sys.argv[2]), readable=False),
-                  solver.shared_flag(int(sys.argv[3])))
+    solver._serve(Connection(int(sys.argv[1]), writable=False), Connection(int(sys.argv[2]), readable=False), stop_flag)
