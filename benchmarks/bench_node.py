@@ -55,6 +55,8 @@ process and, after a warm-up, records for ``--duration`` seconds (default 30):
   the node gives its threads (``[threads]``: ``ref_publisher``, ``ref_frames``, ``ref_diagnostics``, rclpy's
   executor in the main thread, Fast DDS's ``dds.*`` threads);
 * the time from SIGINT (sent while active) to the node's exit (``exit_after_sigint_s``);
+* with ``--hang``, first: the solver's process stopped (SIGSTOP) under a node publishing at 100 Hz: the seconds
+  until /diagnostics reports it at ERROR, a deactivate's answer and SIGINT to the node's exit;
 * with ``--busy N``: all of the above with N processes that only spin (at the default priority) beside each node run,
   not beside the floor's measurements: how the node holds up on a busy machine (the CPU ratios then count its
   share of a contended machine);
@@ -87,6 +89,8 @@ from common import aba_time, print_table, process_cpu_seconds, run_times
 from crane_reference_interfaces.action import Retarget
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState
 from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -107,6 +111,7 @@ from crane_reference.motion.steps import ONLINE_STEP
 from crane_reference.ros.message_types import rclpy_types
 from crane_reference.ros.parameters import SPECS
 from crane_reference.ros.publishing import MARKER_RATE, TRAIL_POINTS
+from crane_reference.stream.health import Level
 from crane_reference.stream.reference_stream import ReferenceStream
 from crane_reference.stream.sample import Samples
 from crane_reference.stream.schedule import Counters
@@ -454,6 +459,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from diagnostic_msgs.msg import DiagnosticArray
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState
 rclpy.init()
 node = Node("bench_messages_subscriber")
 node.create_subscription(JointState, "/bench_joint_states", lambda msg: None, 1000)
@@ -466,6 +473,53 @@ except (KeyboardInterrupt, ExternalShutdownException):
 
 
 TARGET_OVER_FLOOR, TARGET_REAL_TIME_FACTOR, TARGET_P99_MS, TARGET_MAX_MS_100HZ = 1.3, 10.0, 2.0, 5.0
+
+
+def hang_probe(model: str, domain: int, crane: Crane) -> dict[str, float]:
+    """The solver's process stopped (SIGSTOP) while the node publishes at 100 Hz: the seconds until /diagnostics
+    reports it at ERROR (``hang_error_after_s``), a deactivate's answer (``hang_deactivate_s``) and SIGINT to the
+    node's exit (``hang_exit_after_sigint_s``)."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    node = subprocess.Popen([sys.executable, "-m", "crane_reference.ros.node", "--ros-args", "-p", "publish_rate:=100",
+                             "-p", f"model:={model}", *crane.node_parameters],
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    probe = Node("bench_hang", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(probe)
+    recorder = Recorder(crane.slew)
+    probe.create_subscription(JointState, f"/{NODE}/joint_states", recorder.joint_state, 1000)
+    errors: list[float] = []
+    error = rclpy_types().byte(Level.ERROR)
+    probe.create_subscription(DiagnosticArray, "/diagnostics", lambda msg: errors.extend(
+        time.monotonic() for status in msg.status if status.name.startswith(NODE) and status.level == error), 100)
+    change_state = probe.create_client(ChangeState, f"/{NODE}/change_state")
+    try:
+        if not spin_until(executor, lambda: len(recorder.stamps) > 100, 60.0):
+            raise RuntimeError("no joint_states within 60 s")
+        solver = descendants(node.pid)[1]
+        os.kill(solver, signal.SIGSTOP)
+        stopped = time.monotonic()
+        if not spin_until(executor, lambda: errors, 10.0):
+            raise RuntimeError("no ERROR in /diagnostics within 10 s of the solver's stop")
+        error_after = errors[0] - stopped
+        asked = time.monotonic()
+        response = call(executor, change_state, ChangeState.Request(transition=Transition(
+            id=Transition.TRANSITION_DEACTIVATE)), timeout=30.0)
+        deactivated = time.monotonic() - asked
+    finally:
+        signalled = time.monotonic()
+        node.send_signal(signal.SIGINT)
+        node.communicate(timeout=30)
+        exit_after = time.monotonic() - signalled
+        executor.shutdown()
+        probe.destroy_node()
+        context.try_shutdown()
+    return {"hang_error_after_s": error_after, "hang_deactivate_s": deactivated,
+            "hang_deactivate_success": bool(response.success), "hang_exit_after_sigint_s": exit_after,
+            "hang_exit_code": node.returncode}
 
 
 def message_costs(model: str, domain: int, rates: list[int], details: bool, config: str | None = None
@@ -625,6 +679,8 @@ def main() -> int:
     parser.add_argument("--domain-id", type=int, default=os.getpid() % 100 + 1)
     parser.add_argument("--message-costs", action="store_true", help="first print the publisher's message costs")
     parser.add_argument("--flood", type=int, default=0, metavar="N", help="N random parameter requests at 50 Hz")
+    parser.add_argument("--hang", action="store_true", help="first the hung-solver probe (SIGSTOP): the time to "
+                        "ERROR, a deactivate's answer and SIGINT to exit")
     parser.add_argument("--busy", type=int, default=0, metavar="N",
                         help="N processes that only spin beside each node run (a busy machine)")
     parser.add_argument("-p", "--parameter", action="append", default=[], metavar="NAME:=VALUE",
@@ -635,6 +691,10 @@ def main() -> int:
     step = node_step(args.parameter)
     scenario = Scenario(load_config(args.config), args.model)
     crane = Crane.of(args.config, args.model)
+    if args.hang:
+        probe = hang_probe(args.model, args.domain_id, crane)
+        print("[hang] " + ", ".join(f"{name} {value:.3f}" if isinstance(value, float) else f"{name} {value}"
+                                    for name, value in probe.items()))
     rows = []
     for rate in args.rates:
         before, aba_before = floor_parts(args.model, args.domain_id, rate, step, args.config), aba_time(scenario)

@@ -794,6 +794,26 @@ def test_a_dead_solver_holds_reports_error_and_a_new_configure_recovers(ros: Har
     assert latest_values(ros, since=time.monotonic())["state"] == "RUNNING"
 
 
+def test_a_hung_solver_is_killed_reported_and_a_new_configure_recovers(ros: Harness) -> None:
+    """The solver's process stopped (SIGSTOP: alive, but never answering): the node reports at ERROR that it gave no
+    sign of life and was killed, and reaps it; deactivate answers (the reference stops at its held sample, no ramp
+    to compute it), and cleanup, configure and activate start a new solver."""
+    node = ros.start(publish_rate=100, model="rigid")
+    (pid,) = solver_processes()
+    os.kill(pid, signal.SIGSTOP)
+    ros.wait_for(lambda: any("gave no sign of life" in m for m in diagnostic_messages(ros)), "the hang reported")
+    status = next(d.status[0] for _, d in list(ros.received["diagnostics"])
+                  if "gave no sign of life" in d.status[0].message)
+    assert status.level == rclpy_types().byte(Level.ERROR) and "configure" in status.message, status.message
+    ros.wait_for(lambda: not solver_processes(), "the hung process reaped")
+    assert change_state(ros, Transition.TRANSITION_DEACTIVATE)
+    stopped = ros.samples()["stamp"][-1]
+    for transition in (Transition.TRANSITION_CLEANUP, Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE):
+        assert change_state(ros, transition), transition
+    ros.wait_for(lambda: len(ros.samples(after_ns=stopped)["stamp"]) >= 50, "samples from the new solver")
+    assert node.get_parameter("model").value == "rigid"
+
+
 # --- message builders -----------------------------------------------------------------------------
 
 
