@@ -17,6 +17,8 @@ from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 from sensor_msgs.msg import JointState
 
 NODE_YAML = Path(__file__).resolve().parent.parent / "config" / "node.yaml"
@@ -108,3 +110,62 @@ def test_a_waiting_node_reports_its_state_and_exits_cleanly_on_a_signal(signal_n
     assert received and received[0].status[0].message.startswith(state), stderr
     assert process.returncode == 0, stderr
     assert "Traceback" not in stderr and "Traceback" not in stdout, stderr
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("override", "reason", "mended"), [
+    ("ellipse.a:=3.9", "ellipse.* / z.* = ", Parameter("ellipse.a", value=3.0)),  # in the table's range, out of reach
+    ("config_file:=missing.yaml", "missing.yaml: cannot read", None),  # mended: the file is written
+])
+def test_a_failed_start_leaves_the_node_unconfigured_until_mended(tmp_path: Path, override: str, reason: str,
+                                                                  mended: Parameter | None) -> None:
+    """With autostart (the default), a target out of reach or a crane file that does not load: the node keeps
+    running, unconfigured, with the reason and the remedy at ERROR in /diagnostics; once the parameter is set (or
+    the file written), configure and activate publish; SIGINT then ends it with exit code 0."""
+    process = subprocess.Popen([sys.executable, "-m", "crane_reference.ros.node", "--ros-args", "-p", override,
+                                "-p", "publish_rate:=50"], env=os.environ, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    statuses: list = []
+    joints: list = []
+    try:
+        node = Node("prober", context=context)
+        node.create_subscription(DiagnosticArray, "/diagnostics", lambda msg: statuses.extend(msg.status), 100)
+        node.create_subscription(JointState, "/crane_reference/joint_states", joints.append, 100)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+
+        def wait_for(condition, what: str, timeout: float = 60.0) -> None:
+            deadline = time.monotonic() + timeout
+            while not condition():
+                assert time.monotonic() < deadline and process.poll() is None, f"no {what}"
+                executor.spin_once(timeout_sec=0.05)
+
+        def call(future) -> object:
+            wait_for(future.done, "answer")
+            return future.result()
+
+        wait_for(lambda: any("cannot configure" in s.message for s in statuses), "ERROR in /diagnostics")
+        status = next(s for s in statuses if "cannot configure" in s.message)
+        assert status.level == b"\x02" and reason in status.message and "then configure" in status.message
+        if mended is not None:
+            parameters = AsyncParameterClient(node, "crane_reference")
+            assert parameters.wait_for_services(timeout_sec=30.0)
+            assert call(parameters.set_parameters([mended])).results[0].successful
+        else:
+            (tmp_path / "missing.yaml").write_text((Path(__file__).resolve().parent.parent / "config" /
+                                                    "crane.yaml").read_text())
+        change_state = node.create_client(ChangeState, "/crane_reference/change_state")
+        assert change_state.wait_for_service(timeout_sec=30.0)
+        for transition in (Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE):
+            request = ChangeState.Request(transition=Transition(id=transition))
+            assert call(change_state.call_async(request)).success, transition
+        wait_for(lambda: len(joints) >= 10, "joint states")
+        node.destroy_node()
+    finally:
+        context.try_shutdown()
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=30)
+    assert process.returncode == 0, stderr
+    assert stderr.count("cannot configure") == 1 and "Traceback" not in stderr, stderr

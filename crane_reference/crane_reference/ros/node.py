@@ -58,8 +58,10 @@ class CraneReferenceNode(LifecycleNode):
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs) -> None:
         """Declare and read the parameters, publish diagnostics, and with ``autostart`` configure and activate;
-        ``kwargs`` go to :class:`rclpy.node.Node`.  Raises :class:`~.settings.StartupError`, ConfigError or
-        ParameterError if a parameter is unusable, or with ``autostart`` if it cannot be configured."""
+        ``kwargs`` go to :class:`rclpy.node.Node`.  Raises ParameterError if a parameter's override is refused by
+        the table or names no parameter.  A configure that fails (a target out of reach, a crane file that does
+        not load, no consistent start), with ``autostart`` too, leaves the node unconfigured, saying why at ERROR
+        with the remedy: set what it names, then configure."""
         super().__init__(node_name, **{"automatically_declare_parameters_from_overrides": True, **kwargs})
         self._types = rclpy_types()
         self._server: ReferenceServer | None = None
@@ -89,10 +91,7 @@ class CraneReferenceNode(LifecycleNode):
         self._jump_handle = self.get_clock().create_jump_callback(  # a looped bag, a simulator reset
             JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=True),
             post_callback=self._clock_jumped)
-        if self._params.autostart:
-            if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
-                self._stop.set()
-                raise StartupError(self._starting.removeprefix(f"{CANNOT} configure: "))
+        if self._params.autostart and self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
             self.trigger_activate()
 
     def _fail_start(self, error: Exception) -> None:
@@ -140,7 +139,8 @@ class CraneReferenceNode(LifecycleNode):
             server = ReferenceServer(solver, v.publish_rate, v.command_lead, settings.preview(v))
             messages_settings = settings.publish_settings(v, server.info.joint_names)
         except (StartupError, ConfigError, ParameterError) as error:
-            self._starting = f"{CANNOT} configure: {error}"
+            self._starting = (f"{CANNOT} configure: {error}; unconfigured: set the parameter it names (or mend the "
+                              "crane file), then configure")
             self.get_logger().error(self._starting)
             return TransitionCallbackReturn.FAILURE
         except SolverStoppedError as error:  # shutting down while the solver started
@@ -294,7 +294,8 @@ class CraneReferenceNode(LifecycleNode):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node until SIGINT / shutdown; exit code 0, or 1 if it cannot start.
+    """Run the node until SIGINT / shutdown; exit code 0, or 1 if a parameter's override is refused (a failed
+    configure leaves it running, unconfigured).
 
     ``args`` are the command line arguments for ``rclpy.init`` (``None``: ``sys.argv``), e.g.
     ``['--ros-args', '-p', 'ellipse.a:=3.5']``.
@@ -310,7 +311,7 @@ def main(args: list[str] | None = None) -> int:
             spin_once(executor, node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (StartupError, ConfigError, ParameterError) as error:
+    except ParameterError as error:
         rclpy.logging.get_logger(NODE_NAME).fatal(f"{CANNOT} start: {error}")
         return 1
     except Exception:
