@@ -18,6 +18,8 @@ from rclpy.parameter import Parameter
 from test_ros_node import NODE, NS, Harness, change_state, diagnostic_messages, stamp_ns
 
 from crane_reference.ros.node import CraneReferenceNode
+from crane_reference.ros.retarget_action import goal_parameters
+from crane_reference.ros.settings import refusal
 
 RATE = 100  # [Hz]
 ON_PATH = 1e-9  # E's ellipse residual (5.1) on the path (as the node's parameter test)
@@ -135,14 +137,17 @@ def test_a_goal_reached_between_monitor_ticks_succeeds_when_a_newer_goal_comes(r
     assert np.abs(new[stamps >= path_stamp][:10]).max() < ON_PATH < np.abs(new[stamps < path_stamp][-1])
 
 
-def test_invalid_goals_are_aborted_naming_the_field_and_the_stream_goes_on(ros: Harness) -> None:
-    ros.start(publish_rate=RATE, model="rigid")
+def test_invalid_goals_are_rejected_naming_the_field_and_the_stream_goes_on(ros: Harness) -> None:
+    """As joint_trajectory_controller refuses an invalid goal: REJECTED at the goal response (which carries no
+    reason), the reason, the field and what is allowed, logged as :func:`refusal` words it for the goal."""
+    node = ros.start(publish_rate=RATE, model="rigid")
     client = Client(ros)
-    for goal, expected in (({"ellipse_a": math.nan}, "ellipse.a"), ({"blend_time": -1.0}, "blend_time"),
+    for goal, expected in (({"ellipse_a": math.nan}, "ellipse.a = nan: must be a number in [0.1, 20] m"),
+                           ({"blend_time": -1.0}, "blend_time = -1.0: must be a number in [0.01, 600] s"),
                            ({"ellipse_a": 19.0}, "not reachable")):
-        answer = client.result(client.send(**goal))
-        assert answer.status == GoalStatus.STATUS_ABORTED
-        assert answer.result.error_code == Retarget.Result.INVALID_GOAL and expected in answer.result.error_string
+        request = Retarget.Goal(**{"ellipse_a": 3.0, "ellipse_b": 2.0, "z_increment": 0.2, "z_rise_time": 5.0, **goal})
+        assert expected in refusal(goal_parameters(request), node._params, node._server)
+        assert not client.send(**goal).accepted
     count = len(ros.received["joint_states"])
     ros.wait_for(lambda: len(ros.received["joint_states"]) > count + RATE // 2, "samples after the refusals")
 

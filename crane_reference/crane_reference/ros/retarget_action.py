@@ -1,11 +1,13 @@
 """The node's ``~/retarget`` action (crane_reference_interfaces/action/Retarget): re-targets with goal, feedback
 and result, served as joint_trajectory_controller serves ``follow_joint_trajectory``.
 
-* A goal is refused while the node is not active.
-* An accepted goal's targets are checked as the target parameters are (:func:`.settings.refusal`: their ranges,
-  E's reach); if one is not allowed the goal is aborted with ``INVALID_GOAL`` and the reason.  Otherwise it
-  re-targets the stream over its blend time (:class:`~crane_reference.stream.retarget_goal.RetargetGoal`) and
-  sets the target parameters to its targets, so that they show the targets in force.
+* A goal is refused (REJECTED at the goal response, the reason in the log, as joint_trajectory_controller refuses
+  an invalid trajectory) while the node is not active, or if its targets or blend time are not allowed: they are
+  checked as the target parameters are (:func:`.settings.refusal`: their ranges, NaN, E's reach).
+* An accepted goal is checked again as it begins; one that has become invalid meanwhile is aborted with
+  ``INVALID_GOAL`` and the reason.  Otherwise it re-targets the stream over its blend time
+  (:class:`~crane_reference.stream.retarget_goal.RetargetGoal`) and sets the target parameters to its targets,
+  so that they show the targets in force.
 * Feedback at ``monitor_rate`` (the node's ``action_monitor_rate``, Hz of wall time): the stamp of the last
   sample published, the blend's progress and E's distance to the new path.
 * The result, once the first sample on the new path is published: its stamp and that of the blend's first sample.
@@ -45,6 +47,12 @@ GOAL_FIELDS = {name: field_name(name) for name in TARGET_PARAMETERS}
 """The target parameters and the goal fields that carry them."""
 
 
+def goal_parameters(request: Retarget.Goal) -> list[Parameter]:
+    """The target parameters a goal sets, then ``blend_time`` if it gives one (0: the node's)."""
+    targets = [Parameter(name, value=float(getattr(request, field))) for name, field in GOAL_FIELDS.items()]
+    return targets + ([Parameter("blend_time", value=float(request.blend_time))] if request.blend_time != 0.0 else [])
+
+
 class RetargetActionServer:
     """See the module documentation."""
 
@@ -70,10 +78,19 @@ class RetargetActionServer:
         self._action.destroy()
 
     def _on_goal(self, request: Retarget.Goal) -> GoalResponse:
-        """Refuse goals while the node is not active (as joint_trajectory_controller does)."""
-        if self._active():
+        """Refuse goals while the node is not active, and goals whose targets or blend time are not allowed (as
+        joint_trajectory_controller refuses an invalid goal)."""
+        server = self._server()
+        if server is None or not self._active():
+            reason = "the node is not active"
+        else:
+            try:
+                reason = refusal(goal_parameters(request), self._params(), server)
+            except (CommandRefusedError, *SOLVER_FAILURES) as error:
+                reason = f"{type(error).__name__}: {error}"
+        if reason is None:
             return GoalResponse.ACCEPT
-        self._node.get_logger().error("~/retarget goal refused: the node is not active")
+        self._node.get_logger().error(f"~/retarget goal refused: {reason}")
         return GoalResponse.REJECT
 
     def _on_cancel(self, goal_handle: ServerGoalHandle) -> CancelResponse:
@@ -82,8 +99,8 @@ class RetargetActionServer:
     async def _execute(self, goal_handle: ServerGoalHandle) -> Retarget.Result:
         """Check the goal, re-target, then wait for its end (:meth:`_tick` finishes it)."""
         request, params, server = goal_handle.request, self._params(), self._server()
-        targets = [Parameter(name, value=float(getattr(request, field))) for name, field in GOAL_FIELDS.items()]
-        blend = [Parameter("blend_time", value=float(request.blend_time))] if request.blend_time != 0.0 else []
+        parameters = goal_parameters(request)
+        targets, blend = parameters[:len(GOAL_FIELDS)], parameters[len(GOAL_FIELDS):]
         Result = Retarget.Result
         if goal_handle.is_cancel_requested:
             return self._end(goal_handle, goal_handle.canceled, Result.CANCELED, "canceled before it began")
@@ -94,7 +111,7 @@ class RetargetActionServer:
                              f"the stream is in ERROR ({server.stream.last_error})")
         try:
             server.check_computing()  # a stopped solver is STOPPED, not an invalid goal
-            reason = refusal([*targets, *blend], params, server)
+            reason = refusal(parameters, params, server)
             if reason is not None:
                 return self._end(goal_handle, goal_handle.abort, Result.INVALID_GOAL, reason)
             goal = RetargetGoal(server, params.changed(targets).targets(), params.changed(blend).blend_time,
