@@ -115,11 +115,13 @@ class Due(NamedTuple):
 
 @dataclass(frozen=True)
 class Restart:
-    """A restart at sample k: the largest position change (SI units) and the joint it is on."""
+    """A restart at sample k: the largest position change, the joint it is on and its unit (rad, or m for a
+    prismatic joint)."""
 
     k: int
     jump: float
     joint: str
+    unit: str
 
 
 class Published(NamedTuple):
@@ -531,7 +533,8 @@ class ReferenceServer:
             raise CommandRefusedError("a restart makes the reference jump to the start: stop publishing first")
         point = self._at_command_point("restart", accepted_ns)
         jump = abs(point.answer.start - point.answer.before)
-        restart = Restart(point.k, float(jump.max()), self.info.joint_names[int(jump.argmax())])
+        largest = int(jump.argmax())
+        restart = Restart(point.k, float(jump[largest]), self.info.joint_names[largest], self.info.joint_units[largest])
         with self._lock:
             self.schedule.fault = ""
             self._commands.update(restart_jump_rad=f"{restart.jump:.6g}", restart_jump_joint=restart.joint)
@@ -544,7 +547,7 @@ class ReferenceServer:
         except (*SOLVER_FAILURES, CommandRefusedError) as error:
             return Reply(False, f"restart failed, stream unchanged: {error}")
         return Reply(True, f"restarted from the static equilibrium at sample {restart.k}, published once active: "
-                           f"position jump up to {restart.jump:.6g} (SI units) on {restart.joint}")
+                           f"position jump up to {restart.jump:.6g} {restart.unit} on {restart.joint}")
 
     def pause(self, hold: bool, accepted_ns: int) -> Reply:
         """~/pause: ``hold`` brings the reference to rest along the speed ramp and holds it there, else it resumes;

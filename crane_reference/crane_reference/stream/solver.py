@@ -57,6 +57,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..model.chain import PRISMATIC
 from ..model.description import CraneDescription
 from ..model.drive import column_drive
 from ..model.parameters import Task
@@ -107,11 +108,12 @@ class StreamSpec:
 
 @dataclass(frozen=True)
 class StreamInfo:
-    """What a server needs to know of the stream once: joint names, the URDF of the model, the sample at
-    the start, E's static height [m], the singular-value margin of target checks, and how the kernels were
-    made ready ("" without warm-up)."""
+    """What a server needs to know of the stream once: joint names and their units ("rad", or "m" for a
+    prismatic joint), the URDF of the model, the sample at the start, E's static height [m], the singular-value
+    margin of target checks, and how the kernels were made ready ("" without warm-up)."""
 
     joint_names: tuple[str, ...]
+    joint_units: tuple[str, ...]
     urdf: str
     start: ReferenceSample
     z_static: float
@@ -158,7 +160,8 @@ class StreamSolver:
 
     def info(self) -> StreamInfo:
         stream = self.stream
-        return StreamInfo(tuple(stream.joint_names), model_to_urdf(stream.model), stream.sample(0.0),
+        units = tuple("m" if joint.kind == PRISMATIC else "rad" for joint in stream.model.joints)
+        return StreamInfo(tuple(stream.joint_names), units, model_to_urdf(stream.model), stream.sample(0.0),
                           stream.scenario.z_static, stream.singular_value_margin, self.kernels)
 
     def status(self) -> StreamStatus:
