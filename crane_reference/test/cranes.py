@@ -8,10 +8,15 @@ from pathlib import Path
 import pytest
 
 from crane_reference.model.config import ConfigError, parse_config
+from crane_reference.model.drive import TorqueSource
 
 CONFIG = Path(__file__).resolve().parent.parent / "config"
 PAPER_LAYOUT = Path(__file__).resolve().parent / "data" / "paper_layout_crane.yaml"
 """The packaged crane (config/crane.yaml) in the layout of the paper's crane family."""
+NO_DRIVE = TorqueSource(0.0, 0.0, 0.0)
+"""A drive that applies nothing."""
+DRIVE_OFF = 2.0
+"""[s] a time after the packaged crane's torque drive (4000 N m on [0, 1) s): it applies nothing then."""
 EXAMPLES = ("crane.yaml", "loader_crane.yaml", "knuckle_boom_crane.yaml")
 """The packaged cranes (files in :data:`CONFIG`): the paper's and the examples."""
 

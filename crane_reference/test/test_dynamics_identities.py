@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from cranes import DRIVE_OFF, NO_DRIVE
 from scipy.integrate import solve_ivp
 
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
@@ -31,13 +32,10 @@ from crane_reference.dynamics.inertia import world_pseudo_inertias
 from crane_reference.dynamics.kinematics import forward_kinematics, velocity_terms
 from crane_reference.dynamics.terms import inverse_dynamics
 from crane_reference.model.chain import VARIANTS, ChainModel, build_model
-from crane_reference.model.drive import TorqueSource
 from crane_reference.model.parameters import Damping
 
 SEED = 20240611
 SAMPLES = 5
-DRIVE_OFF = 5.0  # [s], the default torque drive (4000 N m on [0, 1) s) is zero here
-NO_DRIVE = TorqueSource(0.0, 0.0, 1.0)
 RTOL, ATOL = 1e-10, 1e-12  # DOP853 tolerances for the energy tests
 ENERGY_TOLERANCE = 1e-6  # relative to the largest kinetic energy of the run, see energy_history
 FD_STEP = 1e-6  # [m or rad], central differences of E_p

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 import pytest
-from cranes import CONFIG, EXAMPLES
+from cranes import CONFIG, DRIVE_OFF, EXAMPLES
 
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.model.chain import PRISMATIC, VARIANTS, ChainModel, build_model, rotation
@@ -28,7 +28,6 @@ from crane_reference.model.drive import TorqueSource
 from crane_reference.model.urdf import matrix_to_rpy, model_to_urdf
 
 SAMPLES = 6
-DRIVE_OFF = 5.0  # [s], any time: the dynamics compared are driven by nothing
 TOLERANCES = {  # relative, ||ours - Pinocchio|| / ||Pinocchio||
     "mass_matrix": 1e-10,
     "gravity": 1e-10,

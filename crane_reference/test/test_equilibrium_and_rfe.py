@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 import scipy.linalg
+from cranes import DRIVE_OFF
 
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.model.chain import AXES, REVOLUTE, VARIANTS, Body, ChainModel, Joint, build_model, homogeneous
@@ -31,7 +32,6 @@ from crane_reference.motion.equilibrium import static_equilibrium
 from crane_reference.motion.integration import ExactFrequencyTrapezoidal
 from crane_reference.motion.programmed_motion import ProgrammedMotion
 
-DRIVE_OFF_START = 2.0  # [s], the default torque drive (on [0, 1) s) is off from here on
 HOLD_DURATION, HOLD_STEP = 5.0, 2e-3  # [s]
 REST_VELOCITY = 1e-7  # [m/s or rad/s], the brief's bound on |qd| while holding the equilibrium
 ROUND_OFF_VELOCITY = 1e-10  # a converged implicit step stays at ~1e-15 here, see test_rest_stays_at_round_off
@@ -62,10 +62,10 @@ class Hold:
 def hold(request, params) -> Hold:
     """The static equilibrium with z held at z_E,s, the drive off (t0 = 2 s), integrated for 5 s."""
     motion = paper_motion(params, build_model(params, request.param))
-    equilibrium = static_equilibrium(motion, motion.dynamics.model.initial_q, t0=DRIVE_OFF_START)
+    equilibrium = static_equilibrium(motion, motion.dynamics.model.initial_q, t0=DRIVE_OFF)
     integrator = ExactFrequencyTrapezoidal(motion, tolerance=1e-12)
     start = time.perf_counter()
-    state = integrator.start(DRIVE_OFF_START, equilibrium.q, np.zeros(motion.dof))
+    state = integrator.start(DRIVE_OFF, equilibrium.q, np.zeros(motion.dof))
     velocities = []
     for _ in range(round(HOLD_DURATION / HOLD_STEP)):
         state = integrator.step(state, state.t + HOLD_STEP)
@@ -98,10 +98,10 @@ def test_equilibrium_satisfies_static_kkt(hold):
     motion = hold.motion
     model = motion.dynamics.model
     q = hold.q
-    terms = motion.dynamics.terms(DRIVE_OFF_START, q, np.zeros(model.dof))
+    terms = motion.dynamics.terms(DRIVE_OFF, q, np.zeros(model.dof))
     p, C = motion.dynamics.end_effector(q)
-    assert np.max(np.abs(motion.constraints.residual(DRIVE_OFF_START, p))) <= 1e-12
-    A = motion.constraints.position_jacobian(DRIVE_OFF_START, p) @ C  # Phi_q = Phi_p C
+    assert np.max(np.abs(motion.constraints.residual(DRIVE_OFF, p))) <= 1e-12
+    A = motion.constraints.position_jacobian(DRIVE_OFF, p) @ C  # Phi_q = Phi_p C
     rows = np.array([k for k in range(model.dof) if k != model.drive_joint])
     multipliers, *_ = np.linalg.lstsq(A[:, rows].T, -terms.Q[rows], rcond=None)
     residual = terms.Q + A.T @ multipliers

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from cantilever import cantilever_model
 from circle_constraint import CircleXZ
+from cranes import NO_DRIVE
 from scipy.linalg import eigvalsh
 
 from crane_reference.analysis.modal import (
@@ -37,7 +38,6 @@ from crane_reference.analysis.modal import (
 from crane_reference.cli import main
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.model.chain import AXES, PRISMATIC, VARIANTS, Body, ChainModel, Joint
-from crane_reference.model.drive import TorqueSource
 from crane_reference.model.parameters import FlexibleDrive, RigidBody
 from crane_reference.motion.constraints import ConstraintSet
 from crane_reference.motion.equilibrium import reduced_static_forces
@@ -45,7 +45,6 @@ from crane_reference.motion.programmed_motion import REALISATIONS, ProgrammedMot
 from crane_reference.motion.simulation import Scenario
 
 EULER_BERNOULLI_ROOTS = (1.875104068711961, 4.694091132974175, 7.854757438237613)  # cos x cosh x = -1
-NO_DRIVE = TorqueSource(0.0, 0.0, 0.0)
 
 
 @pytest.mark.parametrize("plane", ["vertical", "lateral"])

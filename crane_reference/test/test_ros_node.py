@@ -40,6 +40,7 @@ from std_msgs.msg import Float64, String
 from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
+from waiting import wait_for
 
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.interface import messages
@@ -124,11 +125,8 @@ class Harness:
         self.context.try_shutdown()
 
     @staticmethod
-    def wait_for(condition: Callable[[], bool], what: str, timeout: float = 10.0) -> None:
-        deadline = time.monotonic() + timeout
-        while not condition():
-            assert time.monotonic() < deadline, f"timed out waiting for {what}"
-            time.sleep(0.01)
+    def wait_for(condition: Callable[[], bool], what: str, timeout: float = 30.0) -> None:
+        wait_for(condition, what, timeout)
 
     def result(self, future: Any, timeout: float = 10.0) -> Any:
         self.wait_for(future.done, "a service response", timeout)

@@ -36,6 +36,7 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from waiting import wait_for
 
 from crane_reference.analysis.tracking.closed_loop import TrackingSpec, run_tracking
 from crane_reference.control.plant import held_start
@@ -89,10 +90,7 @@ class Probe:
         self._threads.append(thread)
 
     def wait_for(self, condition, what: str, timeout: float = 30.0) -> None:
-        deadline = time.monotonic() + timeout
-        while not condition():
-            assert time.monotonic() < deadline, f"timed out waiting for {what}"
-            time.sleep(0.005)
+        wait_for(condition, what, timeout)
 
     def command(self, values) -> None:
         self.commands.publish(Float64MultiArray(data=[float(v) for v in values]))

@@ -24,6 +24,7 @@ from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, Qo
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from test_bag_export import installed_type_hash, metadata, read_bag, stamp_ns
+from waiting import wait_for
 
 from crane_reference import cli
 from crane_reference.interface.bag import (
@@ -58,12 +59,6 @@ def context():
     rclpy.try_shutdown(context=context)
 
 
-def wait_for(condition, timeout: float, what: str, period: float = 0.01) -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"waited {timeout} s for {what}")
-        time.sleep(period)
 
 
 def joint_state(k: int) -> JointState:
@@ -126,7 +121,7 @@ def test_record_in_process(context, tmp_path, storage, version):
             bag, ["/recorder_test/joints", "recorder_test/latched"], stop, context=context)))
         thread.start()
         try:
-            wait_for(lambda: joints.get_subscription_count() > 0, 20.0, "the recorder's subscription")
+            wait_for(lambda: joints.get_subscription_count() > 0, "the recorder's subscription", 20.0)
             sent = []
             for k in range(count):
                 sent.append(publisher_node.get_clock().now().nanoseconds)
@@ -134,9 +129,9 @@ def test_record_in_process(context, tmp_path, storage, version):
                 time.sleep(0.002)
             latched = publisher_node.create_publisher(String, "/recorder_test/latched", LATCHED)
             latched.publish(String(data="robot description"))  # before the recorder subscribes
-            wait_for(lambda: latched.get_subscription_count() > 0, 20.0, "the recorder's latched subscription")
-            wait_for(lambda: bag.counts.get("/recorder_test/latched") == 1, 5.0, "the latched message")
-            wait_for(lambda: bag.counts["/recorder_test/joints"] == count, 5.0, "every message")
+            wait_for(lambda: latched.get_subscription_count() > 0, "the recorder's latched subscription", 20.0)
+            wait_for(lambda: bag.counts.get("/recorder_test/latched") == 1, "the latched message", 5.0)
+            wait_for(lambda: bag.counts["/recorder_test/joints"] == count, "every message", 5.0)
             stopped = publisher_node.get_clock().now().nanoseconds
         finally:
             stop.set()
@@ -202,7 +197,7 @@ def test_signal_leaves_a_complete_bag(context, tmp_path, signum, storage):
                                               topic), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                text=True)
     try:
-        wait_for(lambda: publisher.get_subscription_count() > 0, 30.0, "the recorder's subscription")
+        wait_for(lambda: publisher.get_subscription_count() > 0, "the recorder's subscription", 30.0)
         start, sent, signalled = time.monotonic(), 0, None
         while time.monotonic() - start < 1.5:
             publisher.publish(joint_state(sent))
@@ -242,7 +237,7 @@ def test_live_node_matches_offline_export(context, tmp_path):
     live = tmp_path / "live"
     try:
         try:
-            wait_for(lambda: executor.spin_once(timeout_sec=0.1) or heard, 120.0, "the node's first sample")
+            wait_for(lambda: executor.spin_once(timeout_sec=0.1) or heard, "the node's first sample", 120.0)
         except TimeoutError as error:
             raise TimeoutError(f"{error}; node log:\n{log.read_text()}") from None
         publishing = time.monotonic()  # the node publishes from about now on
@@ -251,7 +246,7 @@ def test_live_node_matches_offline_export(context, tmp_path):
         status = StatusReader(recorder)
         try:
             try:
-                wait_for(lambda: status.count(JOINT_STATES) >= 3 * rate, 90.0, "3 s of joint states", period=0.1)
+                wait_for(lambda: status.count(JOINT_STATES) >= 3 * rate, "3 s of joint states", 90.0, period=0.1)
             except TimeoutError as error:
                 raise TimeoutError(f"{error}; recorder status:\n{status.text()}\nnode log:\n{log.read_text()}") \
                     from None
@@ -346,10 +341,10 @@ def test_records_the_topics_of_a_renamed_node(context, tmp_path):
     joints = publisher_node.create_publisher(JointState, "~/joint_states", 10)
     other.create_publisher(JointState, "/joint_states", 10)  # measured state of someone else: not recorded
     with BagWriter(tmp_path / "bag") as bag, recording(bag, context, "/site_a/renamed") as result:
-        wait_for(lambda: joints.get_subscription_count() > 0, 20.0, "the recorder's subscription")
+        wait_for(lambda: joints.get_subscription_count() > 0, "the recorder's subscription", 20.0)
         for k in range(5):
             joints.publish(joint_state(k))
-        wait_for(lambda: bag.counts.get("/site_a/renamed/joint_states") == 5, 5.0, "the messages")
+        wait_for(lambda: bag.counts.get("/site_a/renamed/joint_states") == 5, "the messages", 5.0)
     assert set(result["recorder"].topics) == {"/site_a/renamed/joint_states"}
     publisher_node.destroy_node()
     other.destroy_node()
@@ -366,11 +361,11 @@ def test_records_every_node_of_the_name(context, tmp_path):
     events = stale.create_publisher(String, "~/transition_event", 10)
     joints = running.create_publisher(JointState, "~/joint_states", 10)
     with BagWriter(tmp_path / "bag") as bag, recording(bag, context, "/twin") as result:
-        wait_for(lambda: joints.get_subscription_count() > 0, 20.0, "the recorder's subscription")
+        wait_for(lambda: joints.get_subscription_count() > 0, "the recorder's subscription", 20.0)
         for k in range(3):
             joints.publish(joint_state(k))
-        wait_for(lambda: bag.counts.get("/twin/joint_states") == 3, 5.0, "the messages")
-        wait_for(lambda: events.get_subscription_count() > 0, 20.0, "the recorder's subscription to the twin")
+        wait_for(lambda: bag.counts.get("/twin/joint_states") == 3, "the messages", 5.0)
+        wait_for(lambda: events.get_subscription_count() > 0, "the recorder's subscription to the twin", 20.0)
     assert set(result["recorder"].topics) == {"/twin/joint_states", "/twin/transition_event"}
     stale.destroy_node()
     running.destroy_node()

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 from circle_constraint import CircleXZ
+from cranes import DRIVE_OFF
 from scipy import signal
 from scipy.integrate import solve_ivp
 from scipy.interpolate import CubicSpline
@@ -50,8 +51,6 @@ from crane_reference.motion.constraints import ConstraintSet, HeightZ, paper_con
 from crane_reference.motion.equilibrium import static_equilibrium
 from crane_reference.motion.programmed_motion import ProgrammedMotion
 from crane_reference.motion.simulation import Scenario, simulate, simulate_reference
-
-DRIVE_OFF = 2.0  # [s] the default torque drive acts on [0, 1) s
 
 
 @pytest.mark.parametrize(("suffix", "axis"), [("bend_vertical", 2), ("bend_lateral", 1), ("twist", 0)])
