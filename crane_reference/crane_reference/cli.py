@@ -129,7 +129,10 @@ def study_command(args: argparse.Namespace) -> int:
               "(run the same command again to go on)", file=sys.stderr)
         return 130
     files = write_report(spec, table, args.out)
-    print(f"{len(table)} cases ({int(table['feasible'].sum())} feasible): {', '.join(str(f) for f in files)}")
+    reused = table.attrs["reused"]
+    print(f"{len(table)} cases ({int(table['feasible'].sum())} feasible"
+          + (f"; {reused} done before, read from {args.out}/results.csv" if reused else "")
+          + f"): {', '.join(str(f) for f in files)}")
     return 0
 
 

@@ -3,6 +3,8 @@ an interrupted study, and one case's metrics against a direct simulation of the 
 
 from __future__ import annotations
 
+import csv
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -96,7 +98,10 @@ def test_an_interrupted_study_resumes_without_recomputing(tmp_path):
     resumed = []
     table = run_study(spec, tmp_path, workers=1, progress=False, on_row=lambda row: resumed.append(row["key"]))
     assert len(resumed) == 1 and resumed[0] not in seen  # only the missing case was computed
-    assert list(table["case"]) == [0, 1, 2]
+    assert list(table["case"]) == [0, 1, 2] and table.attrs["reused"] == 2
+    with (tmp_path / "results.csv").open() as handle:  # the file itself in case order, as the table
+        assert [row["case"] for row in csv.DictReader(handle)] == ["0", "1", "2"]
+    assert not [c for c in table.columns if c.startswith(("track_", "diff_", "tip_", "vibration_"))]  # rigid, alone
     fresh = run_study(spec, tmp_path / "fresh", workers=1, progress=False)
     pd.testing.assert_frame_equal(deterministic(table), deterministic(fresh), check_exact=True)
 

@@ -54,11 +54,14 @@ def tracked(joints: tuple[str, ...]) -> tuple[str, ...]:
     return tuple(f"track_{name}" for name in summary_names(joints) if name != "real_time_factor")
 
 
-def metrics(joints: tuple[str, ...]) -> tuple[str, ...]:
-    """The metrics of a case (module docstring) for a crane with the actuated ``joints``, in order."""
-    return ("feasible", "reason", "kdc_min_singular_value", "tip_deflection_m", "vibration_rms_m", "constraint_force_n",
-            "drive_power_w", "ee_speed_m_s", *(f"diff_{joint}_rad" for joint in joints), "residual_m",
-            "energy_error_j", *tracked(joints), "wall_s")
+def metrics(spec: StudySpec) -> tuple[str, ...]:
+    """The metrics of a case of ``spec`` (module docstring), in order: the deflection's with a flexible model, the
+    differences with both models, the closed loop's with tracking."""
+    flexible = ("tip_deflection_m", "vibration_rms_m") if spec.variant != "rigid" else ()
+    differences = tuple(f"diff_{joint}_rad" for joint in spec.joints) if spec.variant == "both" else ()
+    return ("feasible", "reason", "kdc_min_singular_value", *flexible, "constraint_force_n", "drive_power_w",
+            "ee_speed_m_s", *differences, "residual_m", "energy_error_j",
+            *(tracked(spec.joints) if spec.tracking else ()), "wall_s")
 
 
 class ClosedLoopError(RuntimeError):
@@ -150,7 +153,7 @@ def run_case(spec: StudySpec, case: Case) -> dict[str, object]:
     then infeasible and ``reason`` says why)."""
     started = time.perf_counter()
     row: dict[str, object] = {"case": case.index, "key": case.key, **case.values,
-                              **dict.fromkeys(metrics(spec.joints), math.nan), "feasible": False, "reason": ""}
+                              **dict.fromkeys(metrics(spec), math.nan), "feasible": False, "reason": ""}
     params = case_parameters(load_config(spec.config or None), case.values)
     variants = list(VARIANTS) if spec.variant == "both" else [spec.variant]
     runs = {}

@@ -26,7 +26,7 @@ def write_report(spec: StudySpec, table: pd.DataFrame, out: str | Path) -> list[
     out = Path(out)
     written = [out / "results.parquet"]
     table.to_parquet(written[0], index=False)
-    plotted = [m for m in metrics(spec.joints) if m not in ("feasible", "reason", "wall_s")]
+    plotted = [m for m in metrics(spec) if m not in ("feasible", "reason", "wall_s")]
     metrics_shown = [m for m in plotted if m in table and table[m].notna().any()]
     if len(spec.varied) == 2:
         written.append(_heat_maps(table, spec.varied, metrics_shown, out / "heatmaps.png", spec.limits))
@@ -145,7 +145,7 @@ def summary(spec: StudySpec, table: pd.DataFrame) -> str:
                 lines.append("")
         lines.append("")
     lines += ["## Ranges of the metrics (feasible cases)", "", "| metric | min | max |", "|---|---|---|"]
-    for metric in (m for m in metrics(spec.joints) if m not in ("feasible", "reason", "wall_s")):
+    for metric in (m for m in metrics(spec) if m not in ("feasible", "reason", "wall_s")):
         if metric in table and table.loc[feasible, metric].notna().any():
             values = table.loc[feasible, metric]
             lines.append(f"| {metric} | {values.min():.4g} | {values.max():.4g} |")

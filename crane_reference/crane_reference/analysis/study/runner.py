@@ -25,7 +25,7 @@ RESULTS = "results.csv"
 
 
 def columns(spec: StudySpec) -> list[str]:
-    return ["case", "key", *spec.varied, *metrics(spec.joints)]
+    return ["case", "key", *spec.varied, *metrics(spec)]
 
 
 def finished_keys(out: Path) -> set[str]:
@@ -67,12 +67,13 @@ def _dask(spec: StudySpec, cases: list[Case], address: str) -> Iterator[dict[str
 def run_study(spec: StudySpec, out: str | Path, *, workers: int = 1, scheduler: str | None = None,
               progress: bool = True, on_row: Callable[[dict[str, object]], None] | None = None) -> pd.DataFrame:
     """Run the cases of ``spec`` not yet in ``out`` (a local pool of ``workers`` processes, or the Dask
-    scheduler at ``scheduler``), appending each to results.csv as it finishes; returns the whole table,
-    sorted by case."""
+    scheduler at ``scheduler``), appending each to results.csv as it finishes, then sorting the file by case;
+    returns the whole table, sorted by case, with ``table.attrs["reused"]`` the cases found done in the file."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     done = finished_keys(out)
-    todo = [case for case in spec.cases() if case.key not in done]
+    cases = spec.cases()
+    todo = [case for case in cases if case.key not in done]
     names = columns(spec)
     path = out / RESULTS
     new_file = not path.exists()
@@ -92,7 +93,22 @@ def run_study(spec: StudySpec, out: str | Path, *, workers: int = 1, scheduler: 
             bar.update()
             if on_row is not None:
                 on_row(row)
-    return load_results(out)
+    _sort_by_case(path)
+    table = load_results(out)
+    table.attrs["reused"] = len(cases) - len(todo)
+    return table
+
+
+def _sort_by_case(path: Path) -> None:
+    """Rewrite the results file with its rows in case order (each row's text as written)."""
+    with path.open(newline="") as handle:
+        header, *rows = list(csv.reader(handle))
+    at = header.index("case")
+    rows.sort(key=lambda row: int(row[at]))
+    written = path.with_suffix(".sorting")
+    with written.open("w", newline="") as handle:
+        csv.writer(handle).writerows([header, *rows])
+    written.replace(path)
 
 
 def load_results(out: str | Path) -> pd.DataFrame:
