@@ -1,0 +1,105 @@
+"""The numerical core's failures, each driven by a real input, against independent truths about why it fails.
+
+* A stretched arm: E sent along a circle growing past the crane's reach stops with ConstraintSingularityError,
+  at a pose where the boom and link 4 are aligned (E as far from the luff pivot as their lengths allow).
+* A target rising out of reach while the crane moves stops the integrator (IntegrationError naming when), the arm
+  stretched as E climbs; the stream's check of the same targets refuses them before anything moves.
+* A crane without a static equilibrium (a trolley free to roll down an inclined jib) is refused with
+  EquilibriumError naming the unbalanced force.
+* A torque that overflows the accelerations: the stream goes to ERROR, holds its last valid sample at rest and
+  publishes nothing that is not finite.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from cranes import CONFIG
+
+from crane_reference.dynamics.kinematics import forward_kinematics
+from crane_reference.model.config import load_config, parse_config, read_yaml
+from crane_reference.model.parameters import Task, TorqueDrive
+from crane_reference.model.profiles import Blend, Constant
+from crane_reference.motion.constraints import paper_constraints
+from crane_reference.motion.equilibrium import EquilibriumError
+from crane_reference.motion.integration import IntegrationError
+from crane_reference.motion.programmed_motion import ConstraintSingularityError, ProgrammedMotion
+from crane_reference.motion.simulation import MotionStepper, Scenario
+from crane_reference.stream.reference_stream import ERROR, ReferenceStream
+from crane_reference.stream.targets import UnreachableTargetError, check_task, reach
+
+BOOM, LINK4 = 2.546, 1.2  # [m] the packaged crane's boom and E's distance from the knuckle (config/crane.yaml)
+
+
+def _run_until_it_fails(motion: ProgrammedMotion, q0: np.ndarray, seconds: float, step: float = 1e-3):
+    """Step ``motion`` from rest at q0 until it raises; the error and the last state computed."""
+    stepper = MotionStepper(motion, 0.0, q0, np.zeros_like(q0), step)
+    last = stepper.state
+    with pytest.raises(Exception) as info:
+        while stepper.state.t < seconds:
+            last = stepper.state
+            stepper.advance()
+    return info.value, last
+
+
+def _pivot_to_e(scenario: Scenario, q: np.ndarray) -> float:
+    """|E - luff pivot| [m] at q (the pivot: the origin of the boom's frame)."""
+    chain = scenario.dynamics.chain
+    T, _ = forward_kinematics(np.ascontiguousarray(q), chain.kinds, chain.axes, chain.origins)
+    pivot = T[scenario.model.index("boom_luff"), :3, 3]
+    return float(np.linalg.norm(scenario.dynamics.end_effector(q)[0] - pivot))
+
+
+def test_a_circle_past_the_reach_stretches_the_arm_into_a_singular_pose():
+    scenario = Scenario(load_config(), "rigid")
+    _, outer = reach(scenario, 2.0, (scenario.z_static,), 0.0)  # [m]: E can be held up to here at its height
+    radius = outer + 0.01
+    constraints = paper_constraints(Blend(Constant(3.0), Constant(radius), 0.0, 3.0),
+                                    Blend(Constant(2.0), Constant(radius), 0.0, 3.0), Constant(scenario.z_static))
+    error, last = _run_until_it_fails(ProgrammedMotion(scenario.dynamics, constraints), scenario.equilibrium.q, 4.0)
+    assert isinstance(error, ConstraintSingularityError), error
+    assert "stretch/fold singularity" in str(error)
+    assert _pivot_to_e(scenario, last.q) == pytest.approx(BOOM + LINK4, abs=2e-3)  # boom and link 4 in line
+
+
+def test_a_target_rising_out_of_reach_stops_the_integrator_and_the_check_refuses_it():
+    task = Task(3.0, 2.0, 5.0, 1.0)  # E to rise by 5 m within a second: far above what the arm reaches
+    scenario = Scenario(load_config(), "rigid", task)
+    with pytest.raises(UnreachableTargetError, match=r"ellipse point \(.*\) m at z = "):
+        check_task(scenario, task, scenario.z_static, 0.1)
+    error, last = _run_until_it_fails(scenario.motion, scenario.equilibrium.q, 1.0)
+    assert isinstance(error, IntegrationError) and "did not converge" in str(error), error
+    assert f"t = {last.t:.3f}" in str(error)
+    assert _pivot_to_e(scenario, last.q) > 0.99 * (BOOM + LINK4)  # it failed with the arm nearly straight
+
+
+def test_a_trolley_free_on_an_inclined_jib_has_no_static_equilibrium():
+    """The loader crane with a 100 kg trolley beyond E, free to roll along the jib (no spring, no drive): held on
+    the task, the jib keeps its slope, so gravity's component along it, m g sin(slope), is never balanced."""
+    data = read_yaml(CONFIG / "loader_crane.yaml")
+    data["links"].append({"name": "trolley", "joint": {"name": "roll", "type": "prismatic", "axis": [1.0, 0.0, 0.0],
+                                                        "origin": {"xyz": [2.0, 0.0, 0.0]}},
+                          "inertial": {"mass": 100.0, "center_of_mass": [0.0, 0.0, 0.0],
+                                       "inertia": {"ixx": 1.0, "iyy": 1.0, "izz": 1.0}}})
+    scenario = Scenario(parse_config(data), "rigid")
+    with pytest.raises(EquilibriumError, match="largest unbalanced generalized force"):
+        scenario.equilibrium  # noqa: B018 (computed on first use)
+    jib = scenario.model.index("knuckle")
+    q = scenario.model.initial_q
+    chain = scenario.dynamics.chain
+    T, _ = forward_kinematics(np.ascontiguousarray(q), chain.kinds, chain.axes, chain.origins)
+    slope = math.asin(T[jib, 2, 0])  # the jib's x axis against the horizontal
+    assert abs(100.0 * 9.81 * math.sin(slope)) > 100.0  # [N]: what rolls the trolley, far from balanced
+
+
+def test_an_overflowing_torque_holds_the_last_valid_sample():
+    params = replace(load_config(), drive=TorqueDrive(torque=1e300, start=0.05, end=1.0))
+    stream = ReferenceStream(params, "rigid", step=1e-3)
+    stream.compute(0.5)
+    assert (stream.state == ERROR and "LinAlgError" in stream.last_error) or "FloatingPointError" in stream.last_error
+    held = stream.samples(np.linspace(0.0, 2.0, 50))
+    assert np.all(np.isfinite(held.q)) and np.all(held.qd == 0.0)
+    np.testing.assert_array_equal(held.q, np.broadcast_to(held.q[0], held.q.shape))  # one sample, held
