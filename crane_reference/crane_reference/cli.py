@@ -22,6 +22,11 @@ from .model.urdf_layout import description_to_urdf
 from .motion.programmed_motion import REALISATIONS
 from .motion.steps import ANALYSIS_STEP, ONLINE_STEP, PLANT_STEP
 
+CSV_RATE = 1000
+"""[Hz] samples per second ``simulate`` writes to CSV/NPZ by default (its figure uses every step)."""
+BAG_RATE = 100
+"""[Hz] the publish rate of ``simulate --bag`` by default."""
+
 
 def progress_bar(label: str, total: float) -> tqdm:
     """A tqdm bar over ``total`` seconds of simulated time (shown only when stderr is a terminal); call
@@ -45,6 +50,12 @@ def simulate_command(args: argparse.Namespace) -> int:
     from .analysis.plotting import figure2
     from .motion.simulation import Scenario, simulate
     step = ANALYSIS_STEP if args.step is None else args.step
+    rate = CSV_RATE if args.rate is None else args.rate
+    stride = round(1.0 / (rate * step)) if rate > 0 else 0
+    if stride < 1 or abs(stride * rate * step - 1.0) > 1e-9:
+        print(f"crane-reference: --rate {rate}: must be a whole number of steps of {step:g} s apart (e.g. "
+              f"{round(1.0 / step)}, {round(0.5 / step)} or {round(0.25 / step)} Hz)", file=sys.stderr)
+        return 2
     params = load_config(args.config)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -60,9 +71,9 @@ def simulate_command(args: argparse.Namespace) -> int:
         with progress_bar(variant, args.duration) as bar:
             trajectory = simulate(scenario.motion, start.q, args.duration, step=step, progress=advance_to(bar))
         wall = time.perf_counter() - wall
-        trajectory.to_csv(out / f"{variant}.csv")
-        trajectory.to_npz(out / f"{variant}.npz")
-        trajectories.append(trajectory)
+        trajectory.subsampled(stride).to_csv(out / f"{variant}.csv")
+        trajectory.subsampled(stride).to_npz(out / f"{variant}.npz")
+        trajectories.append(trajectory)  # the figure from every step
         moved = start.q - scenario.model.initial_q
         dependent = ", ".join(f"{scenario.model.joint_names[k]} {moved[k]:+.3e}"
                               for k in scenario.model.dependent_joints)
@@ -75,7 +86,8 @@ def simulate_command(args: argparse.Namespace) -> int:
               "configuration, "
               f"holding torque {start.holding_torque:.2e} N m")
     figure2(trajectories, params.actuated, (params.task.ellipse_a, params.task.ellipse_b), out / "figure2.png")
-    print(f"wrote {', '.join(f'{t.variant}.csv/.npz' for t in trajectories)} and figure2.png to {out}")
+    print(f"wrote {', '.join(f'{t.variant}.csv/.npz' for t in trajectories)} ({rate} samples/s) and figure2.png "
+          f"to {out}")
     return 0
 
 
@@ -85,8 +97,9 @@ def export_command(args: argparse.Namespace) -> int:
     node's default, flexible)."""
     from .interface import bag
 
-    if not 1 <= args.rate <= bag.MAX_RATE:
-        print(f"crane-reference: --rate {args.rate}: must be an integer in [1, {bag.MAX_RATE}] Hz", file=sys.stderr)
+    rate = BAG_RATE if args.rate is None else args.rate
+    if not 1 <= rate <= bag.MAX_RATE:
+        print(f"crane-reference: --rate {rate}: must be an integer in [1, {bag.MAX_RATE}] Hz", file=sys.stderr)
         return 2
     variant = "flexible" if args.model == "both" else args.model
     config = load_config(args.config)
@@ -98,11 +111,11 @@ def export_command(args: argparse.Namespace) -> int:
     step = ONLINE_STEP if args.step is None else args.step
     wall = time.perf_counter()
     with writer, progress_bar(variant, args.duration) as bar:
-        samples = bag.export_reference(writer, bag.node_stream(config, variant, step), args.rate,
+        samples = bag.export_reference(writer, bag.node_stream(config, variant, step), rate,
                                        args.duration, progress=advance_to(bar))
     wall = time.perf_counter() - wall
     counts = ", ".join(f"{topic} {count}" for topic, count in writer.counts.items())
-    print(f"{variant}: {samples} samples at {args.rate} Hz ({args.duration:g} s simulated in {wall:.2f} s wall) "
+    print(f"{variant}: {samples} samples at {rate} Hz ({args.duration:g} s simulated in {wall:.2f} s wall) "
           f"written to {writer.path} ({writer.storage}, version {writer.version}, "
           f"{writer.size() / 1e6:.2f} MB): {counts}")
     return 0
@@ -308,7 +321,8 @@ def parser() -> argparse.ArgumentParser:
                    f"{ONLINE_STEP:g})")
     s.add_argument("--bag", metavar="DIR", help="instead of CSV/NPZ/Figure 2, write the node's topics as a rosbag2 "
                    "bag (new directory DIR), stamped with simulated time; --model both records flexible")
-    s.add_argument("--rate", type=int, default=100, metavar="HZ", help="--bag: publish rate (default 100)")
+    s.add_argument("--rate", type=int, metavar="HZ", help=f"samples per second written: CSV/NPZ (default "
+                   f"{CSV_RATE}: a whole number of steps apart), or with --bag the publish rate (default {BAG_RATE})")
     s.add_argument("--bag-storage", choices=STORAGES, default="mcap", help="--bag: storage (default mcap)")
     s.add_argument("--bag-version", type=int, choices=[9, 8], default=9,
                    help="--bag: metadata version, 9 (Jazzy, default) or 8 (Humble)")

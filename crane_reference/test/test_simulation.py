@@ -145,6 +145,9 @@ def test_cli_simulate_writes_results_and_figure(tmp_path):
     assert "real-time factor" in result.stdout
     for name in ("rigid.csv", "rigid.npz", "flexible.csv", "flexible.npz", "figure2.png"):
         assert (tmp_path / name).stat().st_size > 0
+    written = Trajectory.from_npz(tmp_path / "rigid.npz")  # every millisecond: the default output rate
+    np.testing.assert_allclose(written.t, np.arange(201) * 1e-3, rtol=0.0, atol=1e-12)
+    assert run_cli("simulate", "--duration", "0.2", "--rate", "300", "--out", str(tmp_path)).returncode == 2
 
 
 def test_cli_reports_config_errors_by_field(tmp_path):
