@@ -59,7 +59,7 @@ def ellipse_residuals(ros: Harness, a: float, b: float) -> tuple[np.ndarray, np.
 def test_a_goal_gets_feedback_and_the_stamp_from_which_the_published_path_is_the_new_one(ros: Harness) -> None:
     node = ros.start(publish_rate=RATE, model="rigid")
     client = Client(ros)
-    time.sleep(0.3)
+    ros.published_for(0.3)
     feedback: list = []
     blend = 0.8
     goal_handle = client.send(feedback, ellipse_a=3.3, ellipse_b=2.2, blend_time=blend)
@@ -96,12 +96,12 @@ def test_a_newer_goal_preempts_and_a_cancel_blends_the_old_targets_back(ros: Har
     client = Client(ros)
     first = client.send(ellipse_a=3.2, blend_time=3.0)
     assert first.accepted
-    time.sleep(0.3)
+    ros.published_for(0.3)
     second = client.send(ellipse_a=3.4, blend_time=3.0)
     answer = client.result(first)
     assert answer.status == GoalStatus.STATUS_ABORTED and answer.result.error_code == Retarget.Result.PREEMPTED
     assert node.get_parameter("ellipse.a").value == 3.4
-    time.sleep(0.3)
+    ros.published_for(0.3)
     ros.result(second.cancel_goal_async())
     answer = client.result(second)
     canceled = time.monotonic()
@@ -112,7 +112,7 @@ def test_a_newer_goal_preempts_and_a_cancel_blends_the_old_targets_back(ros: Har
     assert np.abs(back[-10:]).max() < ON_PATH  # E on the path before the canceled goal again
     # a change of the target parameters pre-empts a goal too
     third = client.send(ellipse_b=2.3, blend_time=3.0)
-    time.sleep(0.3)
+    ros.published_for(0.3)
     (changed,) = ros.set_parameters(Parameter("ellipse.b", value=1.9))
     assert changed.successful, changed.reason
     answer = client.result(third)
@@ -159,7 +159,7 @@ def test_a_goal_is_stopped_by_a_deactivation(ros: Harness) -> None:
     assert transitions.wait_for_service(timeout_sec=10.0)  # discovered before the goal: its blend outlasts the call
     goal_handle = client.send(ellipse_a=3.2, blend_time=30.0)
     assert goal_handle.accepted
-    time.sleep(0.2)
+    ros.published_for(0.2)
     deactivate = ChangeState.Request(transition=Transition(id=Transition.TRANSITION_DEACTIVATE))
     assert ros.call(transitions, deactivate).success
     answer = client.result(goal_handle)
