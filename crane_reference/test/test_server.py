@@ -335,6 +335,18 @@ def test_closing_a_stopped_solver_process_kills_it_at_once() -> None:
     assert process.exit_code == -signal.SIGKILL
 
 
+def test_replies_name_a_sample_by_its_stamp_only_once_published(server: ReferenceServer) -> None:
+    """Before publishing, a command's sample has no stamp yet: the reply names it by its number."""
+    reply = server.pause(True, accepted_ns=0)
+    assert reply.success and "sample 0 of the stream (stamped once published)" in reply.message, reply.message
+    server.pause(False, accepted_ns=0)
+    server.begin(5 * NS)
+    publish(server, 5 * NS, 0.2)
+    reply = server.pause(True, accepted_ns=5 * NS + 20 * PERIOD)
+    k = int(round((float(reply.message.split("stamped ")[1].split(" s")[0]) * NS - 5 * NS) / PERIOD))
+    assert reply.success and k >= 20, reply.message  # by its stamp, at or after the acceptance
+
+
 def test_health_ranks_what_is_wrong_worst_first() -> None:
     """Diagnostics' level and message (ROS-free): before publishing, what the node does or, at ERROR, why it
     cannot start; while publishing, a stopped solver over a failed stream over a clock that went back over a

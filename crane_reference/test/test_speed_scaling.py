@@ -28,7 +28,8 @@ def test_motion_time_is_the_integral_of_the_rate():
         h = 1e-6
         assert warp.at(tau)[2] == pytest.approx((rate(tau + h) - rate(tau - h)) / (2 * h), abs=1e-5)
         assert 0.0 <= rate(tau) <= 1.0
-    assert rate(1.0) == pytest.approx(0.3 * (1 - 0.0) + 0.0, abs=0.3)  # on the way down from 0.3 to 0
+    tau = (1.0 - 0.9) / RAMP  # on the way down from 0.3 (reached at 0.9 s) to 0, along the quintic step of (5.2)
+    assert rate(1.0) == pytest.approx(0.3 * (1.0 - (10 * tau**3 - 15 * tau**4 + 6 * tau**5)), rel=1e-12)
     assert rate(1.5) == 0.0 and rate(2.5) == 1.0
     t = warp.at(2.7)[0]
     assert warp.publish_time(t) == pytest.approx(2.7, abs=1e-9)

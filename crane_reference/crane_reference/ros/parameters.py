@@ -333,9 +333,10 @@ def unknown_overrides(node: Node, known: Iterable[str] = SPECS) -> list[str]:
     its parameters (``known``: the names of its table).  The node declares every override
     (``automatically_declare_parameters_from_overrides``), so they are the declared names that neither the table
     nor rclpy itself declares (the parameters of a bare node of the same context, without the command line's
-    arguments)."""
+    arguments; it offers no service, so the graph never lists one of it)."""
     bare = Node(f"{node.get_name()}_bare", context=node.context, use_global_arguments=False,
-                start_parameter_services=False, enable_rosout=False)
+                start_parameter_services=False, enable_rosout=False,
+                parameter_overrides=[Parameter("start_type_description_service", value=False)])
     try:
         builtin = set(bare.get_parameters_by_prefix(""))
     finally:

@@ -125,8 +125,8 @@ class RetargetActionServer:
         done = Future()
         self._goal = goal_handle, goal, done
         self._timer.reset()
-        self._node.get_logger().info(f"~/retarget: re-targeting to {goal.targets} from the sample stamped "
-                                     f"{server.stamp_of(goal.blend.k):.6f} s over {goal.blend_time:g} s")
+        self._node.get_logger().info(f"~/retarget: re-targeting to {goal.targets} from "
+                                     f"{server.sample_named(goal.blend.k)} over {goal.blend_time:g} s")
         return await done
 
     def _tick(self) -> None:

@@ -109,10 +109,10 @@ def apply(server: ReferenceServer, params: NodeParameters, names: list[str], acc
         server.preview = preview(params)
     if "speed_scaling" in names:
         k = server.command("speed_scaling", params.speed_scaling, accepted_ns=accepted_ns)
-        done.append(f"speed scaling {params.speed_scaling:g} from the sample stamped {server.stamp_of(k):.6f} s")
+        done.append(f"speed scaling {params.speed_scaling:g} from {server.sample_named(k)}")
     targets = params.targets()
     if any(name in TARGET_PARAMETERS for name in names) and targets != server.stream.targets:
         k = server.retarget(targets, params.blend_time, accepted_ns).k  # they passed check_targets on set
-        done.append(f"re-targeting to {targets} from the sample stamped {server.stamp_of(k):.6f} s over "
+        done.append(f"re-targeting to {targets} from {server.sample_named(k)} over "
                     f"{params.blend_time:g} s")
     return done

@@ -415,6 +415,13 @@ class ReferenceServer:
         """Stamp [s] of sample k (relative to the start while not publishing)."""
         return stamp_at(self._start_ns or 0, k, self.rate) / NANOSECONDS
 
+    def sample_named(self, k: int) -> str:
+        """Sample k as a reply names it: by its stamp while publishing, else by its number (its stamp is given
+        when publishing begins)."""
+        if self.publishing:
+            return f"the sample stamped {self.stamp_of(k):.6f} s"
+        return f"sample {k} of the stream (stamped once published)"
+
     # -- commands -------------------------------------------------------------------------------------
 
     def _at_command_point(self, name: str, accepted_ns: int, *args: Any,
@@ -562,7 +569,7 @@ class ReferenceServer:
             return Reply(True, f"already {stream.state.lower()}")
         k = self.command("pause" if hold else "resume", accepted_ns=accepted_ns)
         verb = "coming to rest" if hold else "resuming"
-        return Reply(True, f"{verb} from the sample stamped {self.stamp_of(k):.6f} s over {self.stream.ramp_time:g} s")
+        return Reply(True, f"{verb} from {self.sample_named(k)} over {self.stream.ramp_time:g} s")
 
     def come_to_rest(self, accepted_ns: int, stop: threading.Event | None = None) -> bool:
         """Pause a moving stream (a speed ramp to rest) and wait, while publishing, until its first sample at
