@@ -702,6 +702,8 @@ def test_lifecycle_deactivate_restart_activate_without_a_jump_while_active(ros: 
 
     response = ros.call(ros.restart, Trigger.Request())
     assert response.success and "position jump up to" in response.message, response.message
+    ros.wait_for(lambda: any("restart_jump_rad" in {kv.key for kv in d.status[0].values}  # while still inactive
+                             for _, d in list(ros.received["diagnostics"])), "the restart in the diagnostics")
     assert change_state(ros, Transition.TRANSITION_ACTIVATE)
     ros.wait_for(lambda: len(ros.received["joint_states"]) >= len(stopped["stamp"]) + rate // 2, "samples once active")
     data = ros.samples(after_ns=stopped["stamp"][-1])
@@ -712,8 +714,6 @@ def test_lifecycle_deactivate_restart_activate_without_a_jump_while_active(ros: 
                                atol=1e-10)  # the fresh motion from the static equilibrium, from the first sample
     jump = np.max(np.abs(data["q"][0] - stopped["q"][-1]))
     assert float(response.message.split("position jump up to ")[1].split()[0]) == pytest.approx(jump, rel=1e-5)
-    ros.wait_for(lambda: any("restart_jump_rad" in {kv.key for kv in d.status[0].values}
-                             for _, d in list(ros.received["diagnostics"])), "the restart in the diagnostics")
 
 
 def test_without_autostart_the_node_waits_for_a_manager(ros: Harness) -> None:

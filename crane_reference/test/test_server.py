@@ -343,7 +343,7 @@ def test_replies_name_a_sample_by_its_stamp_only_once_published(server: Referenc
     server.begin(5 * NS)
     publish(server, 5 * NS, 0.2)
     reply = server.pause(True, accepted_ns=5 * NS + 20 * PERIOD)
-    k = int(round((float(reply.message.split("stamped ")[1].split(" s")[0]) * NS - 5 * NS) / PERIOD))
+    k = round((float(reply.message.split("stamped ")[1].split(" s")[0]) * NS - 5 * NS) / PERIOD)
     assert reply.success and k >= 20, reply.message  # by its stamp, at or after the acceptance
 
 

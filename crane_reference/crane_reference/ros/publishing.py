@@ -293,12 +293,14 @@ class DiagnosticsPublisher:
             self.publish()
 
     def publish(self) -> None:
-        """One /diagnostics message: before publishing starts, what the node is doing (or why it cannot start);
-        then state, constraint residual, real-time factor, achieved rate, counters."""
+        """One /diagnostics message: unconfigured, what the node is doing (or why it cannot start); configured,
+        also the server's values (state, constraint residual, real-time factor, achieved rate, counters, the last
+        commands and restart), with what the node is doing as the message while it does not publish, unless the
+        solver stopped or the stream failed (ERROR)."""
         node, server = self.node, self._server()
         now = node.get_clock().now().nanoseconds
         name, hardware_id = f"{node.get_name()}: reference", node.get_fully_qualified_name()
-        if server is None or not server.publishing:
+        if server is None:
             health = startup_health(self._doing())
             self._publisher.publish(messages.diagnostics(self.types, now, name, hardware_id, health.level,
                                                          health.message, {}))
@@ -306,6 +308,8 @@ class DiagnosticsPublisher:
         status = server.status(now)
         stream, counters = status.stream, status.counters
         health = serving_health(status, counters["held_late"] - self._held_reported)
+        if not server.publishing and health.level != Level.ERROR:
+            health = startup_health(self._doing())
         self._held_reported = counters["held_late"]
         self.achieved_rate = status.achieved_rate
         values = messages.diagnostic_values(
