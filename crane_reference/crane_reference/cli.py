@@ -13,7 +13,6 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
-from .dynamics.cache import cache_counts
 from .interface.messages import STORAGES
 from .model.chain import VARIANTS, build_model
 from .model.config import ConfigError, load_config
@@ -48,6 +47,7 @@ def simulate_command(args: argparse.Namespace) -> int:
     if args.bag is not None:
         return export_command(args)
     from .analysis.plotting import figure2
+    from .dynamics.cache import cache_counts
     from .motion.simulation import Scenario, simulate
     step = ANALYSIS_STEP if args.step is None else args.step
     rate = CSV_RATE if args.rate is None else args.rate

@@ -41,15 +41,16 @@ PERIOD_NS = 10**9 // RATE
 
 
 def installed_type_hash(msgtype: str) -> str:
-    """RIHS01 hash of ``pkg/msg/Name`` from the installed message package's share/pkg/msg/Name.json."""
-    package, _, name = msgtype.split("/")
+    """RIHS01 hash of ``pkg/msg/Name`` from the installed message package's share/pkg/msg/Name.json (of an
+    action's ``pkg/action/Name_Part``, from share/pkg/action/Name.json), as rosidl wrote it."""
+    package, kind, name = msgtype.split("/")
     prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p] + [sys.prefix]
     for prefix in prefixes:
-        path = Path(prefix, "share", package, "msg", f"{name}.json")
+        path = Path(prefix, "share", package, kind, f"{name.partition('_')[0] if kind == 'action' else name}.json")
         if path.is_file():
             hashes = json.loads(path.read_text())["type_hashes"]
             return next(h["hash_string"] for h in hashes if h["type_name"] == msgtype)
-    raise FileNotFoundError(f"no share/{package}/msg/{name}.json under {prefixes}")
+    raise FileNotFoundError(f"no share/{package}/{kind}/{name}.json under {prefixes}")
 
 
 def read_bag(path: Path) -> tuple[dict, dict[str, list[tuple[int, object, bytes]]]]:

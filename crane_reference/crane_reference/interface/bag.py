@@ -36,7 +36,7 @@ from typing import Any
 
 from rosbags.interfaces import Connection, Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from ..model.description import CraneDescription
 from ..model.drive import column_drive
@@ -76,9 +76,61 @@ class BagError(RuntimeError):
     """A bag that cannot be written as asked (existing path, unknown storage or type, closed bag...)."""
 
 
+INTERFACES = "crane_reference_interfaces"
+ACTION = "Retarget"
+
+
+def interface_definitions() -> dict[str, tuple[str, tuple[str, ...]]]:
+    """The message types of this project's interface package that go on topics, from its ``.action`` file (the
+    installed one, else the source tree's; none if neither is there): the action's goal, result and feedback and
+    the feedback message of ``~/retarget/_action/feedback``, as rosidl generates them, each with its ``.msg`` text
+    and the types it nests, in order."""
+    relative = Path("action") / f"{ACTION}.action"
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        path = Path(get_package_share_directory(INTERFACES)) / relative
+    except (ImportError, LookupError, OSError):
+        path = Path(__file__).resolve().parents[3] / INTERFACES / relative
+    if not path.is_file():
+        return {}
+    goal, result, feedback = path.read_text(encoding="utf-8").split("\n---\n")
+    prefix = f"{INTERFACES}/action/{ACTION}"
+    time = "builtin_interfaces/msg/Time"
+    return {f"{prefix}_Goal": (goal, ()), f"{prefix}_Result": (result, (time,)),
+            f"{prefix}_Feedback": (feedback, (time,)),
+            f"{prefix}_FeedbackMessage": (f"unique_identifier_msgs/UUID goal_id\n{prefix}_Feedback feedback",
+                                          ("unique_identifier_msgs/msg/UUID", f"{prefix}_Feedback", time))}
+
+
+def interface_types() -> dict[str, Any]:
+    """rosbags' types of :func:`interface_definitions` (their RIHS01 hashes are rosidl's)."""
+    types: dict[str, Any] = {}
+    for name, (text, _) in interface_definitions().items():
+        types.update(get_types_from_msg(text, name))
+    return types
+
+
+def message_definition(typestore: Any, msgtype: str) -> str:
+    """The message definition rosbag2 stores for ``msgtype`` (its ``.msg`` text, then each nested type's after a
+    line of '=' and ``MSG: name``); rosbags' own for the message packages, written here for the action types,
+    whose nested action types rosbags does not name."""
+    definitions = interface_definitions()
+    if msgtype not in definitions:
+        return typestore.generate_msgdef(msgtype, ros_version=2)[0]
+    text, nested = definitions[msgtype]
+    parts = [text]
+    for name in nested:
+        body = definitions[name][0] if name in definitions else typestore.generate_msgdef(name, ros_version=2)[0]
+        parts.append(f"{'=' * 80}\nMSG: {name.replace('/msg/', '/')}\n{body}")
+    return "\n".join(parts)
+
+
 def jazzy_typestore() -> Any:
-    """rosbags' typestore of ROS 2 Jazzy."""
-    return get_typestore(Stores.ROS2_JAZZY)
+    """rosbags' typestore of ROS 2 Jazzy, with this project's interface types (:func:`interface_types`)."""
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    typestore.register(interface_types())
+    return typestore
 
 
 def directory_size(path: Path) -> int:
@@ -115,6 +167,8 @@ class BagWriter:
         self._connections: dict[str, Connection] = {}
         self._types: dict[str, str] = {}
         self.counts: dict[str, int] = {}  # messages given to write() per topic
+        self.first_ns: int | None = None  # the earliest and latest timestamps written
+        self.last_ns: int | None = None
         self._lock = threading.Lock()
         self._requests: queue.Queue[tuple[Callable[..., Any], tuple, Future | None] | None] = queue.Queue(QUEUE_SIZE)
         self._failure: BaseException | None = None
@@ -163,7 +217,8 @@ class BagWriter:
             if name in self._connections:
                 raise BagError(f"topic {name} is in the bag already")
             self._connections[name] = self._call(partial(
-                self._writer.add_connection, typestore=self.typestore, serialization_format="cdr",
+                self._writer.add_connection, msgdef=message_definition(self.typestore, msgtype),
+                rihs01=self.typestore.hash_rihs01(msgtype), serialization_format="cdr",
                 offered_qos_profiles=list(qos)), name, msgtype)
             self._types[name] = msgtype
             self.counts[name] = 0
@@ -178,10 +233,17 @@ class BagWriter:
                 raise BagError(f"topic {name} was not added to the bag")
             self._requests.put((self._writer.write, (connection, stamp_ns, bytes(data)), None))
             self.counts[name] += 1
+            self.first_ns = stamp_ns if self.first_ns is None else min(self.first_ns, stamp_ns)
+            self.last_ns = stamp_ns if self.last_ns is None else max(self.last_ns, stamp_ns)
 
     def write_message(self, name: str, message: Any, stamp_ns: int) -> None:
         """Serialize a message of the typestore's classes (rosbags) and write it."""
         self.write(name, self.typestore.serialize_cdr(message, self._types[name]), stamp_ns)
+
+    @property
+    def duration(self) -> float:
+        """[s] from the first message's timestamp to the last's (as metadata.yaml gives it; 0 without messages)."""
+        return 0.0 if self.first_ns is None else (self.last_ns - self.first_ns) / 1e9
 
     def size(self) -> int:
         """Bytes of the bag on disk so far (messages still queued or in the storage's open chunk excluded)."""

@@ -86,9 +86,16 @@ def subscription_qos(offers: Iterable[QoSProfile]) -> QoSProfile:
 
 
 def message_class(msgtype: str) -> type:
-    """The rclpy class of ``pkg/msg/Name`` (raises ImportError or AttributeError if not installed)."""
+    """The rclpy class of ``pkg/msg/Name``, or of an action's message ``pkg/action/Name_Part`` (``Goal``,
+    ``Result``, ``Feedback`` on the action, ``FeedbackMessage`` on its ``Impl``); raises ImportError or
+    AttributeError if not installed."""
     package, kind, name = msgtype.split("/")
-    return getattr(importlib.import_module(f"{package}.{kind}"), name)
+    module = importlib.import_module(f"{package}.{kind}")
+    if kind != "action":
+        return getattr(module, name)
+    action, _, part = name.partition("_")
+    definition = getattr(module, action)
+    return getattr(definition, part) if hasattr(definition, part) else getattr(definition.Impl, part)
 
 
 class Recorder:
@@ -162,7 +169,7 @@ class Recorder:
             return f"publishers of different types {', '.join(types)}"
         msgtype = types[0]
         if msgtype not in self.bag.typestore.types:
-            return f"type {msgtype} is not in rosbags' Jazzy typestore"
+            return f"type {msgtype} is not in rosbags' Jazzy typestore nor this project's interfaces"
         try:
             message_class(msgtype)
         except (ImportError, AttributeError, ValueError) as error:
@@ -281,8 +288,9 @@ def record_command(args: argparse.Namespace) -> int:
         status.close()
         for signum, handler in handlers.items():
             signal.signal(signum, handler)
-    print(f"recorded {recorder.total} messages in {time.monotonic() - started:.1f} s to {bag.path} "
-          f"({bag.storage}, version {bag.version}, {bag.size() / 1e6:.2f} MB)")
+    print(f"recorded {recorder.total} messages over {bag.duration:.2f} s (the bag's duration; "
+          f"{time.monotonic() - started:.1f} s of recording) to {bag.path} ({bag.storage}, version {bag.version}, "
+          f"{bag.size() / 1e6:.2f} MB)")
     for topic, count in recorder.received.items():
         print(f"  {topic}: received {count}, written {bag.counts.get(topic, 0)}"
               f"{f' (not recorded: {recorder.failed[topic]})' if topic in recorder.failed else ''}")
