@@ -373,19 +373,31 @@ def flood(executor: SingleThreadedExecutor, client: AsyncParameterClient, record
                                               and float(recorder.diagnostics.get("target_ellipse_a_m", "nan")) == a)}
 
 
-def run(rate: int, duration: float, model: str, changes: int, domain: int, flood_requests: int,
-        parameters: list[str], crane: Crane) -> dict[str, float]:
+def start_node(domain: int, parameters: list[str], crane: Crane) -> subprocess.Popen:
+    """The reference node of ``crane`` in a process of its own on the ROS domain ``domain``, with the node
+    ``parameters`` (``NAME:=VALUE``); its stderr piped."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    node = subprocess.Popen([sys.executable, "-m", "crane_reference.ros.node", "--ros-args", "-p",
-                             f"publish_rate:={rate}", "-p", f"model:={model}", "-p", "status_period:=3600.0",
-                             *crane.node_parameters, *(arg for parameter in parameters for arg in ("-p", parameter))],
+    return subprocess.Popen([sys.executable, "-m", "crane_reference.ros.node", "--ros-args", *crane.node_parameters,
+                             *(arg for parameter in parameters for arg in ("-p", parameter))],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+
+def probe_node(domain: int, name: str) -> tuple[rclpy.Context, Node, SingleThreadedExecutor]:
+    """A node of this process on the ROS domain ``domain``, in a context of its own, with its executor."""
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     context = rclpy.Context()
     rclpy.init(context=context)
-    subscriber = Node("bench_subscriber", context=context)
+    node = Node(name, context=context)
     executor = SingleThreadedExecutor(context=context)
-    executor.add_node(subscriber)
+    executor.add_node(node)
+    return context, node, executor
+
+
+def run(rate: int, duration: float, model: str, changes: int, domain: int, flood_requests: int,
+        parameters: list[str], crane: Crane) -> dict[str, float]:
+    node = start_node(domain, [f"publish_rate:={rate}", f"model:={model}", "status_period:=3600.0", *parameters],
+                      crane)
+    context, subscriber, executor = probe_node(domain, "bench_subscriber")
     recorder = Recorder(crane.slew)
     subscriber.create_subscription(JointState, "/crane_reference/joint_states", recorder.joint_state, 10000)
     subscriber.create_subscription(DiagnosticArray, "/diagnostics", recorder.diagnostic, 100)
@@ -479,16 +491,8 @@ def hang_probe(model: str, domain: int, crane: Crane) -> dict[str, float]:
     """The solver's process stopped (SIGSTOP) while the node publishes at 100 Hz: the seconds until /diagnostics
     reports it at ERROR (``hang_error_after_s``), a deactivate's answer (``hang_deactivate_s``) and SIGINT to the
     node's exit (``hang_exit_after_sigint_s``)."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    node = subprocess.Popen([sys.executable, "-m", "crane_reference.ros.node", "--ros-args", "-p", "publish_rate:=100",
-                             "-p", f"model:={model}", *crane.node_parameters],
-                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    probe = Node("bench_hang", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(probe)
+    node = start_node(domain, ["publish_rate:=100", f"model:={model}"], crane)
+    context, probe, executor = probe_node(domain, "bench_hang")
     recorder = Recorder(crane.slew)
     probe.create_subscription(JointState, f"/{NODE}/joint_states", recorder.joint_state, 1000)
     errors: list[float] = []
