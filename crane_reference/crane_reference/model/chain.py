@@ -179,16 +179,18 @@ def support_stiffness(supports: tuple[SupportSpring, ...]) -> np.ndarray:
 def axis_frame(axis: np.ndarray) -> tuple[int, np.ndarray]:
     """(k, R_a): the chain axis k and the rotation R_a with R_a e_k = ``axis`` (unit).  R_a is the identity for
     +x, +y, +z; a half turn about x (-y, -z) or z (-x) for a negative one, so a beam's x axis is kept where it
-    can be; for any other axis the shortest rotation taking z to it (Rodrigues)."""
+    can be; for any other axis the frame (x', y', z' = axis) with x' the link's x axis (or, for an axis near x,
+    its y axis) made orthogonal to the axis (Gram-Schmidt), so that it is as close to the link's frame as can
+    be, without the division of Rodrigues' formula near -z."""
     for k in range(3):
         if np.array_equal(axis, np.eye(3)[k]):
             return k, np.eye(3)
         if np.array_equal(axis, -np.eye(3)[k]):
             return k, rotation(2 if k == 0 else 0, np.pi).round()
-    z = np.eye(3)[2]
-    v, c = np.cross(z, axis), float(z @ axis)
-    skew = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-    return 2, np.eye(3) + skew + skew @ skew / (1.0 + c)
+    seed = np.eye(3)[0] if abs(axis[0]) < 0.9 else np.eye(3)[1]
+    x = seed - (seed @ axis) * axis
+    x /= np.linalg.norm(x)
+    return 2, np.column_stack((x, np.cross(axis, x), axis))
 
 
 def transformed_body(body: RigidBody, R: np.ndarray) -> RigidBody:

@@ -59,7 +59,7 @@ def parse_description(value: object) -> CraneDescription:
     base = _base(data["base"], "base")
     links = _links(data["links"], "links")
     names = [link.name for link in links]
-    joints = [link.joint.name for link in links] + (list(BASE_JOINTS) if base is not None else [])
+    joints = [link.joint.name for link in links]  # the base's coordinates are driven, actuated and solved by none
     drive = f.section(data["drive"], "drive", ("joint", "type"), optional=tuple(
         dict.fromkeys(key for keys in f.DRIVE_KEYS.values() for key in keys)))
     drive_joint = joint_name(drive["joint"], "drive.joint", joints)

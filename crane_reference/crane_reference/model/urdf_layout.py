@@ -38,7 +38,10 @@ import numpy as np
 from urdf_parser_py.urdf import URDF
 
 from . import fields as f
+from .chain import chain_order
 from .description import (
+    BASE,
+    BASE_JOINTS,
     PRISMATIC,
     REVOLUTE,
     Beam,
@@ -50,7 +53,7 @@ from .description import (
 )
 from .description_layout import AUTO, BASE_TYPES, joint_name, listed_joints, point_on_link, rpy_matrix, vertical_axis
 from .parameters import RigidBody, Task
-from .urdf import description_links_urdf
+from .urdf import WORLD, description_links_urdf
 
 SECTIONS = ("urdf", "gravity", "base", "drive", "actuated", "end_effector")
 OPTIONAL = ("name", "flexible", "joints", "dependent", "payload", "task")
@@ -75,6 +78,15 @@ def parse_urdf_description(value: object, source: Path | None) -> CraneDescripti
         raise f.invalid("base.type", kind, f"must be one of {', '.join(BASE_TYPES)}")
     root = _base_link(robot, kind)
     links = _links(robot, rigid, root, flexible, overrides)
+    try:
+        chain_order(links)
+    except ValueError as err:
+        raise f.FieldError(f"urdf: {err}") from None
+    taken = (*BASE_JOINTS, WORLD, BASE) if kind == "sprung" else (WORLD,)
+    clashing = [name for name in [*(j.name for j in robot.joints), *(link.name for link in links)] if name in taken]
+    if clashing:
+        raise f.FieldError(f"urdf: {', '.join(clashing)}: with a {kind} base the names {', '.join(taken)} are "
+                           "taken (the root and a sprung base's body and coordinates); rename them")
     base = None
     if kind == "sprung":
         base_data = f.section(data["base"], "base", ("type", "supports"), optional=("damping",))
@@ -89,13 +101,14 @@ def parse_urdf_description(value: object, source: Path | None) -> CraneDescripti
     joints = [link.joint.name for link in links]
     f.section(data["drive"], "drive", ("joint", "type"), optional=tuple(
         dict.fromkeys(key for keys in f.DRIVE_KEYS.values() for key in keys)))
-    end_effector = _carried(point_on_link(data["end_effector"], "end_effector", [*names, *rigid]), rigid)
+    end_effector = _on_a_link(_carried(point_on_link(data["end_effector"], "end_effector", [*names, *rigid]), rigid),
+                              "end_effector", root)
     payload = f.section(data.get("payload", {"mass": 0.0}), "payload", ("mass",), optional=("link", "point"))
     payload_at = None
     if "link" in payload or "point" in payload:
-        payload_at = _carried(point_on_link({"link": payload.get("link", data["end_effector"].get("link")),
-                                      "point": payload.get("point", [0.0, 0.0, 0.0])}, "payload",
-                                     [*names, *rigid]), rigid)
+        payload_at = _on_a_link(_carried(point_on_link(
+            {"link": payload.get("link", data["end_effector"].get("link")),
+             "point": payload.get("point", [0.0, 0.0, 0.0])}, "payload", [*names, *rigid]), rigid), "payload", root)
     dependent = data.get("dependent", AUTO)
     return CraneDescription(
         name=str(data.get("name", robot.name)),
@@ -198,6 +211,13 @@ def _merged_body(robot: URDF, rigid: dict[str, tuple[str, np.ndarray]], name: st
     return RigidBody(mass, center, inertia)
 
 
+def _on_a_link(point: PointOnLink, path: str, base: str) -> PointOnLink:
+    """``point``, unless it is on the base (a link fixed to it): :class:`~.fields.FieldError` naming ``path``."""
+    if point.link == base:
+        raise f.FieldError(f"{path}.link: it is fixed to the base {base!r}; E and the payload are on a moving link")
+    return point
+
+
 def _carried(point: PointOnLink, rigid: dict[str, tuple[str, np.ndarray]]) -> PointOnLink:
     """A point on a link fixed to another, on that other link."""
     if point.link not in rigid:
@@ -273,6 +293,10 @@ def _beam(robot: URDF, rigid: dict[str, tuple[str, np.ndarray]], name: str, valu
         length = float(tip[0])
     if length is None:
         raise f.FieldError(f"{f.join(path, 'length')}: missing; the link has no child joint to take it from")
+    fixed = [child for child, (owner, _) in rigid.items() if owner == name and _body(robot.link_map[child])]
+    if fixed:
+        raise f.FieldError(f"{path}: links {', '.join(fixed)} with mass are fixed to it; a flexible link is a uniform "
+                           "beam: give their mass to a link of their own on a joint, or leave it out")
     urdf_body = _merged_body(robot, rigid, name)
     beam_mass = density * section.area * length
     if urdf_body is not None and abs(urdf_body.mass - beam_mass) > MASS_TOLERANCE * beam_mass:

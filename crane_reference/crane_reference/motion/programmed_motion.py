@@ -104,6 +104,11 @@ def choose_dependent(dynamics: CraneDynamics, constraints: ConstraintSet, q: np.
     none reaches ``minimum``."""
     candidates = _dependent_candidates(dynamics)
     names = dynamics.model.joint_names
+    if len(candidates) < constraints.size:
+        raise ConfigError(f"dependent = auto: the task has {constraints.size} constraints, and only "
+                          f"{len(candidates)} joints ({', '.join(names[k] for k in candidates) or 'none'}) are free of "
+                          "springs and dampers and not the drive's: take a spring or damper off a joint, or name "
+                          "the dependent joints")
     best, chosen = -1.0, ()
     for columns in combinations(candidates, constraints.size):
         sigma = _minor_singular_value(dynamics, constraints, q, columns)
@@ -122,18 +127,22 @@ def choose_dependent(dynamics: CraneDynamics, constraints: ConstraintSet, q: np.
 def check_dependent(dynamics: CraneDynamics, constraints: ConstraintSet, q: np.ndarray, dependent: tuple[int, ...],
                     minimum: float = MIN_SINGULAR_VALUE) -> None:
     """:class:`~crane_reference.model.config.ConfigError` naming ``dependent`` unless the named coordinates can solve
-    the task at the start q: as many
-    as constraints, free of springs and dampers, and K_dc well conditioned (smallest singular value >=
-    ``minimum``)."""
+    the task at the start q: as many as constraints, free of springs and dampers (not the base's), and K_dc well
+    conditioned (smallest singular value >= ``minimum``)."""
     names = dynamics.model.joint_names
     listed = [names[k] for k in dependent]
     if len(dependent) != constraints.size:
         raise ConfigError(f"dependent = {listed}: the task has {constraints.size} constraints and needs as many "
-                         "dependent joints")
+                          "dependent joints")
+    free = {*_dependent_candidates(dynamics), dynamics.model.drive_joint}
+    sprung = [names[k] for k in dependent if k not in free]
+    if sprung:
+        raise ConfigError(f"dependent = {listed}: {', '.join(sprung)} carry a spring or a damper, or are the base's; "
+                          "the dependent joints must be free of them")
     sigma = _minor_singular_value(dynamics, constraints, q, tuple(dependent))
     if not sigma >= minimum:
         raise ConfigError(f"dependent = {listed}: these joints cannot satisfy the task at the start (smallest "
-                         f"singular value of K_dc {sigma:.3g} < {minimum:g}); name other joints, or 'auto'")
+                          f"singular value of K_dc {sigma:.3g} < {minimum:g}); name other joints, or 'auto'")
 
 
 POSITION_TOLERANCE = 1e-13

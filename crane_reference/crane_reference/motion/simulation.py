@@ -46,6 +46,8 @@ SAMPLED_ACCOUNTS = ("kinetic_energy", "potential_energy", "drive_torque", "kdc_m
 
 VERTICAL_TOLERANCE = 1e-9
 """How far from 1 |z . axis| of a slew joint may be (:attr:`Scenario.slew`)."""
+AXIS_OFFSET_TOLERANCE = 1e-9
+"""How far [m] from the world z axis the slew joint's axis may pass (:attr:`Scenario.slew`)."""
 Progress = Callable[[float], None]
 TaskConstraints = Callable[[Task, float], ConstraintSet]
 """Builds the programmed constraints of a :class:`Task` given E's static height z_E,s [m]."""
@@ -99,9 +101,9 @@ class Scenario:
     @property
     def slew(self) -> Slew:
         """The slew joint: the first independent revolute joint (the drive's, if it is one) whose axis is the
-        world's vertical at the initial configuration.  The task checks walk
-        the ellipse with it (:func:`crane_reference.stream.targets.check_task`); ConfigError naming ``links``
-        if the crane has none."""
+        world z axis at the initial configuration (vertical and through the origin, the ellipse's centre).
+        The task checks walk the ellipse with it (:func:`crane_reference.stream.targets.check_task`);
+        ConfigError naming ``links`` if the crane has none."""
         model, q = self.model, self.model.initial_q
         T, _ = forward_kinematics(np.ascontiguousarray(q, dtype=float), self.dynamics.chain.kinds,
                                   self.dynamics.chain.axes, self.dynamics.chain.origins)
@@ -109,13 +111,15 @@ class Scenario:
         for k in order:
             joint = model.joints[k]
             if (joint.kind == REVOLUTE and k in self.motion.independent and joint.name not in BASE_JOINTS
-                    and abs(T[k, 2, joint.axis]) >= 1.0 - VERTICAL_TOLERANCE):
+                    and abs(T[k, 2, joint.axis]) >= 1.0 - VERTICAL_TOLERANCE
+                    and np.hypot(T[k, 0, 3], T[k, 1, 3]) <= AXIS_OFFSET_TOLERANCE):
                 p = self.dynamics.end_effector(q)[0]
                 sign = float(np.sign(T[k, 2, joint.axis]))
                 offset = np.arctan2(p[1], p[0]) - sign * q[k]
                 return Slew(k, sign, float((offset + np.pi) % (2.0 * np.pi) - np.pi))
         raise ConfigError("links: the ellipse task needs a slew joint, a revolute joint (not a dependent one) "
-                          "whose axis is vertical at the initial configuration; the crane has none")
+                          "whose axis is the world z axis (vertical, through the ellipse's centre at x = y = 0) at the "
+                          "initial configuration; the crane has none")
 
     @property
     def equilibrium(self) -> Equilibrium:
