@@ -6,8 +6,9 @@
   stretched as E climbs; the stream's check of the same targets refuses them before anything moves.
 * A crane without a static equilibrium (a trolley free to roll down an inclined jib) is refused with
   EquilibriumError naming the unbalanced force.
-* A torque that overflows the accelerations: the stream goes to ERROR, holds its last valid sample at rest and
-  publishes nothing that is not finite.
+* A torque that overflows the accelerations, or one that leaves a linear system of the step unsolvable: the step
+  that fails is named, the stream goes to ERROR, holds its last valid sample at rest and publishes nothing that is
+  not finite.
 """
 
 from __future__ import annotations
@@ -95,11 +96,18 @@ def test_a_trolley_free_on_an_inclined_jib_has_no_static_equilibrium():
     assert abs(100.0 * 9.81 * math.sin(slope)) > 100.0  # [N]: what rolls the trolley, far from balanced
 
 
-def test_an_overflowing_torque_holds_the_last_valid_sample():
-    params = replace(load_config(), drive=TorqueDrive(torque=1e300, start=0.05, end=1.0))
-    stream = ReferenceStream(params, "rigid", step=1e-3)
+@pytest.mark.parametrize(("torque", "failure"), [
+    (1.7e308, "overflowed: its state or accelerations are not finite"),  # near the largest double
+    (1e10, "met a linear system it cannot solve"),
+])
+def test_a_torque_beyond_reason_stops_at_its_first_step_and_holds_the_last_valid_sample(torque, failure):
+    """A column torque switched on at 0.05 s: the step from 0.05 s fails, naming why, the stream goes to ERROR
+    and holds its last sample (finite, at rest) for every time asked."""
+    params = replace(load_config(), drive=TorqueDrive(torque=torque, start=0.05, end=1.0))
+    stream = ReferenceStream(params, "rigid", step=5e-4)
     stream.compute(0.5)
-    assert (stream.state == ERROR and "LinAlgError" in stream.last_error) or "FloatingPointError" in stream.last_error
+    assert stream.state == ERROR and stream.last_error.startswith("IntegrationError: the step from t = 0.05 s ")
+    assert failure in stream.last_error, stream.last_error
     held = stream.samples(np.linspace(0.0, 2.0, 50))
     assert np.all(np.isfinite(held.q)) and np.all(held.qd == 0.0)
     np.testing.assert_array_equal(held.q, np.broadcast_to(held.q[0], held.q.shape))  # one sample, held

@@ -1,11 +1,11 @@
-"""The kernels' small linear algebra against numpy's dense products."""
+"""The kernels' small linear algebra against numpy's dense products and reductions."""
 
 from __future__ import annotations
 
 import numpy as np
 from velocity_map import random_velocity_map
 
-from crane_reference.dynamics.linalg import congruent, map_columns, project_rows
+from crane_reference.dynamics.linalg import congruent, largest_magnitude, map_columns, project_rows
 
 
 def test_congruent_is_the_dense_product_and_symmetric():
@@ -30,3 +30,16 @@ def test_rows_and_columns_mapped_without_b_are_the_dense_products():
     np.testing.assert_allclose(project_rows(X, B, independent, dependent, False), B.T @ X, rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(project_rows(X, B, independent, dependent, True), X[independent])
     np.testing.assert_allclose(map_columns(Y, B, independent, dependent), Y @ B, rtol=1e-12, atol=1e-12)
+
+
+def test_the_largest_magnitude_is_numpys_also_with_a_nan_anywhere():
+    """max |x_i| as numpy's max gives it: NaN wherever a NaN stands (a NaN Newton correction or projection step
+    must meet no tolerance), inf with an inf, 0 for no entries."""
+    rng = np.random.default_rng(5)
+    for special in (np.nan, np.inf, -np.inf):
+        for where in range(4):
+            x = rng.normal(size=4)
+            x[where] = special
+            np.testing.assert_array_equal(largest_magnitude(x), np.max(np.abs(x)))
+    x = rng.normal(size=6)
+    assert largest_magnitude(x) == np.max(np.abs(x)) and largest_magnitude(np.empty(0)) == 0.0

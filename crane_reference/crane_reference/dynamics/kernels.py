@@ -21,6 +21,7 @@ from .linalg import (
     cholesky,
     cholesky_solve,
     congruent,
+    larger_magnitude,
     largest_magnitude,
     map_columns,
     matmul,
@@ -35,6 +36,7 @@ from .structures import (
     ACCOUNTS,
     CONSTRAINTS_UNSOLVABLE,
     CONVERGED,
+    NON_FINITE,
     NOT_CONVERGED,
     SINGULAR_VALUE,
     Accelerations,
@@ -511,11 +513,18 @@ def _end_accelerations(end: Iterate, a1, k: Coefficients, partition: Partition, 
 
 
 @njit(cache=True, nogil=True)
-def _failed(q0, qd0, qdd0, B0, earlier, correction: ModalCorrection, iterations):
-    """The :class:`Advance` of a step whose constraints could not be met: its start, unsolved."""
+def _failed(q0, qd0, qdd0, B0, earlier, correction: ModalCorrection, status, iterations):
+    """The :class:`Advance` of a step that failed with ``status``: its start, unsolved."""
     nan = np.full(3, np.nan)
-    return Advance(q0, qd0, qdd0, B0, earlier, nan, np.full((3, 3), np.nan), nan, np.nan, correction,
-                   CONSTRAINTS_UNSOLVABLE, iterations)
+    return Advance(q0, qd0, qdd0, B0, earlier, nan, np.full((3, 3), np.nan), nan, np.nan, correction, status,
+                   iterations)
+
+
+@njit(cache=True, nogil=True)
+def _unsolved(q, a1):
+    """Why the constraints could not be met at an iterate (q, a1): NON_FINITE when it overflowed, else
+    CONSTRAINTS_UNSOLVABLE."""
+    return CONSTRAINTS_UNSOLVABLE if np.isfinite(q.sum() + a1.sum()) else NON_FINITE
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -626,7 +635,7 @@ def integration_step(q0, qd0, qdd0, B0, earlier, correction: ModalCorrection, t0
     a1 = predicted_accelerations(a0, earlier)
     it = first_iterate(q0, qd0, qdd0, a0, a1, h, k, partition, chain, settings)
     if not it.solved:
-        return _failed(q0, qd0, qdd0, B0, earlier, correction, 1)
+        return _failed(q0, qd0, qdd0, B0, earlier, correction, _unsolved(it.q, a1), 1)
     qdd, residual, B, Hw = _step_residual_at(it, a1, correction, k, drive, partition, chain)
     M = mass_at(it.S, Hw, chain)
     factor = iteration_factor(M, B, h, correction, drive, partition, chain)
@@ -645,7 +654,9 @@ def integration_step(q0, qd0, qdd0, B0, earlier, correction: ModalCorrection, t0
             else:
                 change = qdd[integrated[i]] - a1[i]
             a1[i] += change
-            largest = max(largest, abs(change))
+            largest = larger_magnitude(largest, change)
+        if not largest < np.inf:  # NaN or inf: an overflow, which no iteration mends
+            return _failed(q0, qd0, qdd0, B0, earlier, correction, NON_FINITE, iteration + 1)
         # q_hd of the next iterate to second order in the change of x: dx = h^2/4 da
         q1 = _predict_dependent(it.q, B, solved, partition.holonomic_dependent)
         if iteration + 1 >= settings.evaluations and 0.5 * h * largest <= settings.tolerance:
@@ -653,7 +664,7 @@ def integration_step(q0, qd0, qdd0, B0, earlier, correction: ModalCorrection, t0
             break
     end = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, True, True)
     if not end.solved:
-        return _failed(q0, qd0, qdd0, B0, earlier, correction, iteration + 1)
+        return _failed(q0, qd0, qdd0, B0, earlier, correction, _unsolved(end.q, a1), iteration + 1)
     qdd, B, singular_value = _end_accelerations(end, a1, k, partition, chain)
     later = np.empty_like(earlier)
     later[0], later[1] = a0, earlier[0]

@@ -95,11 +95,19 @@ def solve_small_vector(A, b):
 
 
 @njit(cache=True, nogil=True)
+def larger_magnitude(largest, value):
+    """max(largest, |value|), NaN when either is NaN, as numpy's max gives (Python's max drops a NaN that
+    comes second, so a NaN iterate would meet every tolerance)."""
+    size = abs(value)
+    return size if size > largest or size != size else largest
+
+
+@njit(cache=True, nogil=True)
 def largest_magnitude(x):
-    """max |x_i| (0 for an empty x)."""
+    """max |x_i| (0 for an empty x; NaN when an x_i is NaN, see :func:`larger_magnitude`)."""
     largest = 0.0
     for i in range(x.size):
-        largest = max(largest, abs(x[i]))
+        largest = larger_magnitude(largest, x[i])
     return largest
 
 

@@ -216,14 +216,16 @@ class Step(NamedTuple):
     iterations: int
 
 
-CONVERGED, NOT_CONVERGED, CONSTRAINTS_UNSOLVABLE = 0, 1, 2
+CONVERGED, NOT_CONVERGED, CONSTRAINTS_UNSOLVABLE, NON_FINITE = 0, 1, 2, 3
 STATUS_MESSAGES = {
     NOT_CONVERGED: "the step from t = {t0:.6g} s with h = {h:g} s did not converge in {iterations} Newton iterations",
     CONSTRAINTS_UNSOLVABLE: "position or velocity constraints cannot be met at t = {t1:.6g} s: the target is not "
                             "reachable",
+    NON_FINITE: "the step from t = {t0:.6g} s with h = {h:g} s overflowed: its state or accelerations are not "
+                "finite (forces or speeds beyond floating point)",
 }
-"""A step's ``status``: converged, Newton did not converge, or the constraints could not be solved; the
-messages of the failures (formatted with t0, t1, h and iterations)."""
+"""A step's ``status``: converged, Newton did not converge, the constraints could not be solved, or the step
+overflowed; the messages of the failures (formatted with t0, t1, h and iterations)."""
 
 
 class Advance(NamedTuple):

@@ -202,6 +202,20 @@ class ExactFrequencyTrapezoidal:
         message = STATUS_MESSAGES[status].format(t0=t0, t1=t1, h=t1 - t0, iterations=self.max_iterations)
         return ProjectionError(message) if status == CONSTRAINTS_UNSOLVABLE else IntegrationError(message)
 
+    def _unsolvable_step(self, state: StepState, times: np.ndarray, ends_on_jump: bool,
+                         error: np.linalg.LinAlgError) -> IntegrationError:
+        """The error of a run that met a linear system it cannot solve (a singular K_dc, an indefinite
+        iteration matrix), naming the step: the run's steps taken again one by one (they are deterministic)."""
+        if times.size == 1:
+            return IntegrationError(f"the step from t = {state.t:.6g} s with h = {times[0] - state.t:g} s met a "
+                                    f"linear system it cannot solve: {error}")
+        for k in range(times.size):
+            try:
+                state = self.step(state, float(times[k]), ends_on_jump and k == times.size - 1)
+            except IntegrationError as failure:
+                return failure
+        return IntegrationError(f"the steps from t = {state.t:.6g} s to {times[-1]:.6g} s: {error}")
+
     def step(self, state: StepState, t1: float, ends_on_jump: bool = False) -> StepState:
         """Advance ``state`` to time t1 > state.t [s] (one step of :meth:`run`).  A step ending on a drive
         jump (``ends_on_jump``) uses the drive's left limit there; continue with :meth:`resolve` at the jump."""
@@ -222,11 +236,14 @@ class ExactFrequencyTrapezoidal:
         drives = drive.kernel_parameters(times)
         if ends_on_jump:
             drives[-1] = drive.kernel_parameters(times[-1], left_limit=True)
-        run = kernels.integration_run(
-            state.q, state.qd, state.solution.qdd, state.solution.velocity_map, state.earlier, state.correction,
-            state.t, times,
-            motion.constraints.coefficients_at(times), drives, motion.partition, motion.dynamics.chain, self.settings,
-            np.full(times.size, every_row), stop_flag() if stop is None else stop)
+        try:
+            run = kernels.integration_run(
+                state.q, state.qd, state.solution.qdd, state.solution.velocity_map, state.earlier, state.correction,
+                state.t, times, motion.constraints.coefficients_at(times), drives, motion.partition,
+                motion.dynamics.chain, self.settings, np.full(times.size, every_row),
+                stop_flag() if stop is None else stop)
+        except np.linalg.LinAlgError as error:
+            raise self._unsolvable_step(state, times, ends_on_jump, error) from error
         if run.status != CONVERGED:
             t0 = times[run.completed - 1] if run.completed else state.t
             raise self.failure(run.status, t0, times[min(run.completed, len(times) - 1)])
