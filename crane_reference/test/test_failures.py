@@ -102,12 +102,28 @@ def test_a_trolley_free_on_an_inclined_jib_has_no_static_equilibrium():
 ])
 def test_a_torque_beyond_reason_stops_at_its_first_step_and_holds_the_last_valid_sample(torque, failure):
     """A column torque switched on at 0.05 s: the step from 0.05 s fails, naming why, the stream goes to ERROR
-    and holds its last sample (finite, at rest) for every time asked."""
+    and holds its last sample (finite, at rest) for every time asked beyond it."""
     params = replace(load_config(), drive=TorqueDrive(torque=torque, start=0.05, end=1.0))
     stream = ReferenceStream(params, "rigid", step=5e-4)
     stream.compute(0.5)
     assert stream.state == ERROR and stream.last_error.startswith("IntegrationError: the step from t = 0.05 s ")
     assert failure in stream.last_error, stream.last_error
-    held = stream.samples(np.linspace(0.0, 2.0, 50))
+    held = stream.samples(np.linspace(0.051, 2.0, 50))  # beyond the last valid step
     assert np.all(np.isfinite(held.q)) and np.all(held.qd == 0.0)
     np.testing.assert_array_equal(held.q, np.broadcast_to(held.q[0], held.q.shape))  # one sample, held
+
+
+def test_the_held_sample_is_the_last_step_before_the_failing_one():
+    """The column's largest allowed torque (1e6 N m) spins the slew faster than 0.5 ms steps follow: the stream
+    computes ahead in runs of hundreds of steps, and holds the state of the last step that converged, the one
+    that single steps from the same start reach before they fail."""
+    params = replace(load_config(), drive=TorqueDrive(torque=1e6, start=0.0, end=1.0))
+    stream = ReferenceStream(params, "rigid", step=5e-4)
+    stream.compute(1.0)
+    assert stream.state == ERROR and "did not converge" in stream.last_error, stream.last_error
+    scenario = Scenario(params, "rigid")
+    error, last = _run_until_it_fails(scenario.motion, scenario.equilibrium.q, 1.0, step=5e-4)
+    assert isinstance(error, IntegrationError) and f"t = {last.t:.6g} s" in str(error)
+    held = stream.sample(0.9)
+    assert held.t == pytest.approx(last.t, abs=1e-12)
+    np.testing.assert_allclose(held.q, last.q, rtol=0, atol=1e-12)

@@ -54,7 +54,7 @@ from crane_reference.ros.node import CraneReferenceNode
 from crane_reference.ros.parameters import PARAMETERS, SPECS, NodeParameters, field_name
 from crane_reference.ros.publishing import NodeTime
 from crane_reference.stream.health import Level
-from crane_reference.stream.reference_stream import ReferenceStream
+from crane_reference.stream.reference_stream import ERROR, ReferenceStream
 from crane_reference.stream.server import LOOKAHEAD
 
 NS = 10**9
@@ -811,6 +811,53 @@ def test_a_hung_solver_is_killed_reported_and_a_new_configure_recovers(ros: Harn
         assert change_state(ros, transition), transition
     ros.wait_for(lambda: len(ros.samples(after_ns=stopped)["stamp"]) >= 50, "samples from the new solver")
     assert node.get_parameter("model").value == "rigid"
+
+
+def test_a_numerical_failure_holds_the_last_sample_reports_error_and_restart_recovers(
+        ros: Harness, tmp_path: Path) -> None:
+    """A crane file whose column torque (the largest drive.torque allows, 1e6 N m) spins the slew faster than
+    the integrator's steps can follow: the node publishes the motion up to the failing step, then holds the
+    start of that step (finite, zero velocity; what a ROS-free stream holds) with an ERROR that names the
+    failure, its time and the remedies; deactivate, ~/restart and activate publish the motion from its start
+    again (the slew a whole number of turns on: the restart goes the shortest way)."""
+    crane = tmp_path / "crane.yaml"
+    text = (Path(__file__).resolve().parent.parent / "config" / "crane.yaml").read_text()
+    assert "  torque: 4000.0 " in text
+    crane.write_text(text.replace("  torque: 4000.0 ", "  torque: 1.0e6 "))
+    rate = 100
+    ros.start(config_file=str(crane), publish_rate=rate, model="rigid")
+    ros.wait_for(lambda: any("IntegrationError" in m for m in diagnostic_messages(ros)), "the failure reported")
+    status = next(d.status[0] for _, d in list(ros.received["diagnostics"])
+                  if "IntegrationError" in d.status[0].message)
+    assert status.level == rclpy_types().byte(Level.ERROR), status.message
+    assert "did not converge" in status.message and "the step from t = " in status.message
+    assert "~/restart" in status.message and "configure" in status.message
+    failed_at = float(status.message.split("the step from t = ")[1].split()[0])  # [s] of motion
+    ros.wait_until_stamp(ros.samples()["stamp"][0] + round((failed_at + 1.0) * NS))
+    data = ros.samples()
+    held = held_samples(data)
+    first = int(np.argmax(held))
+    assert first > 0 and np.all(held[first:]) and not np.any(held[:first]) and np.all(np.isfinite(data["q"]))
+    reference = ReferenceStream(load_config(str(crane)), "rigid")
+    tau = stream_times({name: values[:first] for name, values in data.items()}, reference, rate)
+    # the motion up to the last sample before the failing step; from the next one on, that step's start held
+    assert tau[-1] == (math.floor(failed_at * rate + 1e-9) + 1) / rate and np.all(data["qd"][first - 1] == 0.0)
+    assert np.any(data["qd"][first - 2] != 0.0) and reference.state == ERROR
+    np.testing.assert_array_equal(data["q"][first - 1], reference.sample(tau[-1]).q)
+    np.testing.assert_array_equal(data["q"][first:], np.broadcast_to(data["q"][first - 1], data["q"][first:].shape))
+
+    assert change_state(ros, Transition.TRANSITION_DEACTIVATE)  # answered at once: nothing to bring to rest
+    stopped = ros.samples()["stamp"][-1]
+    assert ros.call(ros.restart, Trigger.Request()).success
+    assert change_state(ros, Transition.TRANSITION_ACTIVATE)
+    ros.wait_for(lambda: len(ros.samples(after_ns=stopped)["stamp"]) >= rate // 4, "the motion from its start again")
+    restarted = ros.samples(after_ns=stopped)
+    reference = ReferenceStream(load_config(str(crane)), "rigid")
+    reference.compute(0.1)
+    turns = np.remainder(restarted["q"][0] - reference.sample(0.0).q + math.pi, 2 * math.pi) - math.pi
+    assert min(np.max(np.abs(turns - (reference.sample(k / rate).q - reference.sample(0.0).q)))
+               for k in range(10)) < 1e-9  # a whole number of turns from a sample of the first 0.1 s
+    assert not np.any(held_samples(restarted)[1:])  # moving again (drive.torque is read-only: a new node mends it)
 
 
 # --- message builders -----------------------------------------------------------------------------

@@ -47,8 +47,11 @@ def serving_health(status: ServerStatus, newly_held: int) -> Health:
     if not status.computing:
         return Health(Level.ERROR, f"solver stopped: {status.fault}; holding the last sample (deactivate, cleanup, "
                                    "configure and activate start a new solver)")
-    if state == ERROR or status.fault:
-        return Health(Level.ERROR, f"{state}: {status.stream.last_error or status.fault}")
+    if state == ERROR:
+        return Health(Level.ERROR, f"{state}: {status.stream.last_error}; holding the last sample (deactivate, then "
+                                   "~/restart, or mend the cause and cleanup and configure; then activate)")
+    if status.fault:
+        return Health(Level.ERROR, f"{state}: {status.fault}")
     if status.clock_behind:
         return Health(Level.WARN, f"{state}: ROS time went back: waiting until it reaches the last stamp again "
                                   f"({status.clock_behind:.3f} s ahead)")

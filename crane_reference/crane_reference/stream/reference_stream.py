@@ -199,27 +199,39 @@ class ReferenceStream:
                     return
                 if self._pace:
                     steps = max(1, min(CHUNK_STEPS, int((deadline - started) / self._pace)))
+            end = history.end_time
+            until = max(min(target, end + steps * self.step), end + 0.5 * self.step)
             try:
-                end = history.end_time
-                rows = self._stepper.advance_until(max(min(target, end + steps * self.step), end + 0.5 * self.step),
-                                                   stop)
-                if not (np.all(np.isfinite(rows["q"])) and np.all(np.isfinite(rows["qd"]))):
-                    raise FloatingPointError(f"non-finite state before t = {rows['t'][-1]:.6g} s")
+                rows = self._advance(until, stop)
             except SOLVER_FAILURES as failure:
-                self._fail(failure)
+                self._fail(failure, until)
                 return
             if rows["t"].size >= PACE_STEPS:  # a shorter run's fixed costs would make the pace too slow
                 self._pace = (time.perf_counter() - started) / rows["t"].size
             history.extend(rows, self._stepper.snapshot())
+
+    def _advance(self, until: float, stop: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """The stepper's rows through motion time ``until`` (FloatingPointError for a non-finite state)."""
+        rows = self._stepper.advance_until(until, stop)
+        if not (np.all(np.isfinite(rows["q"])) and np.all(np.isfinite(rows["qd"]))):
+            raise FloatingPointError(f"non-finite state before t = {rows['t'][-1]:.6g} s")
+        return rows
 
     def free_forgotten(self) -> None:
         """Free the motion that commands discarded since the last call (a server that answers commands
         does it after answering, off their critical path)."""
         self._forgotten.clear()
 
-    def _fail(self, failure: Exception) -> None:
+    def _fail(self, failure: Exception, until: float) -> None:
+        """ERROR, holding the last valid step: the failed run's steps before the failing one are taken again one
+        at a time (the steps are deterministic) and kept, so none of that run's valid motion is lost."""
         history = self._history
         self._stepper.rewind(history.last_snapshot)
+        try:
+            while history.end_time < until:
+                history.extend(self._advance(history.end_time + 0.5 * self.step), self._stepper.snapshot())
+        except SOLVER_FAILURES:
+            self._stepper.rewind(history.last_snapshot)
         self._hold = history.read(np.array([len(history) - 1])).rows()[0].hold()
         self.state = ERROR
         self.last_error = f"{type(failure).__name__}: {failure}"
@@ -230,15 +242,17 @@ class ReferenceStream:
 
     def samples(self, taus) -> Samples:
         """The references at the publish times ``taus`` (none beyond :attr:`computed_until`): the computed
-        steps themselves, or interpolated between two of them (:func:`~.sample.between`, all at once)."""
-        if self._hold is not None:
-            return Samples.repeated(self._hold, len(taus))
+        steps themselves, or interpolated between two of them (:func:`~.sample.between`, all at once); in ERROR,
+        the held sample at the times beyond the last valid step."""
         t, rate, rate_change = self._warp.at_times(taus)
         history = self._history
         end = history.end_time
-        if t.size and t.max() > end + 1e-12:
+        held = t > end + 1e-12
+        if self._hold is not None and held.all():
+            return Samples.repeated(self._hold, len(taus))
+        if self._hold is None and held.any():
             raise ValueError(f"t = {t.max():.6g} s is beyond the computed motion ({end:.6g} s): call compute()")
-        k, exact = history.locate(t)
+        k, exact = history.locate(np.minimum(t, end))
         made = history.read(k)
         inside = np.flatnonzero(~exact)
         if inside.size:
@@ -246,7 +260,11 @@ class ReferenceStream:
                                    self.scenario.dynamics.end_effector_poses)
             for field, values in zip(made, interpolated, strict=True):
                 field[inside] = values
-        return warped(made, rate, rate_change)
+        samples = warped(made, rate, rate_change)
+        if held.any():
+            for field, values in zip(samples, Samples.repeated(self._hold, int(held.sum())), strict=True):
+                field[held] = values
+        return samples
 
     def preview_times(self, taus, horizon: float, count: int) -> np.ndarray:
         """The publish times (len(taus), count) of ``count`` samples over (tau, tau + horizon] for each of ``taus``,

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..model.units import NANOSECONDS
-from .reference_stream import ERROR, ReferenceStream
+from .reference_stream import ReferenceStream
 from .sample import ReferenceSample, Samples
 
 TIME_TOLERANCE = 1e-9  # [s], rounding slack when comparing stream times
@@ -151,9 +151,7 @@ def make_frames(stream: ReferenceStream, request: FrameRequest, stop: np.ndarray
         stream.compute(target, request.compute_budget, stop)
         if math.isfinite(stream.computed_until):
             wall, motion = time.perf_counter() - start, stream.computed_until - before
-    times = tau + dt * np.arange(count)
-    if stream.state == ERROR:  # hold the last sample made, not the stream's (computed further ahead)
-        return FrameBatch(Frames.held(plan.k, times, request.last_valid), next_preview_k, False, wall, motion)
+    times = tau + dt * np.arange(count)  # in ERROR: the motion up to its last valid step, held beyond
 
     def waited() -> FrameBatch | None:
         """No frames (busy) if a request waits: it comes first (a command may drop these frames); urgent frames
