@@ -1077,23 +1077,38 @@ def test_a_crane_of_its_own_from_a_urdf_and_its_overlay(ros: Harness) -> None:
     assert descriptions[0].data == model_to_urdf(model)
 
 
-def test_a_bad_crane_file_leaves_the_node_unconfigured_until_it_is_mended(ros: Harness, tmp_path: Path) -> None:
-    """A crane file that names a joint it lacks (without autostart): configure fails, the node stays unconfigured
-    with the file, the field and what is allowed at ERROR in /diagnostics; once the file is mended, configure
-    succeeds."""
+def _trolley_crane(text: str) -> str:
+    """The loader crane with a 100 kg trolley free to roll along its jib (test_failures: no static equilibrium)."""
+    data = yaml.safe_load(text)
+    data["links"].append({"name": "trolley", "joint": {"name": "roll", "type": "prismatic", "axis": [1.0, 0.0, 0.0],
+                                                        "origin": {"xyz": [2.0, 0.0, 0.0]}},
+                          "inertial": {"mass": 100.0, "center_of_mass": [0.0, 0.0, 0.0],
+                                       "inertia": {"ixx": 1.0, "iyy": 1.0, "izz": 1.0}}})
+    return yaml.safe_dump(data)
+
+
+@pytest.mark.parametrize(("spoil", "reason"), [
+    (lambda text: text.replace("joint: column_slew\n", "joint: wrist\n"),
+     "drive.joint = 'wrist': must be a joint of the chain"),
+    (_trolley_crane, "static equilibrium not found: largest unbalanced generalized force 926 N on roll"),
+])
+def test_a_bad_crane_file_leaves_the_node_unconfigured_until_it_is_mended(
+        ros: Harness, tmp_path: Path, spoil: Callable[[str], str], reason: str) -> None:
+    """A crane file that names a joint it lacks, or one without a static equilibrium to start from (without
+    autostart): configure fails, the node stays unconfigured with the file, the reason and what is allowed at
+    ERROR in /diagnostics; once the file is mended, configure succeeds."""
     crane = tmp_path / "crane.yaml"
     text = (Path(__file__).resolve().parent.parent / "config" / "loader_crane.yaml").read_text()
-    crane.write_text(text.replace("joint: column_slew\n", "joint: wrist\n"))
+    crane.write_text(spoil(text))
     node = CraneReferenceNode(context=ros.context, parameter_overrides=[
         Parameter("autostart", value=False), Parameter("config_file", value=str(crane))])
     ros.node = node
     ros.spin(node)
     assert not change_state(ros, Transition.TRANSITION_CONFIGURE)
     assert lifecycle_state(ros) == "unconfigured"
-    ros.wait_for(lambda: any("drive.joint = 'wrist': must be a joint of the chain" in m
-                             for m in diagnostic_messages(ros)), "the reason in /diagnostics")
-    error = next(d.status[0] for _, d in list(ros.received["diagnostics"]) if "wrist" in d.status[0].message)
-    assert error.level == rclpy_types().byte(Level.ERROR) and str(crane) in error.message
+    ros.wait_for(lambda: any(reason in m for m in diagnostic_messages(ros)), "the reason in /diagnostics")
+    error = next(d.status[0] for _, d in list(ros.received["diagnostics"]) if reason in d.status[0].message)
+    assert error.level == rclpy_types().byte(Level.ERROR) and str(crane) in error.message, error.message
     crane.write_text(text)
     assert change_state(ros, Transition.TRANSITION_CONFIGURE)
     assert lifecycle_state(ros) == "inactive"

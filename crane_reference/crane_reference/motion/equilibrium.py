@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import root
 
+from ..model.chain import PRISMATIC
 from .programmed_motion import ProgrammedMotion
 
 
@@ -69,8 +70,9 @@ def static_equilibrium(motion: ProgrammedMotion, q_start: np.ndarray, t0: float 
     forces, q = reduced_static_forces(motion, t0, q)
     worst = float(np.max(np.abs(forces[rows]), initial=0.0))
     if not worst <= force_tolerance:
+        joint = model.joints[free[int(np.argmax(np.abs(forces[rows])))]]
         raise EquilibriumError(f"static equilibrium not found: largest unbalanced generalized force {worst:.3g} "
-                               f"(solver: {message})")
+                               f"{'N' if joint.kind == PRISMATIC else 'N m'} on {joint.name} (solver: {message})")
     drive_row = int(np.flatnonzero(motion.independent == drive)[0])
     holding = {model.joint_names[k]: -float(force) for k, force in zip(motion.independent, forces, strict=True)
                if k in held}

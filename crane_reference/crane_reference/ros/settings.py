@@ -55,7 +55,8 @@ def start_solver(params: NodeParameters, config: CraneDescription, stopped: Call
     except UnreachableTargetError as error:
         raise StartupError(f"ellipse.* / z.* = {targets}: {error}") from error
     except SOLVER_FAILURES as error:
-        raise StartupError(f"no consistent start for the targets {targets}: {error}") from error
+        raise StartupError(f"no consistent start for the crane {params.config_file or 'packaged default'} and the "
+                           f"targets {targets}: {error}") from error
 
 
 def preview(params: NodeParameters) -> Preview:
