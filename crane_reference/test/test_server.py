@@ -10,7 +10,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
@@ -22,7 +22,7 @@ from crane_reference.motion.simulation import MotionStepper
 from crane_reference.stream import solver as solver_module
 from crane_reference.stream.health import Health, Level, serving_health, startup_health
 from crane_reference.stream.reference_stream import ERROR, PAUSED, RUNNING, ReferenceStream
-from crane_reference.stream.schedule import URGENT_PART, FrameSchedule
+from crane_reference.stream.schedule import URGENT_PART, FrameRequest, FrameSchedule
 from crane_reference.stream.server import (
     COMPUTE_SLICE,
     URGENT_REFILL,
@@ -117,27 +117,62 @@ def test_a_command_takes_effect_at_the_last_sample_within_the_lead(server: Refer
     assert server.stream.targets == targets
 
 
-def test_after_a_command_the_urgent_frames_come_in_growing_requests_then_a_full_one(
-        server: ReferenceServer, monkeypatch: pytest.MonkeyPatch) -> None:
+class Simulation:
+    """A server without its worker thread, run on a simulated clock [ns] that moves only when told (no wall
+    clock): the worker's requests (:meth:`ReferenceServer.compute_ahead`) in turn, each answered ``latency(request)``
+    seconds after it is asked, while publishing goes on (every sample due is taken, a period at a time); when the
+    worker has nothing to do, a period passes."""
+
+    def __init__(self, latency: Callable[[FrameRequest], float]) -> None:
+        self.now = NS
+        self.server = ReferenceServer(LocalSolver(spec()), RATE, LEAD, Preview(0.2, 4, 10), clock=lambda: self.now,
+                                      worker=False)
+        self.requests: list[FrameRequest] = []
+        self.out: list = []
+        ask = self.server.solver.frames
+
+        def frames(request: FrameRequest, keep: float):
+            batch = ask(request, keep)
+            self.requests.append(request)
+            self.publish_until(self.now + round(latency(request) * NS))
+            return batch
+
+        self.server.solver.frames = frames
+        while self.server.compute_ahead():  # the look-ahead before publishing
+            pass
+        self.server.begin(self.now)
+
+    def publish_until(self, end_ns: int) -> None:
+        """Publish what is due, a period at a time, until the clock reads ``end_ns``."""
+        while self.now < end_ns:
+            self.now = min(self.now + PERIOD, end_ns)
+            self.out += self.server.due(self.now).outgoing
+
+    def run_until(self, seconds: float) -> None:
+        """Serve until ``seconds`` after publishing began."""
+        end_ns = NS + round(seconds * NS)
+        while self.now < end_ns:
+            if not self.server.compute_ahead():
+                self.publish_until(self.now + PERIOD)
+
+    def held(self) -> int:
+        return self.server.status(self.now).counters["held_late"]
+
+
+def test_after_a_command_the_urgent_frames_come_in_growing_requests_then_a_full_one() -> None:
     """After a pause (the motion it publishes is computed already, so making frames is all a request does) the
     worker asks for the frames close to publishing in short requests, the first for about the command's lead of
     frames (not the whole urgent quarter of the look-ahead at once, which takes longer to make than a command's
     lead), each for about as many as are ready, so that it leaves the urgent window after a few (the frames ready
-    double a request): then a full refill, not a request for each frame or two published meanwhile.  Publishing
-    runs in real time on the wall clock; no sample is held."""
-    requests = []
-    ask = server.solver.frames
-    monkeypatch.setattr(server.solver, "frames", lambda request, keep: requests.append(request) or ask(request, keep))
-    start = time.monotonic_ns()
-    server.begin(start)
-    while time.monotonic_ns() < start + NS // 2:
-        time.sleep(0.001)
-        server.due(time.monotonic_ns())
-    requests.clear()
-    server.command("pause", accepted_ns=time.monotonic_ns())
-    while time.monotonic_ns() < start + 2 * NS:
-        time.sleep(0.001)
-        server.due(time.monotonic_ns())
+    double a request): then a full refill, not a request for each frame or two published meanwhile.  A request
+    takes 2 ms and 0.2 ms a frame (simulated); no sample is held."""
+    simulation = Simulation(lambda request: 2e-3 + 2e-4 * request.count)
+    server = simulation.server
+    simulation.run_until(0.5)
+    simulation.requests.clear()
+    server.command("pause", accepted_ns=simulation.now)
+    simulation.run_until(2.0)
+    requests = simulation.requests
     most, window = round(URGENT_REFILL * RATE), server.schedule.lookahead // URGENT_PART
     urgent = [r.compute_budget < COMPUTE_SLICE for r in requests]
     first_full = urgent.index(False)
@@ -145,34 +180,27 @@ def test_after_a_command_the_urgent_frames_come_in_growing_requests_then_a_full_
     assert requests[0].count <= max(most, round(LEAD * RATE) + 2) and requests[0].compute_budget <= LEAD
     assert first_full <= math.ceil(math.log2(window / most)) + 3
     assert requests[first_full].count > most
-    assert server.status(time.monotonic_ns()).counters["held_late"] == 0
+    assert simulation.held() == 0
+    assert [o.k for o in simulation.out] == list(range(len(simulation.out)))  # every sample once, in order
 
 
-def test_a_solver_whose_answers_come_late_gets_ahead_again_after_a_command(
-        server: ReferenceServer, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Every answer of the solver comes 150 ms late (the round trip and a busy machine's scheduling), longer than
-    the frames ready after a command last (the lead, 0.1 s): after a pause and a resume the worker asks
-    for more frames than are published while it waits, so the frames ready grow back past the urgent window and
-    publishing holds no more samples once they have."""
-    ask = server.solver.frames
-    monkeypatch.setattr(server.solver, "frames", lambda request, keep: (time.sleep(0.15), ask(request, keep))[1])
-    start = time.monotonic_ns()
-    server.begin(start)
-
-    def publish_until(seconds: float) -> None:
-        while time.monotonic_ns() < start + seconds * NS:
-            time.sleep(0.001)
-            server.due(time.monotonic_ns())
-
-    publish_until(0.3)
-    server.command("pause", accepted_ns=time.monotonic_ns())
-    server.command("resume", accepted_ns=time.monotonic_ns())
-    publish_until(2.5)
+def test_a_solver_whose_answers_come_late_gets_ahead_again_after_a_command() -> None:
+    """Every answer of the solver comes 150 ms late (simulated: the round trip and a busy machine's scheduling),
+    longer than the frames ready after a command last (the lead, 0.1 s): after a pause and a resume the worker
+    asks for more frames than are published while it waits, so the frames ready grow back past the urgent window
+    and publishing holds no more samples once they have."""
+    simulation = Simulation(lambda request: 0.15)
+    server = simulation.server
+    simulation.run_until(0.3)
+    server.command("pause", accepted_ns=simulation.now)
+    server.command("resume", accepted_ns=simulation.now)
+    simulation.run_until(2.5)
     schedule = server.schedule
     assert schedule.made_k - schedule.next_k >= schedule.lookahead // URGENT_PART
-    held = server.status(time.monotonic_ns()).counters["held_late"]
-    publish_until(4.0)
-    assert server.status(time.monotonic_ns()).counters["held_late"] == held
+    held = simulation.held()
+    assert held > 0  # the late answers held samples after the command
+    simulation.run_until(4.0)
+    assert simulation.held() == held
 
 
 def test_restart_only_while_not_publishing_and_its_jump(server: ReferenceServer) -> None:

@@ -1,8 +1,9 @@
 """The reference server: a stream computed ahead, published on a schedule and commanded, without ROS.
 
 A :class:`ReferenceServer` owns the publishing schedule (:class:`~.schedule.FrameSchedule`), a worker
-thread that keeps :data:`LOOKAHEAD` seconds of frames ready, and the stream's solver (:mod:`.solver`: in
-a process of its own, or in the caller's thread).  A publisher (the ROS node, a test, a tool) only asks
+thread that keeps :data:`LOOKAHEAD` seconds of frames ready (or, without it, a caller that makes each of its
+requests, :meth:`ReferenceServer.compute_ahead`, on a clock of its own: a simulation), and the stream's solver
+(:mod:`.solver`: in a process of its own, or in the caller's thread).  A publisher (the ROS node, a test, a tool) only asks
 it what is due; a ROS node adds the clock, the messages, parameters and services.
 
 Publishing
@@ -190,10 +191,14 @@ class ServerStatus:
 class ReferenceServer:
     """See the module documentation."""
 
-    def __init__(self, solver: SolverClient, rate: int, lead: float, preview: Preview):
+    def __init__(self, solver: SolverClient, rate: int, lead: float, preview: Preview,
+                 clock: Callable[[], int] = time.monotonic_ns, worker: bool = True):
         """Serve the stream of ``solver`` at ``rate`` Hz with commands ``lead`` seconds ahead and ``preview``;
-        starts computing ahead."""
+        ``clock`` [ns] times the solver's answers and the clock readings of :meth:`due`.  Starts computing ahead
+        in a worker thread, or, without ``worker``, leaves each request to the caller (:meth:`compute_ahead`: a
+        simulation on its own clock)."""
         self.solver = solver
+        self._clock = clock
         self.info = solver.info
         self.rate = rate
         self.preview = preview
@@ -221,7 +226,7 @@ class ReferenceServer:
         self.encode: Callable[[Samples], Any] | None = None
         """What the publisher makes of a batch's samples at once (its messages, a row a sample), set by it: made
         in the thread that receives the batch, outside the lock, and kept as the frames' ``wire``."""
-        self._worker = start_named(self._work, "ref_frames")
+        self._worker = start_named(self._work, "ref_frames") if worker else None
 
     @property
     def stream(self) -> StreamStatus:
@@ -247,7 +252,7 @@ class ReferenceServer:
         self.solver.interrupt()
         with self._lock:
             self._lock.notify_all()
-        if self._worker is not threading.current_thread():
+        if self._worker is not None and self._worker is not threading.current_thread():
             self._worker.join()
         self.solver.close()
 
@@ -255,37 +260,46 @@ class ReferenceServer:
 
     def _work(self) -> None:
         """Keep LOOKAHEAD of frames ready ahead of publishing and the motion computed beyond them."""
-        schedule = self.schedule
         try:
             while not self._halt.is_set():
-                with self._lock:
-                    while (self._commands_pending or self._requests_waiting) and not self._halt.is_set():
-                        self._lock.wait(timeout=LOOKAHEAD)  # frames after a command once it is applied
-                    plan = schedule.plan()
-                    # in batches, but up to the whole look-ahead before publishing starts
-                    refill = plan.room >= self._refill or not self.publishing
-                    urgent = self.publishing and schedule.is_urgent(plan)
-                    if urgent:
-                        request = self._frame_request(plan, *self._urgent_request(plan.k - schedule.next_k))
-                    else:
-                        request = self._frame_request(plan, self._refill * refill, COMPUTE_SLICE)
-                with self._solver_lock:
-                    if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
-                        continue
-                    asked = time.monotonic()
-                    batch = self.solver.frames(request, RELEASE_KEEP + LOOKAHEAD)
-                batch = self._encoded(batch)  # a command need not wait for it
-                with self._lock:
-                    self._urgent_took = time.monotonic() - asked if urgent else 0.0
-                    if self._accept(batch, plan) and not len(batch.frames) and not batch.busy:
-                        self._lock.wait(timeout=LOOKAHEAD)
+                self.compute_ahead(wait=True)
         except SolverStoppedError as error:
             if not self._halt.is_set():
                 with self._lock:
-                    schedule.fault = str(error)
+                    self.schedule.fault = str(error)
         except Exception as error:  # publishing goes on (holding) and reports it
             with self._lock:
-                schedule.fault = f"solver thread stopped: {type(error).__name__}: {error}"
+                self.schedule.fault = f"solver thread stopped: {type(error).__name__}: {error}"
+
+    def compute_ahead(self, wait: bool = False) -> bool:
+        """One request of frames for the schedule's plan (the worker's step): urgent ones close to publishing,
+        else a batch once there is room for one.  Whether it made frames or was cut short (False: nothing to do
+        until publishing frees room or a command comes; with ``wait``, waits for that or LOOKAHEAD, and for the
+        requests of commands to go first)."""
+        schedule = self.schedule
+        with self._lock:
+            while wait and (self._commands_pending or self._requests_waiting) and not self._halt.is_set():
+                self._lock.wait(timeout=LOOKAHEAD)  # frames after a command once it is applied
+            plan = schedule.plan()
+            # in batches, but up to the whole look-ahead before publishing starts
+            refill = plan.room >= self._refill or not self.publishing
+            urgent = self.publishing and schedule.is_urgent(plan)
+            if urgent:
+                request = self._frame_request(plan, *self._urgent_request(plan.k - schedule.next_k))
+            else:
+                request = self._frame_request(plan, self._refill * refill, COMPUTE_SLICE)
+        with self._solver_lock:
+            if plan.generation != schedule.generation:  # a command came in meanwhile: plan again
+                return True
+            asked = self._clock()
+            batch = self.solver.frames(request, RELEASE_KEEP + LOOKAHEAD)
+        batch = self._encoded(batch)  # a command need not wait for it
+        with self._lock:
+            self._urgent_took = (self._clock() - asked) / NANOSECONDS if urgent else 0.0
+            idle = self._accept(batch, plan) and not len(batch.frames) and not batch.busy
+            if idle and wait:
+                self._lock.wait(timeout=LOOKAHEAD)
+            return not idle
 
     def _urgent_request(self, ready: int) -> tuple[int, float]:
         """How many urgent frames the worker asks for, ``ready`` frames being ready ahead of publishing, and for
@@ -325,7 +339,7 @@ class ReferenceServer:
                 del self._awaiting[name]
             elif self.schedule.made_k > k:
                 seen_ns, seen_at = self._clock_seen  # the clock now, assuming it runs at the wall clock's rate
-                now_ns = seen_ns + time.monotonic_ns() - seen_at
+                now_ns = seen_ns + self._clock() - seen_at
                 margin = (stamp_at(self._start_ns, k, self.rate) - now_ns) / NANOSECONDS
                 self._commands[f"{name}_margin_s"] = f"{margin:.6f}"
                 del self._awaiting[name]
@@ -367,7 +381,7 @@ class ReferenceServer:
                 self._clock_note = (f"ROS time jumped {(start - self._start_ns) / NANOSECONDS:.3f} s ahead of the "
                                     "schedule: the stamps leap with it, no sample skipped")
                 self._start_ns = start
-            self._clock_seen = (now_ns, time.monotonic_ns())
+            self._clock_seen = (now_ns, self._clock())
             behind = self._last_stamp - now_ns
             self._clock_behind = behind if behind > NANOSECONDS // self.rate else 0
             batch = schedule.due(now_ns, start)
@@ -467,8 +481,9 @@ class ReferenceServer:
     @property
     def computing(self) -> bool:
         """Whether the server computes ahead (False once its solver ended or failed: the last sample is held,
-        and commands are refused; a new server with a new solver is needed)."""
-        return self._worker.is_alive()
+        and commands are refused; a new server with a new solver is needed).  Without a worker thread: until
+        closed (the caller meets the solver's end in :meth:`compute_ahead`)."""
+        return self._worker.is_alive() if self._worker is not None else not self._halt.is_set()
 
     def check_computing(self) -> None:
         """Raise :class:`CommandRefusedError` (saying why) once the solver has stopped."""
