@@ -95,11 +95,12 @@ def export_command(args: argparse.Namespace) -> int:
     """``crane-reference simulate --bag DIR [--rate HZ] [--bag-storage S] [--bag-version V]``: the bag
     instead of CSV/NPZ/Figure 2, for one model variant (``--model both``, the default, records the
     node's default, flexible)."""
-    from .interface import bag
+    from .interface import bag, reference_bag
 
     rate = BAG_RATE if args.rate is None else args.rate
-    if not 1 <= rate <= bag.MAX_RATE:
-        print(f"crane-reference: --rate {rate}: must be an integer in [1, {bag.MAX_RATE}] Hz", file=sys.stderr)
+    if not 1 <= rate <= reference_bag.MAX_RATE:
+        print(f"crane-reference: --rate {rate}: must be an integer in [1, {reference_bag.MAX_RATE}] Hz",
+              file=sys.stderr)
         return 2
     variant = "flexible" if args.model == "both" else args.model
     config = load_config(args.config)
@@ -111,7 +112,7 @@ def export_command(args: argparse.Namespace) -> int:
     step = ONLINE_STEP if args.step is None else args.step
     wall = time.perf_counter()
     with writer, progress_bar(variant, args.duration) as bar:
-        samples = bag.export_reference(writer, bag.node_stream(config, variant, step), rate,
+        samples = reference_bag.export_reference(writer, reference_bag.node_stream(config, variant, step), rate,
                                        args.duration, progress=advance_to(bar))
     wall = time.perf_counter() - wall
     counts = ", ".join(f"{topic} {count}" for topic, count in writer.counts.items())

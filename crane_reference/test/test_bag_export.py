@@ -1,4 +1,5 @@
-"""Offline export of the reference to rosbag2 (crane_reference.interface.bag), read back with rosbags and mcap."""
+"""Offline export of the reference to rosbag2 (crane_reference.interface.reference_bag, written through
+interface.bag), read back with rosbags and mcap."""
 
 from __future__ import annotations
 
@@ -18,15 +19,14 @@ from rosbags.rosbag2 import Reader
 from crane_reference import cli
 from crane_reference.interface import bag as bag_export
 from crane_reference.interface import messages
-from crane_reference.interface.bag import (
+from crane_reference.interface.bag import BagError, BagWriter
+from crane_reference.interface.reference_bag import (
     DEFAULT_TOPICS,
     DIAGNOSTICS,
     END_EFFECTOR_POSE,
     JOINT_STATES,
     NODE_QOS,
     TOPIC_TYPES,
-    BagError,
-    BagWriter,
     ReferenceBag,
     export_reference,
     node_stream,

@@ -29,12 +29,12 @@ from test_bag_export import installed_type_hash, metadata, read_bag, stamp_ns
 from waiting import wait_for
 
 from crane_reference import cli
-from crane_reference.interface.bag import (
+from crane_reference.interface.bag import BagWriter
+from crane_reference.interface.reference_bag import (
     DIAGNOSTICS,
     END_EFFECTOR_POSE,
     JOINT_STATES,
     TOPIC_TYPES,
-    BagWriter,
     export_reference,
     node_stream,
 )

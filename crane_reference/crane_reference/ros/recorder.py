@@ -6,8 +6,9 @@ the ROS graph shows them (``get_publisher_names_and_types_by_node``), so a renam
 recorded with its actual topics; ``/rosout`` and ``/parameter_events`` are left out.
 
 A :class:`Recorder` subscribes with rclpy to each topic once a publisher of it is discovered
-(``get_topic_names_and_types`` / ``get_publishers_info_by_topic``, polled, so topics that appear later
-are added then), with ``raw=True``: the serialized CDR bytes go to a
+(``get_topic_names_and_types`` / ``get_publishers_info_by_topic``, polled: at every turn of the loop, at most
+:data:`SPIN_TIMEOUT` apart, until a topic is recorded, then every :data:`DISCOVERY_PERIOD`, so topics that
+appear later are added then), with ``raw=True``: the serialized CDR bytes go to a
 :class:`~crane_reference.interface.bag.BagWriter` unchanged, stamped with the receive time on the node
 clock (rosbag2's semantics).  Each topic is registered with the publishers' type (its RIHS01 hash must
 equal rosbags' Jazzy typestore's, i.e. the installed message packages') and their offered QoS profiles;
@@ -50,7 +51,7 @@ from ..interface.bag import BagError, BagWriter
 from ..model.units import NANOSECONDS
 
 RECORD_DEPTH = 1000  # history depth of the recording subscriptions
-DISCOVERY_PERIOD = 0.2  # [s] between two looks at the ROS graph for topics not yet recorded
+DISCOVERY_PERIOD = 0.2  # [s] between two looks at the ROS graph for topics not yet recorded, once one is
 STATUS_PERIOD = 1.0  # [s] between two status lines
 SPIN_TIMEOUT = 0.05  # [s], longest wait for a message before the loop looks at signals, discovery and status
 DRAIN_TIME = 0.2  # [s], longest time spent taking the messages already queued when stopping
@@ -110,11 +111,18 @@ class Recorder:
         self.failed: dict[str, str] = {}
         self._subscriptions: dict[str, Any] = {}
         self._clock = node.get_clock()
+        self.started_ns = self._clock.now().nanoseconds
+        """When the recorder started [ns, the node clock: the bag's timestamps' clock]."""
 
     @property
     def waiting(self) -> list[str]:
         """Topics without a publisher so far."""
         return [t for t in self.topics if t not in self._subscriptions and t not in self.failed]
+
+    @property
+    def recording(self) -> bool:
+        """Whether a topic is subscribed."""
+        return bool(self._subscriptions)
 
     @property
     def total(self) -> int:
@@ -219,9 +227,9 @@ def record(bag: BagWriter, topics: Iterable[str], stop: threading.Event, *, dura
         next_discovery = next_status = start
         while not stop.is_set() and (duration is None or time.monotonic() - start < duration):
             now = time.monotonic()
-            if now >= next_discovery:
+            if now >= next_discovery:  # at every turn of the loop until a topic is recorded
                 recorder.discover()
-                next_discovery = now + DISCOVERY_PERIOD
+                next_discovery = now + (DISCOVERY_PERIOD if recorder.recording else 0.0)
             if status is not None and now >= next_status:
                 status(recorder.status(now - start))
                 next_status = now + STATUS_PERIOD
@@ -291,6 +299,9 @@ def record_command(args: argparse.Namespace) -> int:
     print(f"recorded {recorder.total} messages over {bag.duration:.2f} s (the bag's duration; "
           f"{time.monotonic() - started:.1f} s of recording) to {bag.path} ({bag.storage}, version {bag.version}, "
           f"{bag.size() / 1e6:.2f} MB)")
+    if bag.first_ns is not None:
+        print(f"  the first message came {(bag.first_ns - recorder.started_ns) / NANOSECONDS:.3f} s after the "
+              "recorder started")
     for topic, count in recorder.received.items():
         print(f"  {topic}: received {count}, written {bag.counts.get(topic, 0)}"
               f"{f' (not recorded: {recorder.failed[topic]})' if topic in recorder.failed else ''}")

@@ -3,8 +3,8 @@
 A :class:`ReferenceServer` owns the publishing schedule (:class:`~.schedule.FrameSchedule`), a worker
 thread that keeps :data:`LOOKAHEAD` seconds of frames ready (or, without it, a caller that makes each of its
 requests, :meth:`ReferenceServer.compute_ahead`, on a clock of its own: a simulation), and the stream's solver
-(:mod:`.solver`: in a process of its own, or in the caller's thread).  A publisher (the ROS node, a test, a tool) only asks
-it what is due; a ROS node adds the clock, the messages, parameters and services.
+(:mod:`.solver`: in a process of its own, or in the caller's thread).  A publisher (the ROS node, a test, a
+tool) only asks it what is due; a ROS node adds the clock, the messages, parameters and services.
 
 Publishing
     :meth:`ReferenceServer.begin` at a clock reading starts the stamps (sample k stamped
