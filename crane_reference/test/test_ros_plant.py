@@ -5,7 +5,8 @@ as a process for the signals.
   messages, the executor, /clock), bit for bit, and /clock and the stamps advance one period per command.
 * Bad commands (length, NaN, inf) are refused and counted in /diagnostics, never integrated: the run equals
   the core's with them refused, and the stream goes on.
-* In real time, silence beyond ``command_timeout`` starts the hold command, reported at WARN.
+* In real time, silence beyond ``command_timeout`` starts the hold command, reported at WARN; a process stopped
+  for 0.5 s counts the periods it missed, reported at WARN.
 * The lifecycle transitions through the standard services; SIGINT and SIGTERM end the process with 0.
 * The closed loop over ROS (reference node, plant in lock-step, example controller) is ``crane-reference
   track``'s loop in one process, bit for bit.
@@ -262,6 +263,55 @@ def test_the_process_ends_with_0_on_a_signal(signal_number):
     assert len(received) >= 20, stderr
     assert process.returncode == 0, stderr
     assert "Traceback" not in stderr + stdout, stderr
+
+
+@pytest.mark.slow
+def test_a_stopped_process_counts_the_periods_it_missed():
+    """The plant's process stopped for about 0.5 s (SIGSTOP, as a machine too busy for it would leave it) at
+    100 Hz in real time: the periods due meanwhile are missed, counted in /diagnostics' ``missed_ticks`` (the
+    stop's length over the period, less the one that runs at once on waking) at WARN, and the states go on."""
+    period = 0.01
+    process = subprocess.Popen([sys.executable, "-m", "crane_reference.ros.plant_node", "--ros-args", "-p",
+                                "control_rate:=100", "-p", "integrator.step:=0.001"], env=os.environ,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    states: list = []
+    reports: list[tuple[int, dict[str, str]]] = []
+    try:
+        node = Node("listener", context=context)
+        node.create_subscription(JointState, f"/{NODE_NAME}/joint_states", states.append, 1000)
+        node.create_subscription(DiagnosticArray, "/diagnostics", lambda msg: reports.append(
+            (msg.status[0].level[0], {kv.key: kv.value for kv in msg.status[0].values})), 100)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+
+        def spin_until(condition: Any, what: str, timeout: float = 60.0) -> None:
+            wait_for(lambda: executor.spin_once(timeout_sec=0.05) or condition() or process.poll() is not None,
+                     what, timeout)
+            assert process.poll() is None, process.communicate()[1]
+
+        spin_until(lambda: len(states) >= 20 and reports and "missed_ticks" in reports[-1][1], "states and a report")
+        before = int(reports[-1][1]["missed_ticks"])
+        stopped = time.monotonic()
+        os.kill(process.pid, signal.SIGSTOP)
+        time.sleep(0.5)
+        os.kill(process.pid, signal.SIGCONT)
+        stopped = time.monotonic() - stopped
+        count = len(reports)
+        spin_until(lambda: any(int(values["missed_ticks"]) > before for _, values in reports[count:]),
+                   "the missed periods reported")
+        level, values = next((level, values) for level, values in reports[count:]
+                             if int(values["missed_ticks"]) > before)
+        missed = int(values["missed_ticks"]) - before
+        assert level == 1 and stopped / period - 2 <= missed <= stopped / period + 10, (missed, stopped)
+        received = len(states)
+        spin_until(lambda: len(states) >= received + 20, "states after the stop")
+        node.destroy_node()
+    finally:
+        context.try_shutdown()
+        process.send_signal(signal.SIGINT)
+        process.communicate(timeout=30)
 
 
 def test_configuration_errors_name_the_parameter():
