@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -28,6 +29,7 @@ from typing import Any
 import numpy as np
 import pytest
 import rclpy
+from cranes import CONFIG
 from diagnostic_msgs.msg import DiagnosticArray
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
@@ -396,6 +398,28 @@ def test_crane_reference_loop_writes_tracks_summary(params, tmp_path):
     over_ros.pop("real_time_factor")
     assert over_ros == track
     assert (tmp_path / "tracking.png").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_crane_reference_loop_on_a_crane_without_a_start_fails_naming_why(tmp_path):
+    """``crane-reference loop`` with a crane that has no static equilibrium (test_failures' trolley, free on the
+    inclined jib): exit code 1 and a LoopError with what each node said, the reason of the first to end (the
+    plant or the controller: it cannot start, exit code 1) among them, and no traceback."""
+    from test_ros_node import _trolley_crane
+
+    crane = tmp_path / "trolley.yaml"
+    crane.write_text(_trolley_crane((CONFIG / "loader_crane.yaml").read_text()))
+    result = subprocess.run([sys.executable, "-m", "crane_reference.cli", "loop", "--config", str(crane),
+                             "--duration", "0.2", "--out", str(tmp_path / "out")], env=os.environ, capture_output=True,
+                            text=True, timeout=600)
+    assert result.returncode == 1 and result.stderr.startswith("crane-reference loop: "), result.stderr
+    assert "Traceback" not in result.stderr, result.stderr
+    said = dict(re.findall(r"(crane_\w+) \(exit code (-?\d+)\) said: ", result.stderr))
+    assert set(said) == {"crane_reference", "crane_plant", "crane_controller"}, result.stderr
+    # the plant and the controller each end with 1 unless the loop's SIGINT to all came first (the other's end)
+    assert "1" in (said["crane_plant"], said["crane_controller"]) and set(said.values()) <= {"0", "1", "-2"}
+    assert "cannot start: static equilibrium not found: largest unbalanced generalized force" in result.stderr
+    assert " N on roll " in result.stderr and not (tmp_path / "out").exists()
 
 
 def test_the_controller_refuses_unknown_and_bad_parameters():

@@ -21,6 +21,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from ..model.config import ConfigError
+from ..motion.simulation import SOLVER_FAILURES
 from ..stream.health import CANNOT
 from .parameters import ParameterError
 from .settings import StartupError
@@ -50,8 +51,9 @@ def spin_once(executor: Executor, node: Node, timeout_sec: float | None = None) 
 
 
 def run_node(make: Callable[[], Node], name: str, args: list[str] | None = None) -> int:
-    """Spin the node ``make`` returns until SIGINT or SIGTERM; 0, or 1 if it cannot start (the reason logged
-    as ``name``'s).  ``args``: the command line for ``rclpy.init`` (None: sys.argv)."""
+    """Spin the node ``make`` returns until SIGINT or SIGTERM; 0, or 1 if it cannot start (its parameters, its
+    crane file, or a crane without a start, such as no static equilibrium: the reason logged as ``name``'s).
+    ``args``: the command line for ``rclpy.init`` (None: sys.argv)."""
     stop = threading.Event()
     for number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(number, lambda *_: stop.set())
@@ -59,7 +61,7 @@ def run_node(make: Callable[[], Node], name: str, args: list[str] | None = None)
     try:
         try:
             node = make()
-        except (StartupError, ConfigError, ParameterError, ValueError) as error:
+        except (StartupError, ConfigError, ParameterError, ValueError, *SOLVER_FAILURES) as error:
             rclpy.logging.get_logger(name).fatal(f"{CANNOT} start: {error}")
             return 1
         executor = NodeExecutor()
