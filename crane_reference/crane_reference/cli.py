@@ -13,6 +13,8 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
+from .control.feedforward import FEEDFORWARDS
+from .control.preview_tracking import PREVIEW_FEEDFORWARDS
 from .interface.messages import STORAGES
 from .model.chain import VARIANTS, build_model
 from .model.config import ConfigError, load_config
@@ -186,7 +188,7 @@ def track_command(args: argparse.Namespace) -> int:
         specs = [TrackingSpec(variant=args.model, realisation=args.realisation, controller=args.controller,
                               bandwidth=args.bandwidth, damping_ratio=args.damping_ratio, gains=gains,
                               feedforward=feedforward, limits=limits, rate=args.rate, duration=args.duration,
-                              step=args.step) for feedforward in args.feedforward]
+                              step=args.step, reference_step=args.reference_step) for feedforward in args.feedforward]
     except ValueError as error:
         print(f"crane-reference track: {error}", file=sys.stderr)
         return 2
@@ -217,7 +219,7 @@ def loop_command(args: argparse.Namespace) -> int:
     from .ros.loop import LoopError, run_loop
 
     try:
-        spec = TrackingSpec(variant=args.model, feedforward="none", rate=args.rate, duration=args.duration)
+        spec = TrackingSpec(variant=args.model, feedforward=args.feedforward, rate=args.rate, duration=args.duration)
     except ValueError as error:
         print(f"crane-reference loop: {error}", file=sys.stderr)
         return 2
@@ -225,7 +227,7 @@ def loop_command(args: argparse.Namespace) -> int:
     with progress_bar(f"loop ({args.clock_mode})", spec.duration) as bar:
         try:
             recording = run_loop(spec.duration, args.clock_mode, round(spec.rate), spec.variant, args.config or "",
-                                 advance_to(bar))
+                                 advance_to(bar), spec.feedforward)
         except LoopError as error:
             print(f"crane-reference loop: {error}", file=sys.stderr)
             return 1
@@ -235,6 +237,11 @@ def loop_command(args: argparse.Namespace) -> int:
     print(f"over ROS ({args.clock_mode}): E off the ellipse <= {s['ellipse_distance_max_m']:.2e} m, height error <= "
           f"{s['height_error_max_m']:.2e} m, tip 40-250 Hz RMS {s['tip_vibration_rms_m']:.2e} m, "
           f"{recording.t[-1] / recording.wall:.2f} s of the plant per s of wall time")
+    if args.clock_mode == "lockstep":
+        config = f" --config {args.config}" if args.config else ""
+        print(f"the same loop without ROS (every metric equal but the energy balance): crane-reference track{config} "
+              f"--model {spec.variant} --feedforward {spec.feedforward} --rate {args.rate} "
+              f"--duration {args.duration:g}")
     print(f"wrote {', '.join(f.name for f in files)} to {args.out}")
     return 0
 
@@ -333,7 +340,8 @@ def parser() -> argparse.ArgumentParser:
     st.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
     st.add_argument("--scheduler", metavar="ADDRESS", help="run the cases on this Dask distributed scheduler")
     tr = sub.add_parser("track", help="closed loop: the actuated crane (no programmed constraints) following the "
-                        "reference under joint PD/PID with optional rigid inverse-dynamics feedforward")
+                        "reference under joint PD/PID with optional feedforward (the rigid crane's inverse "
+                        "dynamics, or the reference's constraint forces as the node's preview carries them)")
     tr.add_argument("--config", help="crane YAML (default: the packaged config/crane.yaml)")
     tr.add_argument("--model", choices=VARIANTS, default="flexible", help="crane (plant and reference)")
     tr.add_argument("--realisation", choices=REALISATIONS, default="ideal",
@@ -344,13 +352,16 @@ def parser() -> argparse.ArgumentParser:
     tr.add_argument("--gains", nargs="*", default=[], metavar="[JOINT=]KP,KD[,KI]",
                     help="gains instead of the bandwidth's, per actuated joint (the paper's crane: column_slew, "
                          "boom_luff, knuckle) or for all")
-    tr.add_argument("--feedforward", nargs="+", choices=["none", "rigid"], default=["none", "rigid"],
-                    help="one run per choice (default: both)")
+    tr.add_argument("--feedforward", nargs="+", choices=FEEDFORWARDS, default=["none", "rigid"],
+                    help="one run per choice (default: none and rigid; reference: the node's preview efforts)")
     tr.add_argument("--torque-limit", nargs="*", default=[], metavar="[JOINT=]N_M", help="actuator torque limits")
     tr.add_argument("--rate", type=float, default=1000.0, help="controller rate [Hz] (default 1000)")
     tr.add_argument("--duration", type=float, default=5.0, help="simulated time [s] (default 5)")
     tr.add_argument("--step", type=float, default=PLANT_STEP,
                     help=f"the plant's integrator step [s] (default {PLANT_STEP:g})")
+    tr.add_argument("--reference-step", type=float,
+                    help=f"the reference's integrator step [s], a divisor of --step (default: the node's, "
+                         f"{ONLINE_STEP:g}, where it divides --step, else --step)")
     tr.add_argument("--out", default="results/tracking", help="output directory (default ./results/tracking)")
     lo = sub.add_parser("loop", help="the closed loop over ROS without launch: the reference node, the plant and the "
                         "example controller as processes; records the plant and writes track's summary and figure")
@@ -361,6 +372,8 @@ def parser() -> argparse.ArgumentParser:
                          "wall clock")
     lo.add_argument("--rate", type=int, default=1000, help="control rate [Hz] (default 1000)")
     lo.add_argument("--duration", type=float, default=5.0, help="seconds of the plant's time (default 5)")
+    lo.add_argument("--feedforward", choices=PREVIEW_FEEDFORWARDS, default="none",
+                    help="the controller's feedforward: none (default), or reference: the preview's efforts")
     lo.add_argument("--out", default="results/loop", help="output directory (default ./results/loop)")
     sub.add_parser("compile", help="compile the numba kernels ahead of the first run (fills the cache; run it "
                    "after installing, e.g. after colcon build)")

@@ -1,7 +1,7 @@
 """Bring-up of the closed loop over ROS: the reference node, the crane as a plant and the example controller.
 
     ros2 launch crane_reference closed_loop.launch.py [clock_mode:=lockstep|realtime] [namespace:=crane1]
-        [model:=flexible|rigid] [config_file:=crane.yaml] [control_rate:=1000]
+        [model:=flexible|rigid] [config_file:=crane.yaml] [control_rate:=1000] [feedforward:=none|reference]
 
 * ``crane_reference`` (lifecycle): the reference, its preview with a point every control period over the
   next second (the controller reads the reference there, as joint_trajectory_controller reads its
@@ -33,10 +33,10 @@ def _nodes(context):
     from crane_reference.interface.messages import NODE_NAME
 
     arguments = {name: LaunchConfiguration(name).perform(context)
-                 for name in ("clock_mode", "namespace", "model", "config_file", "control_rate")}
+                 for name in ("clock_mode", "namespace", "model", "config_file", "control_rate", "feedforward")}
     namespace = arguments["namespace"]
     parameters = closed_loop_parameters(arguments["clock_mode"], int(arguments["control_rate"]), arguments["model"],
-                                        arguments["config_file"], namespace)
+                                        arguments["config_file"], namespace, arguments["feedforward"])
     return [
         LifecycleNode(package=PACKAGE, executable="node", name=NODE_NAME, namespace=namespace, output="screen",
                       parameters=[parameters[NODE_NAME]]),
@@ -57,5 +57,7 @@ def generate_launch_description():
         DeclareLaunchArgument("config_file", default_value="",
                               description="crane description YAML ('' = the packaged one)"),
         DeclareLaunchArgument("control_rate", default_value="1000", description="the plant's control rate [Hz]"),
+        DeclareLaunchArgument("feedforward", default_value="none", choices=["none", "reference"],
+                              description="the controller's feedforward: none, or the reference preview's efforts"),
         OpaqueFunction(function=_nodes),
     ])

@@ -16,6 +16,7 @@ import pytest
 import yaml
 
 from crane_reference.interface import messages
+from crane_reference.interface.bringup import RECORDED_HISTORY, missing_messages
 from crane_reference.model.chain import build_model
 from crane_reference.model.config import load_config
 from crane_reference.model.urdf import model_to_urdf
@@ -269,8 +270,15 @@ def test_the_closed_loop_launch_connects_the_three_nodes(monkeypatch, tmp_path, 
     assert isinstance(nodes["crane_reference"], LifecycleNode) and isinstance(nodes["crane_plant"], LifecycleNode)
     (reference,), (plant,), (controller,) = (nodes[name].kwargs["parameters"] for name in
                                              ("crane_reference", "crane_plant", "crane_controller"))
-    latched = {name for name in (*reference, *controller) if name.startswith("qos_overrides.")}
-    assert set(reference) - {"use_sim_time"} - latched <= set(SPECS) and set(plant) <= set(PLANT_SPECS)
+    qos = {name for name in (*reference, *plant, *controller) if name.startswith("qos_overrides.")}
+    assert set(reference) - {"use_sim_time"} - qos <= set(SPECS) and set(plant) - qos <= set(PLANT_SPECS)
+    for node, parameters, topic in ((messages.NODE_NAME, reference, messages.JOINT_STATES_TOPIC),
+                                    (plant_node.NODE_NAME, plant, plant_node.JOINT_STATES_TOPIC),
+                                    (plant_node.NODE_NAME, plant, plant_node.END_EFFECTOR_POSE_TOPIC),
+                                    (plant_node.NODE_NAME, plant, plant_node.TIP_DEFLECTION_TOPIC)):
+        # what `crane-reference loop` records, kept for a recorder that lags
+        assert parameters[f"qos_overrides.{resolve(topic, namespace, node)}.publisher.depth"] == RECORDED_HISTORY
+    assert controller["feedforward"] == "none" and reference["preview.effort"] is False  # the launch's default
     preview = resolve(messages.REFERENCE_PREVIEW_TOPIC, namespace, messages.NODE_NAME)
     assert reference[f"qos_overrides.{preview}.publisher.durability"] == "transient_local"
     assert controller[f"qos_overrides.{preview}.subscription.durability"] == "transient_local"
@@ -287,3 +295,22 @@ def test_the_closed_loop_launch_connects_the_three_nodes(monkeypatch, tmp_path, 
         plant_node.JOINT_STATES_TOPIC, namespace, plant_node.NODE_NAME)
     assert resolve(topics["command_topic"], namespace, "crane_controller") == resolve(
         plant_node.COMMANDS_TOPIC, namespace, plant_node.NODE_NAME)
+
+
+def test_a_recording_of_the_loop_names_what_it_lacks():
+    """missing_messages against recordings made by hand: complete ones lack nothing; a dropped pose, a plant state
+    and a reference sample (lock-step) are counted by topic; real time may miss plant periods and publishes the
+    reference at its own rate, so only the pose of a state and the reference's reach are checked."""
+    ms = 10**6
+    states = list(range(0, 101 * ms, ms))  # 0 .. 100 ms at 1 kHz
+    complete = {"states": states, "poses": states, "deflections": states, "references": states}
+    assert missing_messages(**complete, first=0, end=100 * ms, period_ns=ms, reference_period_ns=ms,
+                            lockstep=True) == {}
+    lossy = {"states": [k for k in states if k != 40 * ms], "poses": [k for k in states if k != 70 * ms],
+             "deflections": states, "references": [k for k in states if k not in (10 * ms, 11 * ms)]}
+    assert missing_messages(**lossy, first=0, end=100 * ms, period_ns=ms, reference_period_ns=ms, lockstep=True) == {
+        "end_effector_pose": 1, "joint_states": 1, "reference joint_states": 2}
+    realtime = {"states": lossy["states"], "poses": states, "deflections": states,
+                "references": list(range(0, 91 * ms, 10 * ms))}  # 100 Hz, ending at 90 ms
+    assert missing_messages(**realtime, first=0, end=100 * ms, period_ns=ms, reference_period_ns=10 * ms,
+                            lockstep=False) == {"reference joint_states": 1}

@@ -234,6 +234,26 @@ def test_the_tracker_waits_for_a_preview_and_answers_a_stamp_once():
         Preview(np.array([5, 6], dtype=np.int64), np.zeros((2, 3)), np.full((2, 3), np.inf), np.zeros((2, 3)))
 
 
+def test_the_feedforward_is_the_preview_s_effort_linear_between_its_points():
+    """With feedforward "reference" the command adds the preview's efforts at the state's time, linear between
+    the points (joint_trajectory_controller's effort interpolation, written out here), a point's own on a point;
+    a preview without efforts is refused, naming the parameter that gives them."""
+    gains = [JointGains(100.0, 10.0)] * 3
+    tracker, alone = PreviewTracker(ACTUATED_JOINTS, gains, 1e-3, "reference"), JointController(gains, 1e-3)
+    times = np.array([1_000_000_000, 1_004_000_000, 1_010_000_000], dtype=np.int64)
+    efforts = np.array([[100.0, -2e4, 5.0], [300.0, -1e4, -5.0], [0.0, 0.0, 0.0]])
+    zeros = np.zeros((3, 3))
+    with pytest.raises(ValueError, match=r"no efforts for feedforward 'reference' \(set preview.effort:=true"):
+        tracker.take_preview(Preview(times, zeros, zeros, zeros))
+    tracker.take_preview(Preview(times, zeros, zeros, zeros, efforts))
+    for t_ns, effort in ((1_000_000_000, efforts[0]), (1_001_000_000, 0.75 * efforts[0] + 0.25 * efforts[1]),
+                         (1_004_000_000, efforts[1]), (1_007_000_000, 0.5 * efforts[1] + 0.5 * efforts[2])):
+        command = tracker.take_state(t_ns, np.zeros(3), np.zeros(3))
+        np.testing.assert_allclose(command, alone(np.zeros(3), np.zeros(3), np.zeros(3), effort), rtol=1e-12)
+    with pytest.raises(ValueError, match="feedforward = 'rigid': must be one of none, reference"):
+        PreviewTracker(ACTUATED_JOINTS, gains, 1e-3, "rigid")
+
+
 def test_warm_up_makes_every_kernel_the_plant_uses_ready(still, kernel_signatures):
     """After ``warm_up_plant`` a plant (another crane of the same model, permuted joints, every coordinate
     published, commands, a refusal, a timeout's hold command) makes no kernel version the warm-up did not make:

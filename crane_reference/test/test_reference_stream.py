@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from crane_reference.control.feedforward import RigidInverseDynamics
 from crane_reference.dynamics.kinematics import forward_kinematics
 from crane_reference.model.chain import build_model
 from crane_reference.model.config import load_config
@@ -215,3 +216,28 @@ def test_history_compaction_keeps_every_sample(monkeypatch):
     for wide, narrow in zip(served[:half], served[half:], strict=True):
         for name in ("t", "q", "qd", "effort", "ee_position", "ee_quaternion", "residual_distance"):
             np.testing.assert_array_equal(getattr(narrow, name), getattr(wide, name), err_msg=name)
+
+
+def test_the_feedforward_is_the_rigid_crane_s_inverse_dynamics_and_the_effort_adds_the_drive():
+    """On the rigid crane under ideal constraints the constraint forces are all that M qdd + h - Q leaves (Q with
+    gravity, springs, damping and the drive): a sample's feedforward at the actuated joints converges to the O(n)
+    inverse dynamics of its q, qd and qdd (RigidInverseDynamics, a second formulation: RNEA against the stream's
+    J^T lambda) as h^2 (the integrator's qdd meets (8) to O(h^2)); its effort adds the drive's torque (4000 N m
+    over [0, 1) s, config/crane.yaml) on the drive's joint alone."""
+    config = load_config()
+    inverse, differences = None, {}
+    for step in (1e-3, 5e-4):
+        stream = ReferenceStream(config, "rigid", step=step)
+        stream.compute(1.5)
+        inverse = inverse or RigidInverseDynamics(config, stream.joint_names)
+        actuated = [stream.joint_names.index(name) for name in config.actuated]
+        drive = stream.joint_names.index(config.drive_joint)
+        for tau, torque in ((0.25, 4000.0), (0.75, 4000.0), (1.25, 0.0)):  # step times: the steps themselves
+            s = stream.sample(tau)
+            truth = inverse(s.t, s.q, s.qd, s.qdd)
+            differences[step, tau] = np.abs(s.feedforward[actuated] - truth).max() / np.abs(truth).max()
+            drive_torque = np.zeros_like(s.effort)
+            drive_torque[drive] = torque
+            np.testing.assert_allclose(s.effort - s.feedforward, drive_torque, rtol=0, atol=1e-9)
+    for tau in (0.25, 0.75, 1.25):
+        assert differences[1e-3, tau] < 1e-4 and 3.5 < differences[1e-3, tau] / differences[5e-4, tau] < 4.5

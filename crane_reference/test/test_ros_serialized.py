@@ -34,12 +34,12 @@ STAMPS = [0, 1, 999_999_999, 1_700_000_000_123_456_789]
 def random_sample(rng: np.random.Generator, n: int) -> ReferenceSample:
     quaternion = rng.normal(size=4)
     return ReferenceSample(float(rng.uniform(0, 10)), rng.normal(size=n), rng.normal(size=n), rng.normal(size=n),
-                           rng.normal(size=n) * 1e3, rng.normal(size=3), quaternion / np.linalg.norm(quaternion),
-                           1e-15, False)
+                           rng.normal(size=n) * 1e3, rng.normal(size=n) * 1e3, rng.normal(size=3),
+                           quaternion / np.linalg.norm(quaternion), 1e-15, False)
 
 
 def zero_sample(n: int) -> ReferenceSample:
-    return ReferenceSample(0.0, np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(3),
+    return ReferenceSample(0.0, np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(3),
                            np.array([0.0, 0.0, 0.0, 1.0]), 0.0, False)
 
 
@@ -115,6 +115,9 @@ def test_previews_filled_in_place_equal_rosbags_serialization(effort, little_end
                 read = TYPESTORE.deserialize_cdr(data, TRAJECTORY)
                 np.testing.assert_array_equal([p.positions for p in read.points],
                                               np.vstack((samples.q[1], preview.q))[:, indices])
+                if effort:  # the feedforward (what a controller adds), not the generalized effort
+                    np.testing.assert_array_equal([p.effort for p in read.points],
+                                                  np.vstack((samples.feedforward[1], preview.feedforward))[:, indices])
 
 
 def test_the_node_s_messages_read_back_by_rclpy_as_the_message_objects():

@@ -1,4 +1,6 @@
-"""Feedforward along the reference: inverse dynamics of the rigid crane.
+"""Feedforward along the reference (:data:`FEEDFORWARDS`): none; the reference's own constraint forces at the
+actuated joints (``reference``: what the reference node's preview carries as its efforts, without the drive's
+torque, which the plant applies itself); or the inverse dynamics of the rigid crane (``rigid``):
 
     tau_ff = (M qdd + h - Q)[actuated joints]
 
@@ -21,7 +23,7 @@ from ..model.chain import build_model
 from ..model.description import CraneDescription
 from ..model.drive import make_drive
 
-FEEDFORWARDS = ("none", "rigid")
+FEEDFORWARDS = ("none", "rigid", "reference")
 
 
 class RigidInverseDynamics:

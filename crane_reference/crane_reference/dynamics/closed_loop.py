@@ -99,8 +99,8 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
                                 feedforward_start[tick])
         last = np.empty(na)
         for j in range(na):
-            last[j] = min(max(first[j] + feedforward_end[tick + 1, j] - feedforward_start[tick, j], -limit[j]),
-                          limit[j])
+            change = feedforward_end[tick + 1, j] - feedforward_start[tick, j]  # first: none held exactly
+            last[j] = min(max(first[j] + change, -limit[j]), limit[j])
         command[0], command[1] = first, last
         # the forces jump: (8) solved again at the tick's start, the modal correction kept
         s0 = first_step[tick]

@@ -218,7 +218,8 @@ def reference_preview(types: MessageTypes, stamp_ns: int, frame_id: str, joint_n
     """trajectory_msgs/JointTrajectory of the joints ``joint_names`` (coordinates ``indices`` of the
     samples) whose first point is at ``stamp_ns`` (header.stamp, time_from_start 0): point i is
     ``samples[i]`` at time_from_start ``offsets_ns[i]`` (0 first, then strictly increasing); positions,
-    velocities and accelerations, efforts only with ``effort``."""
+    velocities and accelerations, efforts only with ``effort``: the samples' feedforward, what a controller adds
+    at those joints (the constraint forces, without the drive's torque, which the plant applies itself)."""
     if len(offsets_ns) != len(samples) or len(joint_names) != len(indices):
         raise ValueError(f"{len(offsets_ns)} offsets for {len(samples)} samples, {len(joint_names)} names for "
                          f"{len(indices)} coordinates")
@@ -229,7 +230,7 @@ def reference_preview(types: MessageTypes, stamp_ns: int, frame_id: str, joint_n
         positions=types.float64_array(s.q[columns]),
         velocities=types.float64_array(s.qd[columns]),
         accelerations=types.float64_array(s.qdd[columns]),
-        effort=types.float64_array(s.effort[columns] if effort else []),
+        effort=types.float64_array(s.feedforward[columns] if effort else []),
         time_from_start=duration_msg(types, offset),
     ) for offset, s in zip(offsets_ns, samples, strict=True)]
     return types.JointTrajectory(header=header(types, stamp_ns, frame_id), joint_names=list(joint_names),

@@ -253,8 +253,9 @@ class SerializedPreview(_SerializedMessage):
         if len(preview.t) != self.points - 1:
             raise ValueError(f"a preview of {len(preview.t)} points for a prototype of {self.points - 1}")
         columns = self._columns
-        first = (samples.q[row], samples.qd[row], samples.qdd[row], samples.effort[row])
-        later = (preview.q[:, columns], preview.qd[:, columns], preview.qdd[:, columns], preview.effort[:, columns])
+        first = (samples.q[row], samples.qd[row], samples.qdd[row], samples.feedforward[row])
+        later = (preview.q[:, columns], preview.qd[:, columns], preview.qdd[:, columns],
+                 preview.feedforward[:, columns])
         for view, values in zip(self._points[0], first, strict=False):
             view[:] = values[columns]
         for views, i in zip(self._points[1:], range(self.points - 1), strict=True):

@@ -11,7 +11,9 @@ Parameters: ``joints``; the gains per joint ``gains.<joint>.p`` [N m/rad], ``.d`
 [N m/(rad s)] (ros2_control's names; defaults: :func:`~crane_reference.control.plant.default_gains` of the
 crane of ``config_file`` and ``model``, as ``crane-reference track``); ``.d`` is the D action the plant's
 drives apply, so it must equal the plant's ``drive_damping.<joint>`` (the defaults agree); ``control_rate``
-[Hz], the plant's, for the integral; the three topics.  The preview's subscription takes rclpy's
+[Hz], the plant's, for the integral; ``feedforward``: ``none`` (default) or ``reference``, the preview's efforts
+(the reference node's ``preview.effort:=true``: the constraint forces at these joints, without the drive's
+torque, which the plant applies itself); the three topics.  The preview's subscription takes rclpy's
 ``qos_overrides`` (closed_loop.launch.py makes it transient-local on both ends, so that a controller started
 late still gets the last preview).
 """
@@ -28,7 +30,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from ..control.controller import JointGains
 from ..control.plant import default_gains
-from ..control.preview_tracking import Preview, PreviewTracker
+from ..control.preview_tracking import PREVIEW_FEEDFORWARDS, Preview, PreviewTracker
 from ..model.chain import VARIANTS
 from ..model.config import load_config
 from ..model.units import NANOSECONDS
@@ -89,6 +91,10 @@ class CraneControllerNode(Node):
             raise ParameterError(f"joints = {list(joints)}: must name each of {', '.join(actuated)} once")
         rate = declare(self, ParameterSpec("control_rate", INTEGER, 1000, "The plant's control rate (the integral's "
                                            "period)", "Hz", (1, 1000), read_only=True))
+        feedforward = declare(self, ParameterSpec("feedforward", STRING, "none", "The torque added to the feedback: "
+                                                  "'none', or 'reference': the preview's efforts (the reference "
+                                                  "node's preview.effort:=true)", choices=PREVIEW_FEEDFORWARDS,
+                                                  read_only=True))
         defaults = default_gains(Scenario(config, model), joints)
         gains = []
         for joint, default in zip(joints, defaults, strict=True):
@@ -100,13 +106,13 @@ class CraneControllerNode(Node):
                                                        ("i", 0.0, "Integral gain", "N m/(rad s)")))
             gains.append(JointGains(p, d, i))
         reference, state, command = (declare(self, spec) for spec in _TOPICS)
-        known = ["config_file", "model", "joints", "control_rate", *(spec.name for spec in _TOPICS),
+        known = ["config_file", "model", "joints", "control_rate", "feedforward", *(spec.name for spec in _TOPICS),
                  *(f"gains.{joint}.{name}" for joint in joints for name in "pdi")]
         unknown = unknown_overrides(self, known)
         if unknown:
             raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
                                  f"{parameter_names(self)}")
-        self.tracker = PreviewTracker(joints, gains, 1.0 / rate)
+        self.tracker = PreviewTracker(joints, gains, 1.0 / rate, feedforward)
         self._commands = self.create_publisher(Float64MultiArray, command, DEPTH)
         self.create_subscription(JointTrajectory, reference, self._on_preview, DEPTH,
                                  qos_overriding_options=OVERRIDABLE)
@@ -130,7 +136,10 @@ class CraneControllerNode(Node):
                               for p in msg.points], dtype=np.int64)
             fields = [_columns_of([getattr(p, name) for p in msg.points], columns, f"reference preview {name}")
                       for name in ("positions", "velocities", "accelerations")]
-            preview = Preview(times, *fields)
+            efforts = (_columns_of([p.effort for p in msg.points], columns, "reference preview effort")
+                       if all(len(p.effort) for p in msg.points) else None)
+            preview = Preview(times, *fields, efforts)
+            self.tracker.check(preview)
         except ValueError as error:
             self.get_logger().error(f"dropped: {error}", throttle_duration_sec=1.0)
             return

@@ -27,7 +27,13 @@ from lifecycle_msgs.srv import ChangeState, GetState
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
 
-from ..interface.bringup import CONTROLLER_NODE, PLANT_NODE, LoopRecording, closed_loop_parameters
+from ..interface.bringup import (
+    CONTROLLER_NODE,
+    PLANT_NODE,
+    LoopRecording,
+    closed_loop_parameters,
+    missing_messages,
+)
 from ..interface.messages import NODE_NAME
 from ..model.units import NANOSECONDS
 from .running import spin_once
@@ -38,6 +44,7 @@ START_TIMEOUT = 600.0  # [s] of wall time for the three to start (a first start 
 EXIT_TIMEOUT = 30.0  # [s] after SIGINT
 DISCOVERY_GRACE = 0.5  # [s] after the recorder sees the plant's publishers, before the plant is activated
 ANSWER_TIMEOUT = 10.0  # [s] for an answer of the plant's lifecycle services (then the state is asked)
+COMPLETE_TIMEOUT = 10.0  # [s] of wall time after the loop's end for the messages still in flight
 
 
 class LoopError(RuntimeError):
@@ -49,10 +56,12 @@ def _stamp_ns(msg) -> int:
 
 
 def run_loop(duration: float, clock_mode: str = "lockstep", control_rate: int = 1000, model: str = "flexible",
-             config_file: str = "", progress: Callable[[float], None] | None = None) -> LoopRecording:
-    """Run the loop for ``duration`` s of the plant's time and return what it recorded (``progress`` gets the
-    plant's time)."""
-    return _record(duration, closed_loop_parameters(clock_mode, control_rate, model, config_file), progress)
+             config_file: str = "", progress: Callable[[float], None] | None = None,
+             feedforward: str = "none") -> LoopRecording:
+    """Run the loop for ``duration`` s of the plant's time with the controller's ``feedforward`` and return what it
+    recorded (``progress`` gets the plant's time)."""
+    return _record(duration, closed_loop_parameters(clock_mode, control_rate, model, config_file,
+                                                    feedforward=feedforward), progress)
 
 
 @contextmanager
@@ -211,14 +220,26 @@ def _record(duration: float, parameters: dict[str, dict[str, object]],
                 elif time.monotonic() > start_by:
                     raise LoopError(f"no state of the plant within {START_TIMEOUT:g} s")
             wall = time.monotonic() - started
-            for _ in range(20):  # the last pose, deflection and reference samples in flight
+            end = first + round(duration * NANOSECONDS)
+            plant, reference = parameters[PLANT_NODE], parameters[NODE_NAME]
+
+            def missing() -> dict[str, int]:
+                return missing_messages(states, poses, deflections, references, first, end,
+                                        NANOSECONDS // int(plant["control_rate"]),
+                                        NANOSECONDS // int(reference["publish_rate"]),
+                                        plant["clock_mode"] == "lockstep")
+
+            complete_by = time.monotonic() + COMPLETE_TIMEOUT
+            while missing() and time.monotonic() < complete_by:  # the last messages in flight
                 spin_once(executor, node, 0.01)
+            lost = missing()
+            if lost:
+                raise LoopError("the recording lacks " + ", ".join(f"{count} {topic}" for topic, count in lost.items())
+                                + f" of the loop's first {duration:g} s (still missing {COMPLETE_TIMEOUT:g} s after "
+                                "its end): its summary would not be the loop's")
         node.destroy_node()
     finally:
         context.try_shutdown()
-    if not references:
-        raise LoopError("no sample of the reference node was recorded")
-    end = first + round(duration * NANOSECONDS)
     reference_stamps = np.array(sorted(references), dtype=np.int64)
     inside = range(reference_stamps[0], reference_stamps[-1] + 1)  # the reference is interpolated, never held
     stamps = np.array(sorted(k for k in states if k <= end and k in inside and k in poses and k in deflections),

@@ -178,8 +178,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("preview.joints", STRING_ARRAY, list(PAPER_ACTUATED), "Joints of ~/reference_preview (names "
                   "of the model's coordinates, see `crane-reference urdf`); default the crane's actuated joints",
                   from_config=lambda c: list(c.actuated)),
-    ParameterSpec("preview.effort", BOOL, False, "Fill the efforts of ~/reference_preview (the generalized "
-                  "constraint and drive forces of the motion at its own speed)"),
+    ParameterSpec("preview.effort", BOOL, False, "Fill the efforts of ~/reference_preview with the feedforward "
+                  "a controller adds at each of its joints: the constraint forces of the motion at its own speed, "
+                  "without the drive's torque, which the plant applies itself (~/joint_states' efforts include it)"),
     ParameterSpec("speed_scaling", DOUBLE, 1.0, "Speed of the reference relative to the programmed motion "
                   "(0: at rest); changes are C2 ramps over speed_scaling.ramp_time", "", (0.0, 1.0)),
     ParameterSpec("speed_scaling.ramp_time", DOUBLE, 1.0, "Duration of a speed-scaling ramp (also of "

@@ -11,7 +11,8 @@ hold command on a timeout); the parameters are :mod:`.plant_parameters`.
 * After each control period: ``~/joint_states`` (sensor_msgs/JointState: q, qd and the actuator torque of the
   joints, or of every coordinate with ``all_coordinates``), ``~/end_effector_pose`` (geometry_msgs/PoseStamped,
   E in ``frame_id``) and ``~/tip_deflection`` (geometry_msgs/Vector3Stamped, the boom tip's deflection from
-  its rigid chord in the first boom element's link), stamped with the end of the period.
+  its rigid chord in the first boom element's link), stamped with the end of the period.  The three take
+  rclpy's ``qos_overrides`` (e.g. a deeper history for a recorder that may lag).
 * ``clock_mode`` realtime: a period every period of the steady clock (a thread of its own paces them,
   :mod:`~crane_reference.control.pacing`: after a stall the periods it skipped are missed, counted in
   /diagnostics' ``missed_ticks`` at the next wake-up; while they run, Python's thread switch interval is
@@ -55,7 +56,7 @@ from ..stream.threads import real_time_switching, start_named
 from .message_types import rclpy_types
 from .parameters import check, pre_set_callback
 from .plant_parameters import declare_plant
-from .publishing import run_until_shutdown
+from .publishing import OVERRIDABLE, run_until_shutdown
 from .running import run_node
 from .settings import StartupError
 
@@ -116,9 +117,10 @@ class CranePlantNode(LifecycleNode):
         types = self._types
         depth = messages.PUBLISHER_DEPTH
         self._outputs = {
-            "joints": self.create_lifecycle_publisher(types.JointState, JOINT_STATES_TOPIC, depth),
-            "pose": self.create_lifecycle_publisher(types.PoseStamped, END_EFFECTOR_POSE_TOPIC, depth),
-            "deflection": self.create_lifecycle_publisher(types.Vector3Stamped, TIP_DEFLECTION_TOPIC, depth)}
+            name: self.create_lifecycle_publisher(message_type, topic, depth, qos_overriding_options=OVERRIDABLE)
+            for name, message_type, topic in (("joints", types.JointState, JOINT_STATES_TOPIC),
+                                              ("pose", types.PoseStamped, END_EFFECTOR_POSE_TOPIC),
+                                              ("deflection", types.Vector3Stamped, TIP_DEFLECTION_TOPIC))}
         if v.clock_mode == "lockstep":
             self._outputs["clock"] = self.create_lifecycle_publisher(ClockMessage, CLOCK_TOPIC, depth)
         self._made = {}

@@ -1,7 +1,7 @@
 """The computed motion kept for sampling and for rewinding (a re-target or a command in the past).
 
 The steps are kept as rows of arrays, in the order computed.  What only a reader needs (the generalized
-effort and the constraint distance, by inverse dynamics at the step; the quaternion of E's frame) is
+effort, the feedforward and the constraint distance, by inverse dynamics at the step; the quaternion of E's frame) is
 computed for the rows that are read, when they are first read: the stream's runs evaluate only their last
 step (:class:`~crane_reference.motion.simulation.MotionStepper` with ``every_row`` False), and a node
 publishing at 100 Hz reads one step in twenty.
@@ -19,9 +19,9 @@ from ..motion.trajectory import generalized_effort
 from .sample import Samples, quaternions
 
 TIME_SLACK = 1e-12  # [s], rounding slack when locating a motion time among the computed ones
-STEP_FIELDS = ("t", "q", "qd", "qdd", "ee_position", "ee_rotation", "effort", "residual_distance")
+STEP_FIELDS = ("t", "q", "qd", "qdd", "ee_position", "ee_rotation", "effort", "feedforward", "residual_distance")
 """The arrays kept per step (the rows of :meth:`~crane_reference.motion.simulation.MotionStepper.advance_until`,
-with the effort and the largest constraint distance, NaN until a read evaluates them)."""
+with the effort, the feedforward and the largest constraint distance, NaN until a read evaluates them)."""
 
 
 class Instant(NamedTuple):
@@ -41,7 +41,7 @@ class History:
         s = start.sample
         n = s.q.size
         shapes = {"t": (), "q": (n,), "qd": (n,), "qdd": (n,), "ee_position": (3,), "ee_rotation": (3, 3),
-                  "effort": (n,), "residual_distance": ()}
+                  "effort": (n,), "feedforward": (n,), "residual_distance": ()}
         self._rows = {name: np.full((capacity, *shapes[name]), np.nan) for name in STEP_FIELDS}
         self._motion = np.zeros(capacity, dtype=np.int64)  # index into self._motions of each row's motion
         self._motions: list[ProgrammedMotion] = []
@@ -76,7 +76,8 @@ class History:
         new = slice(self._end, self._end + count)
         for name in ("t", "q", "qd", "qdd", "ee_position", "ee_rotation"):
             self._rows[name][new] = rows[name]
-        self._rows["effort"][new] = self._rows["residual_distance"][new] = np.nan  # NaN: not evaluated yet
+        for name in ("effort", "feedforward", "residual_distance"):
+            self._rows[name][new] = np.nan  # NaN: not evaluated yet
         if not self._motions or self._motions[-1] is not end.motion:
             self._motions.append(end.motion)
         self._motion[new] = len(self._motions) - 1
@@ -133,11 +134,12 @@ class History:
             forces, torques, distances = self._motions[index].evaluated_rows(r["t"][some], r["q"][some],
                                                                              r["qd"][some], r["qdd"][some])
             r["effort"][some] = generalized_effort(forces, torques, self.drive_joint)
+            r["feedforward"][some] = forces
             distance[some] = np.max(distances, axis=-1)
         r = self._rows
         return Samples(r["t"][rows], r["q"][rows], r["qd"][rows], r["qdd"][rows], r["effort"][rows],
-                       r["ee_position"][rows], quaternions(r["ee_rotation"][rows]), distance[rows],
-                       np.zeros(rows.size, dtype=bool))
+                       r["feedforward"][rows], r["ee_position"][rows], quaternions(r["ee_rotation"][rows]),
+                       distance[rows], np.zeros(rows.size, dtype=bool))
 
     def set_snapshot(self, k: int, snapshot: StepperSnapshot) -> None:
         """Make step k (its sample unchanged) restartable from ``snapshot``, under its motion from then on."""

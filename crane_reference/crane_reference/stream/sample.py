@@ -17,41 +17,45 @@ from ..motion.trajectory import hermite_segment
 @dataclass(frozen=True)
 class ReferenceSample:
     """One instant of the reference (SI units, world frame {0}): motion time ``t`` [s], q, qd, qdd,
-    the generalized effort of constraints and drive, E's position and quaternion (x, y, z, w) of link
-    4's frame, the largest constraint distance [m]; ``held``: a held sample (paused or failed)."""
+    ``effort``: the generalized force of constraints and drive (the constraint forces, plus the drive's torque
+    on its joint), ``feedforward``: the generalized force a controller adds (the constraint forces alone: the
+    plant applies the drive's torque itself), E's position and quaternion (x, y, z, w) of link 4's frame, the
+    largest constraint distance [m]; ``held``: a held sample (paused or failed)."""
 
     t: float
     q: np.ndarray
     qd: np.ndarray
     qdd: np.ndarray
     effort: np.ndarray
+    feedforward: np.ndarray
     ee_position: np.ndarray
     ee_quaternion: np.ndarray
     residual_distance: float
     held: bool
 
     def hold(self) -> ReferenceSample:
-        """This sample held: same position and effort, zero velocity and acceleration."""
+        """This sample held: same position, effort and feedforward, zero velocity and acceleration."""
         zero = np.zeros_like(self.qd)
         return replace(self, qd=zero, qdd=zero.copy(), held=True)
 
     def is_finite(self) -> bool:
         """Whether every number is finite (a NaN or infinity propagates into the sum)."""
-        arrays = (self.q, self.qd, self.qdd, self.effort, self.ee_position, self.ee_quaternion)
+        arrays = (self.q, self.qd, self.qdd, self.effort, self.feedforward, self.ee_position, self.ee_quaternion)
         return math.isfinite(np.concatenate(arrays).sum() + self.residual_distance)
 
 
 class Samples(NamedTuple):
     """Reference samples stacked, one row per sample: the fields of :class:`ReferenceSample` (t (N,), q, qd,
-    qdd and effort (N, n), ee_position (N, 3), ee_quaternion (N, 4), residual_distance (N,), held (N,)).  The
-    stream makes and moves samples in this form; a few arrays pickle (to the node's process) at a fraction of
-    the cost of one object per sample."""
+    qdd, effort and feedforward (N, n), ee_position (N, 3), ee_quaternion (N, 4), residual_distance (N,), held
+    (N,)).  The stream makes and moves samples in this form; a few arrays pickle (to the node's process) at a
+    fraction of the cost of one object per sample."""
 
     t: np.ndarray
     q: np.ndarray
     qd: np.ndarray
     qdd: np.ndarray
     effort: np.ndarray
+    feedforward: np.ndarray
     ee_position: np.ndarray
     ee_quaternion: np.ndarray
     residual_distance: np.ndarray
@@ -80,20 +84,21 @@ class Samples(NamedTuple):
     def row(self, i: int) -> ReferenceSample:
         """Row i as a :class:`ReferenceSample` (its arrays are rows of the stacked ones)."""
         return ReferenceSample(float(self.t[i]), self.q[i], self.qd[i], self.qdd[i], self.effort[i],
-                               self.ee_position[i], self.ee_quaternion[i], float(self.residual_distance[i]),
-                               bool(self.held[i]))
+                               self.feedforward[i], self.ee_position[i], self.ee_quaternion[i],
+                               float(self.residual_distance[i]), bool(self.held[i]))
 
     def rows(self) -> list[ReferenceSample]:
         """One :class:`ReferenceSample` per row (its arrays are rows of the stacked ones)."""
         return [ReferenceSample(*row) for row in zip(self.t.tolist(), self.q, self.qd, self.qdd, self.effort,
-                                                     self.ee_position, self.ee_quaternion,
+                                                     self.feedforward, self.ee_position, self.ee_quaternion,
                                                      self.residual_distance.tolist(), self.held.tolist(),
                                                      strict=True)]
 
     def finite(self) -> np.ndarray:
         """(N,): whether every number of a row is finite."""
         total = (self.q.sum(axis=1) + self.qd.sum(axis=1) + self.qdd.sum(axis=1) + self.effort.sum(axis=1)
-                 + self.ee_position.sum(axis=1) + self.ee_quaternion.sum(axis=1) + self.residual_distance)
+                 + self.feedforward.sum(axis=1) + self.ee_position.sum(axis=1) + self.ee_quaternion.sum(axis=1)
+                 + self.residual_distance)
         return np.isfinite(total)
 
 
@@ -111,7 +116,7 @@ def quaternions(rotations: np.ndarray) -> np.ndarray:
 
 def between(a: Samples, b: Samples, t: np.ndarray, poses) -> Samples:
     """The references at a.t[i] < t[i] < b.t[i]: q cubic Hermite in q and qd, qd cubic Hermite in qd and qdd
-    (both :func:`~crane_reference.motion.trajectory.hermite_segment`), qdd and effort linear; E's pose from
+    (both :func:`~crane_reference.motion.trajectory.hermite_segment`), qdd, effort and feedforward linear; E's pose from
     ``poses(q)`` -> (positions (N, 3), rotation matrices (N, 3, 3)), the kinematics at the interpolated q."""
     t = np.asarray(t, dtype=float)
     h = (b.t - a.t)[:, None]
@@ -120,8 +125,9 @@ def between(a: Samples, b: Samples, t: np.ndarray, poses) -> Samples:
     qd = hermite_segment(s, h, a.qd, a.qdd, b.qd, b.qdd)
     qdd = (1 - s) * a.qdd + s * b.qdd
     effort = (1 - s) * a.effort + s * b.effort
+    feedforward = (1 - s) * a.feedforward + s * b.feedforward
     positions, rotations = poses(q)
-    return Samples(t, q, qd, qdd, effort, positions, quaternions(rotations),
+    return Samples(t, q, qd, qdd, effort, feedforward, positions, quaternions(rotations),
                    np.maximum(a.residual_distance, b.residual_distance), np.zeros(t.size, dtype=bool))
 
 

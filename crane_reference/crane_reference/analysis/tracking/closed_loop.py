@@ -4,11 +4,13 @@ joint-space feedback (:mod:`crane_reference.control.controller`) with optional f
 
 The reference is the programmed motion the node publishes (ideal constraints; or realised by the dependent
 joints' torques, the paper's luff and knuckle, ``realisation="servo"``) of the same crane, integrated with the
-same step; the
-controller reads it as a downstream controller does, one sample per tick: q_ref, qd_ref of the actuated
-joints at t_k.  Its command holds over the period (zero-order hold; the D action acts in the joint
-drives, see :mod:`crane_reference.control.controller`), the feedforward runs linearly from its value at t_k
-to that at t_k+1 (the reference is known ahead, as a joint_trajectory_controller interpolates its points).
+node's step (``reference_step``); the controller reads it as a downstream controller does, one sample per tick:
+q_ref, qd_ref of the actuated joints at t_k.  Its command holds over the period (zero-order hold; the D action
+acts in the joint drives, see :mod:`crane_reference.control.controller`).  The ``rigid`` feedforward runs
+linearly from its value at t_k to that at t_k+1 (the reference is known ahead, as a joint_trajectory_controller
+interpolates its points); the ``reference`` feedforward, the reference's constraint forces at t_k, holds with the
+command, as the example controller node adds the preview's efforts (so ``crane-reference loop --feedforward
+reference`` is this loop).
 The plant starts at rest, held by its actuators with E on the task's start point
 (:func:`crane_reference.control.plant.held_start`).
 
@@ -40,7 +42,7 @@ from ...model.description import CraneDescription
 from ...motion.constraints import ConstraintSet
 from ...motion.programmed_motion import REALISATIONS, ProgrammedMotion
 from ...motion.simulation import Scenario, simulated_runs
-from ...motion.steps import PLANT_STEP
+from ...motion.steps import ONLINE_STEP, PLANT_STEP
 from ...motion.trajectory import Trajectory
 from ..bands import vibration_band
 from .ahead import ComputedAhead
@@ -50,10 +52,11 @@ from .ahead import ComputedAhead
 class TrackingSpec:
     """What to run: the crane ``variant``, the reference's ``realisation``, the ``controller`` (pd or pid) with
     gains from the closed-loop ``bandwidth`` [Hz] (or ``joint_bandwidths`` by joint name) and
-    ``damping_ratio`` per joint unless ``gains`` gives them by joint name, ``feedforward`` (none or
-    rigid), torque ``limits`` [N m] by joint name (none: no limit), the controller ``rate`` [Hz],
+    ``damping_ratio`` per joint unless ``gains`` gives them by joint name, ``feedforward`` (none, rigid or
+    reference), torque ``limits`` [N m] by joint name (none: no limit), the controller ``rate`` [Hz],
     ``duration`` [s] and the plant's integrator ``step`` [s]; the reference is integrated with
-    ``reference_step`` [s] (default: ``step``; a divisor of it)."""
+    ``reference_step`` [s], a divisor of ``step`` (default: the node's, ONLINE_STEP, where it divides ``step``, so
+    that the reference is the node's; else ``step``)."""
 
     variant: str = "flexible"
     realisation: str = "ideal"
@@ -79,8 +82,9 @@ class TrackingSpec:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} = {value}: must be a finite number > 0")
-        if self.reference_step is not None and not (self.reference_step > 0.0 and abs(
-                self.reference_stride * self.reference_step / self.step - 1.0) <= 1e-9):
+        if self.reference_step is None:
+            object.__setattr__(self, "reference_step", ONLINE_STEP if _divides(ONLINE_STEP, self.step) else self.step)
+        if not (self.reference_step > 0.0 and _divides(self.reference_step, self.step)):
             raise ValueError(f"reference_step = {self.reference_step} s: must divide step = {self.step} s")
         if not abs(self.steps_per_tick * self.step * self.rate - 1.0) <= 1e-9:
             raise ValueError(f"rate = {self.rate} Hz with step = {self.step} s: the controller period must be a "
@@ -93,7 +97,7 @@ class TrackingSpec:
     @property
     def reference_stride(self) -> int:
         """Reference steps per plant step."""
-        return 1 if self.reference_step is None else max(1, round(self.step / self.reference_step))
+        return max(1, round(self.step / self.reference_step))
 
     def check_joints(self, joints: tuple[str, ...]) -> None:
         """ValueError unless the joints named in gains, limits and bandwidths are among ``joints`` (the actuated
@@ -207,8 +211,8 @@ def run_tracking(params: CraneDescription, spec: TrackingSpec, progress: Progres
     if spec.feedforward == "rigid" and spec.variant != "rigid":
         tasks.append(task(Scenario(params, "rigid")))  # the rigid feedforward follows its own reference
     ahead = ComputedAhead([motion for motion, _ in tasks],
-                          [simulated_runs(motion, q0, spec.duration, step=spec.reference_step or spec.step,
-                                          every_row=False) for motion, q0 in tasks])
+                          [simulated_runs(motion, q0, spec.duration, step=spec.reference_step, every_row=False)
+                           for motion, q0 in tasks])
     joints = scenario.model.actuated_joints
     gains = spec.joint_gains(joints, held_inertia(scenario, joints, start))
     controller = JointController(gains, 1.0 / spec.rate)
@@ -236,7 +240,10 @@ def run_tracking(params: CraneDescription, spec: TrackingSpec, progress: Progres
                 continue
             i = k * per
             at = np.append(i, i[-1] + per)  # the ticks' starts and the last one's end
-            starts, ends = _feedforward(inverse, spec.step, feedforward_reference, tasks[-1][0], at)
+            if spec.feedforward == "reference":
+                starts, ends = _reference_feedforward(reference, tasks[0][0], joints, at)
+            else:
+                starts, ends = _feedforward(inverse, spec.step, feedforward_reference, tasks[-1][0], at)
             loop_start = time.perf_counter()
             plant.follow(reference.t[i + per], reference.q[np.ix_(i, actuated)], reference.qd[np.ix_(i, actuated)],
                          starts, ends, controller)
@@ -262,14 +269,17 @@ def recorded_run(params: CraneDescription, spec: TrackingSpec, recording: LoopRe
     """The :class:`TrackingRun` of a closed loop over ROS (``crane-reference loop``: the example controller with
     the default gains and no feedforward, ``spec`` saying so) from what it recorded: the plant's motion, efforts,
     E's pose and tip deflection, and the reference node's samples (their q and qd; the reference's E and tip
-    deflection from the kinematics of its q).  What the messages do not carry is NaN: the accelerations, the
+    deflection from the kinematics of its q), at the plant's times (its steps' k h, of which the stamps are the
+    nanosecond roundings).  What the messages do not carry is NaN: the accelerations, the
     energies and works (so the energy balance), E's velocity; no torque limit, so nothing saturates."""
     scenario = Scenario(params, spec.variant)
     model, dynamics = scenario.model, scenario.dynamics
     if tuple(recording.joint_names) != tuple(model.joint_names):
         raise ValueError(f"the recording's coordinates {list(recording.joint_names)} are not the {spec.variant} "
                          f"model's {list(model.joint_names)}")
-    t = recording.t
+    t = np.round(recording.t / spec.step) * spec.step  # the plant's time, k steps (its stamps: rounded to ns)
+    if not np.all(np.abs(t - recording.t) <= 1e-9):
+        raise ValueError(f"the recording's stamps are not on the plant's step grid of {spec.step:g} s")
     N, n = recording.q.shape
 
     def trajectory(q, qd, ee_position, ee_quaternion) -> Trajectory:
@@ -299,6 +309,23 @@ def _paper_task(scenario: Scenario, realisation: str) -> tuple[ProgrammedMotion,
     if realisation == "servo":
         return servo_motion(scenario), held_start(scenario).q
     return scenario.motion, scenario.equilibrium.q
+
+
+def _divides(step: float, interval: float) -> bool:
+    """Whether ``step`` [s] divides ``interval`` [s] (to round-off)."""
+    return abs(max(1, round(interval / step)) * step / interval - 1.0) <= 1e-9
+
+
+def _reference_feedforward(reference: Trajectory, motion: ProgrammedMotion, joints: tuple[str, ...],
+                           at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The reference's constraint forces at the ``joints`` (the actuated ones) at its samples ``at`` (ticks'
+    starts; :meth:`~crane_reference.motion.programmed_motion.ProgrammedMotion.evaluated_rows`, as the node's
+    samples have them for the preview's efforts), held over each tick: as ``(starts, ends)`` of :func:`_feedforward`
+    (len(at), a) with each tick's end equal to its start."""
+    forces = motion.evaluated_rows(reference.t[at], reference.q[at], reference.qd[at], reference.qdd[at])[0]
+    starts = forces[:, [reference.joint_names.index(name) for name in joints]]
+    ends = np.vstack((starts[:1], starts[:-1]))  # ends[k + 1] = starts[k]: no change over tick k
+    return starts, ends
 
 
 def _feedforward(inverse: RigidInverseDynamics | None, step: float, reference: Trajectory,
