@@ -73,7 +73,7 @@ def exact(params: CraneDescription) -> None:
     scenario, task = Scenario(params, "rigid"), params.task
     for step in (1e-3, 5e-4):
         run = run_tracking(params, TrackingSpec(variant="rigid", realisation="servo", gains=zero, duration=2.0,
-                                                step=step, rate=1.0 / step))
+                                                step=step, rate=1.0 / step, reference_step=step))
         x, y, z = run.plant.ee_position.T
         s = np.clip(run.t / task.rise_time, 0.0, 1.0)
         z_a = scenario.z_static + task.z_increment * (10 * s**3 - 15 * s**4 + 6 * s**5)
@@ -85,7 +85,8 @@ def exact(params: CraneDescription) -> None:
 def energy(params: CraneDescription, duration: float) -> None:
     """[energy] of the module docstring."""
     for step in (1e-3, 5e-4):
-        plant = run_tracking(params, TrackingSpec(duration=duration, step=step, rate=1.0 / step)).plant
+        plant = run_tracking(params, TrackingSpec(duration=duration, step=step, rate=1.0 / step,
+                                                  reference_step=step)).plant
         print(f"[energy] flexible, {duration:g} s, h={step * 1e3:.1f} ms: balance error <= "
               f"{np.abs(plant.energy_balance_error).max():.3g} J; drive and commands fed in "
               f"{plant.work_drive[-1]:.4g} J, dampers took {-plant.work_damping[-1]:.4g} J")
@@ -97,7 +98,7 @@ def inertia(params: CraneDescription) -> None:
     start = held_start(scenario)
     M = scenario.dynamics.terms(0.0, start.q, np.zeros_like(start.q)).M
     diagonal = np.array([M[j, j] for j in map(scenario.model.index, params.actuated)])
-    gains = TrackingSpec().joint_gains(diagonal)
+    gains = TrackingSpec().joint_gains(params.actuated, diagonal)
     inverse = np.linalg.inv(M)
     for name, J, g in zip(params.actuated, diagonal, gains, strict=True):
         local = 1.0 / inverse[scenario.model.index(name), scenario.model.index(name)]
