@@ -4,14 +4,39 @@ The ROS executable ``node`` (what ``ros2 run crane_reference node`` starts) is i
 file into ``lib/crane_reference`` instead of a console script, so that a plain ``pip install`` never
 puts a program called ``node`` on the user's PATH (it would shadow Node.js).  The PyPI builds of ROS 2
 Jazzy are an optional extra (``ros``): on a machine with a ROS distribution, rclpy and the message
-packages come from there.
+packages come from there.  ``setup.py install`` (``colcon build``) ends by compiling the kernels of the
+installed package (:class:`InstallAndCompile`).
 """
 
+import os
+import subprocess
+import sys
 from glob import glob
 
 from setuptools import find_packages, setup
+from setuptools.command.install import install
 
 PACKAGE = "crane_reference"
+
+
+class InstallAndCompile(install):
+    """``setup.py install`` (what ``colcon build`` runs for an ament_python package), then the package's numba
+    kernels compiled from the installed sources, as a C++ package compiles at build: numba keys its cache on the
+    sources' path, so that the installed node's first start loads them instead of compiling for a minute or two.
+    A failure (numba missing at build time) leaves the compile to the first start, with a warning."""
+
+    def run(self) -> None:
+        super().run()
+        lib = os.path.abspath(self.install_lib)
+        command = (f"import sys; sys.path.insert(0, {lib!r}); from {PACKAGE}.cli import main; "
+                   "sys.exit(main(['compile']))")
+        prefix = os.path.abspath(self.install_data)  # its share directory: the config files the warm-up loads
+        env = dict(os.environ, AMENT_PREFIX_PATH=os.pathsep.join(filter(None, (prefix,
+                                                                               os.environ.get("AMENT_PREFIX_PATH")))))
+        print(f"{PACKAGE}: compiling the kernels of the package installed in {lib}")
+        if subprocess.run([sys.executable, "-c", command], env=env, check=False).returncode != 0:
+            print(f"{PACKAGE}: WARNING: the kernels were not compiled; the first start compiles them "
+                  "(or run `crane-reference compile`)", file=sys.stderr)
 
 setup(
     name=PACKAGE,
@@ -53,6 +78,7 @@ setup(
     maintainer_email="crane-reference@example.org",
     description="Programmed constrained motion of a flexible-boom crane as a ROS 2 reference.",
     license="Apache-2.0",
+    cmdclass={"install": InstallAndCompile},
     entry_points={
         "console_scripts": [
             "crane-reference = crane_reference.cli:main",
