@@ -240,12 +240,17 @@ def test_lifecycle_transitions(probe_factory):
     assert transition(Transition.TRANSITION_CONFIGURE) and transition(Transition.TRANSITION_ACTIVATE)
 
 
+def plant_process() -> subprocess.Popen:
+    """The plant node as a process (real time, 100 Hz, 1 ms steps), its output captured."""
+    return subprocess.Popen([sys.executable, "-m", "crane_reference.ros.plant_node", "--ros-args", "-p",
+                             "control_rate:=100", "-p", "integrator.step:=0.001"], env=os.environ,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM])
 def test_the_process_ends_with_0_on_a_signal(signal_number):
-    process = subprocess.Popen([sys.executable, "-m", "crane_reference.ros.plant_node", "--ros-args", "-p",
-                                "control_rate:=100", "-p", "integrator.step:=0.001"], env=os.environ,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process = plant_process()
     context = rclpy.Context()
     rclpy.init(context=context)
     received: list = []
@@ -273,9 +278,7 @@ def test_a_stopped_process_counts_the_periods_it_missed():
     100 Hz in real time: the periods due meanwhile are missed, counted in /diagnostics' ``missed_ticks`` (the
     stop's length over the period, less the one that runs at once on waking) at WARN, and the states go on."""
     period = 0.01
-    process = subprocess.Popen([sys.executable, "-m", "crane_reference.ros.plant_node", "--ros-args", "-p",
-                                "control_rate:=100", "-p", "integrator.step:=0.001"], env=os.environ,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process = plant_process()
     context = rclpy.Context()
     rclpy.init(context=context)
     states: list = []
