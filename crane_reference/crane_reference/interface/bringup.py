@@ -25,8 +25,9 @@ REALTIME_POINT_PERIOD = 0.01  # [s] between preview points in real time
 REALTIME_PUBLISH_RATE = 100  # [Hz] of the reference's joint states in real time
 RECORDED_HISTORY = 1000
 """Keep-last depth of the publishers of what ``crane-reference loop`` records (the plant's joint states, pose
-and tip deflection, the reference's joint states): a second at 1 kHz, so that a recorder that lags loses
-nothing (a reliable writer drops what it no longer keeps)."""
+and tip deflection, the reference's joint states), which are also transient local: a second at 1 kHz, so that
+a recorder that lags, or whose subscription is matched after the first messages, loses nothing (a reliable
+writer drops what it no longer keeps; a volatile one sends nothing from before the match)."""
 
 
 def closed_loop_parameters(clock_mode: str, control_rate: int, model: str = "flexible", config_file: str = "",
@@ -47,7 +48,8 @@ def closed_loop_parameters(clock_mode: str, control_rate: int, model: str = "fle
 
     preview = topic(NODE_NAME, "reference_preview")
     latched = {f"qos_overrides.{preview}.{end}.durability": "transient_local" for end in ("publisher", "subscription")}
-    recorded = {node: {f"qos_overrides.{topic(node, name)}.publisher.depth": RECORDED_HISTORY for name in names}
+    recorded = {node: {f"qos_overrides.{topic(node, name)}.publisher.{policy}": value for name in names
+                       for policy, value in (("depth", RECORDED_HISTORY), ("durability", "transient_local"))}
                 for node, names in ((NODE_NAME, ("joint_states",)),
                                     (PLANT_NODE, ("joint_states", "end_effector_pose", "tip_deflection")))}
     publish_rate = min(control_rate, MAX_PUBLISH_RATE if lockstep else REALTIME_PUBLISH_RATE)

@@ -25,9 +25,11 @@ from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
 
 from ..interface.bringup import (
+    CLOCK_START,
     CONTROLLER_NODE,
     PLANT_NODE,
     LoopRecording,
@@ -183,17 +185,21 @@ def _record(duration: float, parameters: dict[str, dict[str, object]],
             names[:] = [tuple(msg.name)]
             states.setdefault(_stamp_ns(msg), (msg.position, msg.velocity, msg.effort))
 
-        node.create_subscription(JointState, f"/{PLANT_NODE}/joint_states", on_state, 100000)
+        # transient local, as the publishers (closed_loop_parameters): what they sent before the recorder's
+        # subscription was matched (DDS discovery takes its time) still comes
+        kept = QoSProfile(depth=100000, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        node.create_subscription(JointState, f"/{PLANT_NODE}/joint_states", on_state, kept)
         node.create_subscription(PoseStamped, f"/{PLANT_NODE}/end_effector_pose", lambda msg: poses.setdefault(
             _stamp_ns(msg), (*(getattr(msg.pose.position, a) for a in "xyz"),
-                             *(getattr(msg.pose.orientation, a) for a in "xyzw"))), 100000)
+                             *(getattr(msg.pose.orientation, a) for a in "xyzw"))), kept)
         node.create_subscription(Vector3Stamped, f"/{PLANT_NODE}/tip_deflection", lambda msg: deflections.setdefault(
-            _stamp_ns(msg), tuple(getattr(msg.vector, a) for a in "xyz")), 100000)
+            _stamp_ns(msg), tuple(getattr(msg.vector, a) for a in "xyz")), kept)
+
         def on_reference(msg: JointState) -> None:
             reference_names[:] = [tuple(msg.name)]
             references.setdefault(_stamp_ns(msg), (msg.position, msg.velocity))
 
-        node.create_subscription(JointState, f"/{NODE_NAME}/joint_states", on_reference, 100000)
+        node.create_subscription(JointState, f"/{NODE_NAME}/joint_states", on_reference, kept)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         held_plant = {**parameters, PLANT_NODE: {**parameters[PLANT_NODE], "autostart": False}}
@@ -201,14 +207,15 @@ def _record(duration: float, parameters: dict[str, dict[str, object]],
             start_by = time.monotonic() + START_TIMEOUT
             _start_plant(executor, node, processes, start_by)
             started = deadline = None
-            first = last = None
+            lockstep = parameters[PLANT_NODE]["clock_mode"] == "lockstep"
+            first = last = None  # in lock-step the plant's first state is stamped CLOCK_START: the run's origin
             while last is None or last - first < round(duration * NANOSECONDS):  # then exactly duration is kept
                 spin_once(executor, node, 0.05)
                 ended = [name for name, process in processes.items() if process.poll() is not None]
                 if ended:
                     raise LoopError(f"{', '.join(ended)} ended before the loop did")
                 if states:
-                    first, last = min(states), max(states)
+                    first, last = round(CLOCK_START * NANOSECONDS) if lockstep else min(states), max(states)
                     if started is None:
                         started = time.monotonic()
                         deadline = started + 100.0 * duration + 60.0
@@ -227,7 +234,7 @@ def _record(duration: float, parameters: dict[str, dict[str, object]],
                 return missing_messages(states, poses, deflections, references, first, end,
                                         NANOSECONDS // int(plant["control_rate"]),
                                         NANOSECONDS // int(reference["publish_rate"]),
-                                        plant["clock_mode"] == "lockstep")
+                                        lockstep)
 
             complete_by = time.monotonic() + COMPLETE_TIMEOUT
             while missing() and time.monotonic() < complete_by:  # the last messages in flight
