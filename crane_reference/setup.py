@@ -23,10 +23,13 @@ class InstallAndCompile(install):
     """``setup.py install`` (what ``colcon build`` runs for an ament_python package), then the package's numba
     kernels compiled from the installed sources, as a C++ package compiles at build: numba keys its cache on the
     sources' path, so that the installed node's first start loads them instead of compiling for a minute or two.
-    A failure (numba missing at build time) leaves the compile to the first start, with a warning."""
+    A failure (numba missing at build time) leaves the compile to the first start, with a warning; a staged
+    install (``--root``: a wheel's or a distribution package's build, whose files move) is not compiled."""
 
     def run(self) -> None:
         super().run()
+        if self.root is not None:
+            return
         lib = os.path.abspath(self.install_lib)
         command = (f"import sys; sys.path.insert(0, {lib!r}); from {PACKAGE}.cli import main; "
                    "sys.exit(main(['compile']))")

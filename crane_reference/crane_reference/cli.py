@@ -375,8 +375,9 @@ def parser() -> argparse.ArgumentParser:
     lo.add_argument("--feedforward", choices=PREVIEW_FEEDFORWARDS, default="none",
                     help="the controller's feedforward: none (default), or reference: the preview's efforts")
     lo.add_argument("--out", default="results/loop", help="output directory (default ./results/loop)")
-    sub.add_parser("compile", help="compile the numba kernels ahead of the first run (fills the cache; run it "
-                   "after installing, e.g. after colcon build)")
+    sub.add_parser("compile", help="compile the numba kernels ahead of the first run (fills the cache; "
+                   "`colcon build` does it for the package it installs; run it after `pip install` or "
+                   "`colcon build --symlink-install`)")
     u = sub.add_parser("urdf", help="print the URDF of a model variant (every coordinate a joint: for "
                        "robot_state_publisher), or with --links the URDF of the crane's links as described")
     u.add_argument("--config")

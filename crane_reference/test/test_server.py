@@ -393,7 +393,7 @@ def test_health_ranks_what_is_wrong_worst_first() -> None:
     assert serving_health(behind, 3).level == Level.WARN and "went back" in serving_health(behind, 3).message
     failed = dataclasses.replace(behind, stream=dataclasses.replace(stream, state=ERROR, last_error="singular"))
     health = serving_health(failed, 3)
-    assert health.level == Level.ERROR and health.message.startswith(f"{ERROR}: singular; holding the last sample")
+    assert health.level == Level.ERROR and health.message.startswith(f"{ERROR}: singular; the reference runs to its")
     assert "~/restart" in health.message and "configure" in health.message  # the remedies
     stopped = dataclasses.replace(failed, computing=False, fault="the solver process ended")
     health = serving_health(stopped, 3)

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..dynamics.closed_loop import held_period
 from ..dynamics.structures import CONVERGED, PlantCarry
+from ..motion.integration import IntegrationError
 from ..motion.simulation import StepPlan
 from .plant import Plant
 
@@ -54,15 +55,20 @@ class HeldPeriods:
     def advance(self, efforts: np.ndarray) -> None:
         """Hold the efforts u [N m or N] (order of the actuated joints) over the next
         period; an :class:`~crane_reference.motion.integration.IntegrationError` (or ProjectionError) if a step
-        fails, the plant then staying where it was."""
+        fails or meets a linear system it cannot solve, the plant then staying where it was."""
         i = self.count - self._planned
         if self._plan is None or i + 1 >= self._plan.first.size:
             self._make_plan()
             i = 0
         plan = self._plan
-        status, t, failed_at = held_period(self.carry, self._t0 + (self.count + 1) * self.period, plan.first[i],
-                                           plan.first[i + 1], plan.times, plan.on_jump, self._left, self._right,
-                                           *self._model, np.asarray(efforts, dtype=float))
+        end = self._t0 + (self.count + 1) * self.period
+        try:
+            status, t, failed_at = held_period(self.carry, end, plan.first[i], plan.first[i + 1], plan.times,
+                                               plan.on_jump, self._left, self._right, *self._model,
+                                               np.asarray(efforts, dtype=float))
+        except np.linalg.LinAlgError as error:  # the carry is updated only after every step converged
+            raise IntegrationError(f"the period from t = {self.t:.6g} s to {end:.6g} s met a linear system it "
+                                   f"cannot solve: {error}") from error
         if status != CONVERGED:
             raise self._stepper.integrator.failure(status, t, failed_at)
         self.count += 1

@@ -521,10 +521,10 @@ def _failed(q0, qd0, qdd0, B0, earlier, correction: ModalCorrection, status, ite
 
 
 @njit(cache=True, nogil=True)
-def _unsolved(q, a1):
-    """Why the constraints could not be met at an iterate (q, a1): NON_FINITE when it overflowed, else
-    CONSTRAINTS_UNSOLVABLE."""
-    return CONSTRAINTS_UNSOLVABLE if np.isfinite(q.sum() + a1.sum()) else NON_FINITE
+def _unsolved(it: Iterate, a1):
+    """Why the constraints could not be met at the iterate ``it`` with accelerations a1: NON_FINITE when it
+    overflowed, else CONSTRAINTS_UNSOLVABLE."""
+    return CONSTRAINTS_UNSOLVABLE if np.isfinite(it.q.sum() + it.qd.sum() + a1.sum()) else NON_FINITE
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -635,7 +635,7 @@ def integration_step(q0, qd0, qdd0, B0, earlier, correction: ModalCorrection, t0
     a1 = predicted_accelerations(a0, earlier)
     it = first_iterate(q0, qd0, qdd0, a0, a1, h, k, partition, chain, settings)
     if not it.solved:
-        return _failed(q0, qd0, qdd0, B0, earlier, correction, _unsolved(it.q, a1), 1)
+        return _failed(q0, qd0, qdd0, B0, earlier, correction, _unsolved(it, a1), 1)
     qdd, residual, B, Hw = _step_residual_at(it, a1, correction, k, drive, partition, chain)
     M = mass_at(it.S, Hw, chain)
     factor = iteration_factor(M, B, h, correction, drive, partition, chain)
@@ -664,7 +664,7 @@ def integration_step(q0, qd0, qdd0, B0, earlier, correction: ModalCorrection, t0
             break
     end = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, True, True)
     if not end.solved:
-        return _failed(q0, qd0, qdd0, B0, earlier, correction, _unsolved(end.q, a1), iteration + 1)
+        return _failed(q0, qd0, qdd0, B0, earlier, correction, _unsolved(end, a1), iteration + 1)
     qdd, B, singular_value = _end_accelerations(end, a1, k, partition, chain)
     later = np.empty_like(earlier)
     later[0], later[1] = a0, earlier[0]

@@ -209,10 +209,11 @@ class ExactFrequencyTrapezoidal:
         if times.size == 1:
             return IntegrationError(f"the step from t = {state.t:.6g} s with h = {times[0] - state.t:g} s met a "
                                     f"linear system it cannot solve: {error}")
+        at = state
         for k in range(times.size):
             try:
-                state = self.step(state, float(times[k]), ends_on_jump and k == times.size - 1)
-            except IntegrationError as failure:
+                at = self.step(at, float(times[k]), ends_on_jump and k == times.size - 1)
+            except (IntegrationError, ProjectionError) as failure:
                 return failure
         return IntegrationError(f"the steps from t = {state.t:.6g} s to {times[-1]:.6g} s: {error}")
 

@@ -137,7 +137,8 @@ class CraneControllerNode(Node):
             fields = [_columns_of([getattr(p, name) for p in msg.points], columns, f"reference preview {name}")
                       for name in ("positions", "velocities", "accelerations")]
             efforts = (_columns_of([p.effort for p in msg.points], columns, "reference preview effort")
-                       if all(len(p.effort) for p in msg.points) else None)
+                       if self.tracker.feedforward == "reference" and all(len(p.effort) for p in msg.points)
+                       else None)
             preview = Preview(times, *fields, efforts)
             self.tracker.check(preview)
         except ValueError as error:

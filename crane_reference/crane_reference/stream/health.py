@@ -48,8 +48,9 @@ def serving_health(status: ServerStatus, newly_held: int) -> Health:
         return Health(Level.ERROR, f"solver stopped: {status.fault}; holding the last sample (deactivate, cleanup, "
                                    "configure and activate start a new solver)")
     if state == ERROR:
-        return Health(Level.ERROR, f"{state}: {status.stream.last_error}; holding the last sample (deactivate, then "
-                                   "~/restart, or mend the cause and cleanup and configure; then activate)")
+        return Health(Level.ERROR, f"{state}: {status.stream.last_error}; the reference runs to its last valid step "
+                                   "and holds it there (deactivate, then ~/restart, or mend the cause and cleanup "
+                                   "and configure; then activate)")
     if status.fault:
         return Health(Level.ERROR, f"{state}: {status.fault}")
     if status.clock_behind:

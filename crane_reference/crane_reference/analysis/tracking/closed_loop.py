@@ -267,19 +267,20 @@ def run_tracking(params: CraneDescription, spec: TrackingSpec, progress: Progres
 
 def recorded_run(params: CraneDescription, spec: TrackingSpec, recording: LoopRecording) -> TrackingRun:
     """The :class:`TrackingRun` of a closed loop over ROS (``crane-reference loop``: the example controller with
-    the default gains and no feedforward, ``spec`` saying so) from what it recorded: the plant's motion, efforts,
+    the default gains and ``spec``'s feedforward) from what it recorded: the plant's motion, efforts,
     E's pose and tip deflection, and the reference node's samples (their q and qd; the reference's E and tip
-    deflection from the kinematics of its q), at the plant's times (its steps' k h, of which the stamps are the
-    nanosecond roundings).  What the messages do not carry is NaN: the accelerations, the
-    energies and works (so the energy balance), E's velocity; no torque limit, so nothing saturates."""
+    deflection from the kinematics of its q), at the plant's times (in lock-step its steps' k h, of which the
+    stamps are the nanosecond roundings; in real time the stamps).  What the messages do not carry is NaN: the
+    accelerations, the energies and works (so the energy balance), E's velocity; no torque limit, so nothing
+    saturates."""
     scenario = Scenario(params, spec.variant)
     model, dynamics = scenario.model, scenario.dynamics
     if tuple(recording.joint_names) != tuple(model.joint_names):
         raise ValueError(f"the recording's coordinates {list(recording.joint_names)} are not the {spec.variant} "
                          f"model's {list(model.joint_names)}")
-    t = np.round(recording.t / spec.step) * spec.step  # the plant's time, k steps (its stamps: rounded to ns)
-    if not np.all(np.abs(t - recording.t) <= 1e-9):
-        raise ValueError(f"the recording's stamps are not on the plant's step grid of {spec.step:g} s")
+    t = np.round(recording.t / spec.step) * spec.step  # lock-step: the plant's time, k steps (stamps: to the ns)
+    if not np.all(np.abs(t - recording.t) <= 1e-9):  # real time: stamped by the wall clock
+        t = recording.t
     N, n = recording.q.shape
 
     def trajectory(q, qd, ee_position, ee_quaternion) -> Trajectory:
