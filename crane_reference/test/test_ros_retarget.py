@@ -127,7 +127,12 @@ def test_a_goal_reached_between_monitor_ticks_succeeds_when_a_newer_goal_comes(r
     blend = 0.2
     first = client.send(ellipse_a=3.2, blend_time=blend)
     assert first.accepted
-    ros.wait_for(lambda: abs(ellipse_residuals(ros, 3.2, 2.0)[1][-5:]).max() < ON_PATH, "the first goal's new path")
+    def on_new_path() -> bool:  # the last 5 samples on the new ellipse and off the old one (both hold x = 0,
+        # where E starts at rest)
+        return (abs(ellipse_residuals(ros, 3.2, 2.0)[1][-5:]).max() < ON_PATH
+                and abs(ellipse_residuals(ros, 3.0, 2.0)[1][-5:]).min() > 1e-6)
+
+    ros.wait_for(on_new_path, "the first goal's new path")
     client.send(ellipse_a=3.4, blend_time=3.0)
     answer = client.result(first)
     assert answer.status == GoalStatus.STATUS_SUCCEEDED, answer.result.error_string
