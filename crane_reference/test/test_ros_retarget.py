@@ -32,6 +32,10 @@ class Client:
         self.ros = ros
         self.action = ActionClient(ros.probe, Retarget, f"/{NODE}/retarget")
         assert self.action.wait_for_server(timeout_sec=10.0)
+        # the server's services answer before its feedback publisher has discovered this client: a goal sent
+        # earlier loses its first feedback messages (volatile, as rclpy's action topics are)
+        ros.wait_for(lambda: ros.node.count_subscribers(f"/{NODE}/retarget/_action/feedback") >= 1,
+                     "the node to discover the client's feedback subscription")
 
     def send(self, feedback: list | None = None, **goal: float) -> Any:
         """The goal handle of ``goal`` (the node's targets by default) once the node answered it."""
