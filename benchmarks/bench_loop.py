@@ -3,8 +3,9 @@
     python benchmarks/bench_loop.py [--only tick realtime lockstep executors] [--duration 60]
                                     [--lockstep-duration 5] [--rate 1000]
 
-1. [tick] In this process: the plant's control period (PlantServer.tick: the compiled period and the state) and
-   filling its three serialized messages, per period, as a multiple of one Pinocchio ABA call on the same chain
+1. [tick] In this process: the plant's control period (PlantServer.tick: the compiled period and the state), its
+   state alone, the same periods in one compiled call (Plant.follow) and filling its three serialized messages,
+   per period (the best of 5 blocks of 400 periods), as a multiple of one Pinocchio ABA call on the same chain
    measured in this run; the CPU share [%] of those periods alone at ``--rate``.
 2. [realtime] The reference node, the plant (``clock_mode`` realtime, ``--rate``) and the example controller as
    processes (``crane-reference loop``'s parameters), for a window of ``--duration`` s of wall time that opens once
@@ -31,6 +32,7 @@ localhost.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import signal
 import subprocess
@@ -48,6 +50,7 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
+from crane_reference.control.controller import JointController, JointGains
 from crane_reference.control.plant_server import PlantServer, PlantSettings
 from crane_reference.interface import messages
 from crane_reference.interface.bringup import PLANT_NODE, closed_loop_parameters
@@ -113,26 +116,54 @@ def writers(server: PlantServer) -> tuple:
                                                                         state.deflection))))
 
 
-def tick_costs(rate: int, periods: int = 2000) -> float:
-    """[tick]: prints the per-period costs; returns the CPU share [%] of the periods alone at ``rate``."""
+def tick_costs(rate: int, blocks: int = 5, periods: int = 400) -> float:
+    """[tick]: prints the per-period costs (each the best of ``blocks`` blocks of ``periods`` periods, as ABA is
+    timed); returns the CPU share [%] of the periods alone at ``rate``."""
     params = load_config()
     server = PlantServer(params, PlantSettings(rate=float(rate), all_coordinates=True))
     joint, pose, tip = writers(server)
-    server.tick(0.0)
-    start = time.perf_counter()
-    for _ in range(periods):
-        state = server.tick(0.0)
-    period = (time.perf_counter() - start) / periods
-    start = time.perf_counter()
-    for k in range(periods):
-        joint.fill(k, state), pose.fill(k, state), tip.fill(k, state.deflection)
-    fill = (time.perf_counter() - start) / periods
+    state = server.tick(0.0)
+    tick = read = fill = math.inf
+    for _ in range(blocks):
+        start = time.perf_counter()
+        for _ in range(periods):
+            state = server.tick(0.0)
+        tick = min(tick, (time.perf_counter() - start) / periods)
+        start = time.perf_counter()
+        for _ in range(periods):
+            server.state()
+        read = min(read, (time.perf_counter() - start) / periods)
+        start = time.perf_counter()
+        for k in range(periods):
+            joint.fill(k, state), pose.fill(k, state), tip.fill(k, state.deflection)
+        fill = min(fill, (time.perf_counter() - start) / periods)
+    compiled = follow_cost(server, periods)
     aba = aba_time(Scenario(params, "flexible"))
-    print(f"[tick] a control period (compiled period + state) {period * 1e6:.0f} us = {period / aba:.1f} ABA; filling "
-          f"the three messages {fill * 1e6:.1f} us; Pinocchio ABA {aba * 1e6:.2f} us")
-    share = 100.0 * period * rate
+    print(f"[tick] the same periods in one compiled call (Plant.follow of {periods} ticks under the held efforts): "
+          f"{compiled * 1e6:.0f} us = {compiled / aba:.1f} ABA per period")
+    print(f"[tick] a control period (PlantServer.tick) {tick * 1e6:.0f} us = {tick / aba:.1f} ABA, of which its "
+          f"state (PlantServer.state) {read * 1e6:.1f} us = {read / aba:.1f} ABA; filling the three messages "
+          f"{fill * 1e6:.1f} us; Pinocchio ABA {aba * 1e6:.2f} us")
+    share = 100.0 * tick * rate
     print(f"[tick] the periods alone at {rate} Hz: {share:.1f} % of a core")
     return share
+
+
+def follow_cost(server: PlantServer, periods: int, blocks: int = 5) -> float:
+    """[s] per period of ``server``'s plant (at its start) stepping ``periods`` periods in one compiled call under
+    the efforts that hold it (:meth:`Plant.follow`: a controller with no gain and these efforts as its
+    feedforward), the best of ``blocks`` calls."""
+    plant, period = server.plant, server.settings.period
+    hold = np.tile(server.hold_efforts(server.q), (periods + 1, 1))
+    zeros = np.zeros((periods, hold.shape[1]))
+    best = math.inf
+    for _ in range(blocks):
+        controller = JointController([JointGains(0.0, 0.0)] * hold.shape[1], period)
+        ends = plant.t + period * np.arange(1, periods + 1)
+        start = time.perf_counter()
+        plant.follow(ends, zeros, zeros, hold[:-1], hold, controller)
+        best = min(best, (time.perf_counter() - start) / periods)
+    return best
 
 
 def publish_floor(rate: int, seconds: float = 5.0) -> float:

@@ -4,8 +4,10 @@
   ``held_start`` solves (another computation: static equilibrium with the luff and knuckle as
   servo-constraints), less the column drive's torque.
 * Under the efforts that hold it, the crane with its column drive off stays at rest.
-* A command held over the ticks (Plant.apply, the compiled loop) is the per-tick Python path
-  (Plant.actuate through the Actuated drive) with the same efforts.
+* A command held over the ticks (HeldPeriods, one compiled call per period) is the per-tick Python path
+  (Plant.actuate through the Actuated drive) with the same efforts: q, qd, E's pose, and what the period
+  computes beside them (the actuator torques, E's quaternion against scipy's, the tip deflection against the
+  module that computes it from q).
 * Refused commands (length, NaN, inf) change nothing: a run with them interleaved is the run without them,
   bit for bit; a command ordered by a permuted ``joints`` is the same command.
 * A timeout starts the hold command (counted), and the next command ends it.
@@ -30,6 +32,7 @@ from crane_reference.control.held_periods import HeldPeriods
 from crane_reference.control.plant import Plant, held_start
 from crane_reference.control.plant_server import CommandRefusedError, PlantServer, PlantSettings, warm_up_plant
 from crane_reference.control.preview_tracking import Preview, PreviewTracker
+from crane_reference.dynamics.deflection import tip_deflection
 from crane_reference.dynamics.kinematics import quaternion
 from crane_reference.model.paper_layout import ACTUATED as ACTUATED_JOINTS
 from crane_reference.model.parameters import TorqueDrive
@@ -67,7 +70,7 @@ def test_held_commands_are_the_per_tick_python_path(still):
     kd = np.array([4e4, 4e4, 1.3e4])
     efforts = start.torques + np.array([[2e3, -1e3, 50.0], [-1e3, 3e3, -20.0], [0.0, 0.0, 0.0]])
     ends = 0.05 * np.arange(1, 4)
-    compiled = HeldPeriods(Plant(still, "flexible", start, 1e-3, kd), 0.05)
+    compiled = HeldPeriods(Plant(still, "flexible", start, 1e-3, kd), 0.05, start.torques)
     for u in efforts:
         compiled.advance(u)
     python = Plant(still, "flexible", start, 1e-3, kd)
@@ -80,6 +83,14 @@ def test_held_commands_are_the_per_tick_python_path(still):
     assert np.abs(carry.ee_position - sample.ee_position).max() < 1e-9
     assert np.abs(carry.ee_rotation - sample.ee_rotation).max() < 1e-9
     assert np.abs(python.q - start.q).max() > 1e-3  # the commands moved it
+    torques = python.trajectory()[1][-1]
+    assert np.abs(carry.torques - torques).max() < 1e-9 * np.abs(torques).max()
+    expected = Rotation.from_matrix(sample.ee_rotation).as_quat()
+    assert np.abs(carry.ee_quaternion - expected * np.sign(expected[3])).max() < 1e-9
+    model, chain = python.model, python.dynamics.chain
+    deflection = tip_deflection(model, chain, python.q)[0]
+    assert np.abs(deflection).max() > 1e-5  # the commands bent the boom
+    assert np.abs(carry.deflection - deflection).max() < 1e-9 * np.abs(deflection).max() + 1e-12
 
 
 def test_held_periods_across_plans_and_drive_jumps_are_the_per_tick_python_path(params, monkeypatch):
@@ -91,7 +102,7 @@ def test_held_periods_across_plans_and_drive_jumps_are_the_per_tick_python_path(
     kd = np.array([4e4, 4e4, 1.3e4])
     period, count = 0.01, 7
     efforts = start.torques + np.outer(np.sin(np.arange(count)), [1e3, -5e2, 30.0])
-    compiled = HeldPeriods(Plant(crane, "flexible", start, 1e-3, kd), period)
+    compiled = HeldPeriods(Plant(crane, "flexible", start, 1e-3, kd), period, start.torques)
     python = Plant(crane, "flexible", start, 1e-3, kd)
     for k, u in enumerate(efforts):
         compiled.advance(u)

@@ -133,7 +133,7 @@ def test_forces_jumped_is_a_fresh_evaluation_under_the_new_drive(cases, realisat
         before = np.concatenate((case.dynamics.drive.kernel_parameters(t, True), rng.normal(0.0, 1e3, n)))
         after = np.concatenate((before[:4] + rng.normal(0.0, 1e2, 4), rng.normal(0.0, 1e3, n)))
         step = kernels.step_evaluation(q, qd, rng.normal(0.0, 1.0, n), k, before, partition, chain)
-        jumped = kernels.forces_jumped(step, q, qd, k, after, partition, chain)
+        jumped = kernels.forces_jumped(step.terms, q, qd, k, after, partition, chain)
         fresh = kernels.evaluate(q, qd, k, after, partition, chain)
         for (name, got), (_, expected) in zip(_fields(jumped), _fields(fresh), strict=True):
             np.testing.assert_array_equal(got, expected, err_msg=name)

@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..dynamics.closed_loop import held_period
-from ..dynamics.structures import CONVERGED, PlantCarry
+from ..dynamics.closed_loop import held_period_of_fields, plant_carry
+from ..dynamics.deflection import link_tip
+from ..dynamics.structures import CONVERGED
 from ..motion.integration import IntegrationError
 from ..motion.simulation import StepPlan
 from .plant import Plant
@@ -24,28 +25,30 @@ PLANNED_PERIODS = 1000
 
 
 class HeldPeriods:
-    """Control periods of ``period`` [s] of ``plant`` from its state now (the plant itself stays there), each
-    under efforts held over it."""
+    """Control periods of ``period`` [s] of ``plant`` from its state now (the plant itself stays there, under the
+    actuator ``torques`` [N m or N], order of its actuated joints), each under efforts held over it; the carry
+    holds the tip deflection of the first flexible link (:func:`~crane_reference.dynamics.deflection.link_tip`)."""
 
-    def __init__(self, plant: Plant, period: float):
+    def __init__(self, plant: Plant, period: float, torques: np.ndarray):
         stepper = plant.stepper
-        state, sample = stepper.state, stepper.sample
+        state = stepper.state
         self.period = period
         self.count = 0
         """Periods done."""
-        self.carry = PlantCarry(np.array([state.t]), state.q.copy(), state.qd.copy(), stepper.snapshot().work.copy(),
-                                state.correction.inertia.copy(), state.correction.damping.copy(),
-                                np.array([state.correction.time, state.correction.step]),
-                                np.array(sample.ee_position, dtype=float), np.array(sample.ee_rotation, dtype=float))
-        """The plant's state after the periods done."""
+        tip = link_tip(plant.model)
+        self.carry = plant_carry(state.t, state.q, state.qd, stepper.snapshot().work, state.correction,
+                                 plant.terms(), torques, tip, plant.dynamics.chain)
+        """The plant's state after the periods done (:class:`~crane_reference.dynamics.structures.PlantCarry`)."""
         self._t0 = state.t
         self._stepper = stepper
         self._drive = plant.drive.drive
-        self._model = (stepper.motion.constraints.coefficients(state.t), stepper.motion.partition, plant.dynamics.chain,
-                       stepper.integrator.settings, plant.actuated, plant.joint_damping)
+        k, settings = stepper.motion.constraints.coefficients(state.t), stepper.integrator.settings
+        self._model = (tuple(k), tuple(stepper.motion.partition), tuple(plant.dynamics.chain), tuple(settings),
+                       plant.actuated, plant.joint_damping, tuple(tip))  # as held_period_of_fields takes them
+        self._carry = tuple(self.carry)
+        self._arguments: tuple = ()  # the plan's arrays, then the model's
         self._plan: StepPlan | None = None
         self._planned = 0  # the first period of the plan
-        self._left = self._right = np.empty((0, 4))  # the column drive's parameters: left, right limits
 
     @property
     def t(self) -> float:
@@ -60,12 +63,11 @@ class HeldPeriods:
         if self._plan is None or i + 1 >= self._plan.first.size:
             self._make_plan()
             i = 0
-        plan = self._plan
+        first = self._plan.first
         end = self._t0 + (self.count + 1) * self.period
         try:
-            status, t, failed_at = held_period(self.carry, end, plan.first[i], plan.first[i + 1], plan.times,
-                                               plan.on_jump, self._left, self._right, *self._model,
-                                               np.asarray(efforts, dtype=float))
+            status, t, failed_at = held_period_of_fields(self._carry, end, first[i], first[i + 1], *self._arguments,
+                                                         np.asarray(efforts, dtype=float))
         except np.linalg.LinAlgError as error:  # the carry is updated only after every step converged
             raise IntegrationError(f"the period from t = {self.t:.6g} s to {end:.6g} s met a linear system it "
                                    f"cannot solve: {error}") from error
@@ -80,4 +82,5 @@ class HeldPeriods:
         plan = self._stepper.step_plan(ends, after=self._plan)
         left = self._drive.kernel_parameters(plan.times, left_limit=True)
         right = self._drive.kernel_parameters(np.concatenate(([self.t], plan.times)))
-        self._plan, self._planned, self._left, self._right = plan, self.count, left, right
+        self._plan, self._planned = plan, self.count
+        self._arguments = (plan.times, plan.on_jump, left, right, *self._model)

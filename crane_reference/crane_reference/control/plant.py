@@ -20,7 +20,8 @@ import numpy as np
 
 from ..dynamics.chain_dynamics import CraneDynamics
 from ..dynamics.closed_loop import closed_loop_run
-from ..dynamics.structures import ACCOUNTS, CONVERGED, LoopRows
+from ..dynamics.kernels import accelerations_at
+from ..dynamics.structures import ACCOUNTS, CONVERGED, Accelerations, LoopRows
 from ..model.chain import build_model
 from ..model.description import CraneDescription
 from ..model.drive import Actuated, make_drive
@@ -137,7 +138,7 @@ class Plant:
         after = inner.kernel_parameters(np.concatenate(([stepper.state.t], plan.times)))
         kp, kd, ki, limit, integral, saturated = controller.arrays
         state = stepper.state
-        run = closed_loop_run(state.q, state.qd, state.correction, stepper.snapshot().work, state.t,
+        run = closed_loop_run(state.q, state.qd, self.terms(), state.correction, stepper.snapshot().work, state.t,
                               np.asarray(ends, dtype=float), plan.first, plan.times, plan.on_jump, left, after,
                               motion.constraints.coefficients(state.t), motion.partition, self.dynamics.chain,
                               stepper.integrator.settings, self.actuated, self.joint_damping, controller.period,
@@ -158,6 +159,15 @@ class Plant:
         last_start = plan.first[-2]
         self.drive.command(float(plan.times[last_start - 1]) if last_start else state.t, float(ends[-1]),
                            *(self._forces(torques) for torques in run.command))
+
+    def terms(self) -> Accelerations:
+        """The position and velocity terms of (8) at the plant's state now (an evaluation there, with the column
+        drive's parameters of now and no actuator force)."""
+        stepper, motion = self.stepper, self.stepper.motion
+        state = stepper.state
+        drive = np.concatenate((self.drive.drive.kernel_parameters(state.t), np.zeros(self.model.dof)))
+        return accelerations_at(state.q, state.qd, motion.constraints.coefficients(state.t), drive, motion.partition,
+                                self.dynamics.chain)
 
     def _keep(self, times: np.ndarray, rows: LoopRows) -> None:
         """Keep the rows of a :meth:`follow` (from its start, at ``times``) for :meth:`trajectory`."""

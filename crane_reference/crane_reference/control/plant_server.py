@@ -36,9 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..dynamics.cache import WarmUp, cache_counts
-from ..dynamics.deflection import TipDeflection
 from ..dynamics.kernels import imbalance_rows
-from ..dynamics.kinematics import quaternion
 from ..model.chain import VARIANTS
 from ..model.config import load_config
 from ..model.description import CraneDescription
@@ -147,7 +145,7 @@ class PlantServer:
         actuated_damping[self.order] = self.drive_damping
         self.plant = Plant(params, settings.variant, start, settings.step, actuated_damping, keep=False)
         """The crane at its start (:attr:`periods` carries it on)."""
-        self.periods = HeldPeriods(self.plant, settings.period)
+        self.periods = HeldPeriods(self.plant, settings.period, start.torques)
         """The control periods done and the crane's state after them."""
         model = self.plant.model
         self.published = model.joint_names if settings.all_coordinates else self.joints
@@ -157,8 +155,6 @@ class PlantServer:
         self.deflection_frame = (next(body.name for body in model.bodies if body.joint == flexible.root)
                                  if flexible is not None else "world")
         """The frame of the tip deflection: the URDF link of the first flexible link's first element."""
-        self._deflection = (TipDeflection(model, self.plant.dynamics.chain, link_frame=False)
-                            if settings.variant == "flexible" and flexible is not None else None)
         self._command = start.torques.copy()  # u in the order of the actuated joints
         self._last_command = -math.inf  # when the last command was accepted [s, the caller's clock]
         self._held: np.ndarray | None = None  # q_h while the hold command acts
@@ -171,7 +167,7 @@ class PlantServer:
         """The last command received was refused."""
         # the kernels of a period, of its state and of the hold command made ready now, not at the first command
         # (a period of its own on a copy of the state: the plant stays at its start)
-        HeldPeriods(self.plant, settings.period).advance(self._command)
+        HeldPeriods(self.plant, settings.period, start.torques).advance(self._command)
         self.hold_efforts(self.q)
         self.state()
 
@@ -248,13 +244,11 @@ class PlantServer:
 
     def state(self) -> PlantState:
         """The plant now (:class:`PlantState`)."""
-        plant, carry = self.plant, self.periods.carry
-        effort = np.zeros(plant.model.dof)
-        effort[plant.actuated] = self._command - plant.joint_damping * carry.qd[plant.actuated]
-        deflection = self._deflection(carry.q)[0] if self._deflection is not None else np.zeros(3)
-        rows = self._published
+        carry, rows = self.periods.carry, self._published
+        effort = np.zeros(self.plant.model.dof)
+        effort[self.plant.actuated] = carry.torques
         return PlantState(self.t, carry.q[rows], carry.qd[rows], effort[rows], carry.ee_position.copy(),
-                          quaternion(carry.ee_rotation), deflection, self.holding)
+                          carry.ee_quaternion.copy(), carry.deflection.copy(), self.holding)
 
 
 @dataclass(frozen=True)

@@ -6,10 +6,9 @@ which the Python controller calls too); the plant is the crane without programme
 by :func:`~.kernels.integration_step` exactly as :class:`~crane_reference.motion.simulation.MotionStepper`
 steps it: at each tick the command's forces jump and (8) is solved again there keeping the modal correction
 (:func:`~.kernels.corrected_accelerations`), on the position and velocity terms of the step that ended there
-(:func:`~.kernels.forces_jumped`: the state did not move; a call's first tick evaluates its state afresh); at a
-jump of the column drive's torque the step
-ends on it and the integrator restarts there; every step is evaluated in full and its powers integrated by the
-trapezoidal rule into the work accounts.
+(:func:`~.kernels.forces_jumped`: the state did not move; at a call's first tick, on the terms it is given at
+its start); at a jump of the column drive's torque the step ends on it and the integrator restarts there; every
+step is evaluated in full and its powers integrated by the trapezoidal rule into the work accounts.
 """
 
 from __future__ import annotations
@@ -17,14 +16,18 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .kernels import corrected_accelerations, evaluate, forces_jumped, integration_step, step_evaluation
+from .deflection import deflection_at
+from .kernels import corrected_accelerations, forces_jumped, integration_step, step_evaluation
+from .kinematics import quaternion
 from .structures import (
     ACCOUNTS,
     CONVERGED,
     DRIVE_TORQUE,
     POWERS,
+    Accelerations,
     ChainData,
     Coefficients,
+    LinkTip,
     LoopRows,
     LoopRun,
     ModalCorrection,
@@ -65,12 +68,13 @@ def _drive_at(inner, t, start, end, first, last, actuated, n):
 
 
 @njit(cache=True, nogil=True)
-def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, first_step, step_times, on_jump, inner,
-                    inner_after, k: Coefficients, partition: Partition, chain: ChainData, settings: StepSettings,
-                    actuated, joint_damping, period, reference_q, reference_qd, feedforward_start, feedforward_end, kp,
-                    kd, ki, limit, integral, saturated):
-    """Ticks of the controller from the plant state (t0, q, qd) with its modal ``correction`` and ``work``
-    accounts (3,) [J]; tick k runs from the plant's time then to ``tick_ends`` [k] (K,) [s] over the steps
+def closed_loop_run(q, qd, start_terms: Accelerations, correction: ModalCorrection, work, t0, tick_ends, first_step,
+                    step_times, on_jump, inner, inner_after, k: Coefficients, partition: Partition, chain: ChainData,
+                    settings: StepSettings, actuated, joint_damping, period, reference_q, reference_qd,
+                    feedforward_start, feedforward_end, kp, kd, ki, limit, integral, saturated):
+    """Ticks of the controller from the plant state (t0, q, qd), the position and velocity terms ``start_terms``
+    there (an evaluation's at (q, qd): its Q and qdd are not read), its modal ``correction`` and ``work`` accounts
+    (3,) [J]; tick k runs from the plant's time then to ``tick_ends`` [k] (K,) [s] over the steps
     first_step[k] .. first_step[k + 1] - 1 ending at ``step_times`` (S,), ``on_jump`` where a step ends on a
     jump of the column drive (``inner`` (S, 4): the column drive's parameters at the step ends, left limits
     there; ``inner_after`` (S + 1, 4): right limits at t0 and at the step ends, where the integrator
@@ -105,10 +109,10 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
         # the forces jump: (8) solved again at the tick's start, the modal correction kept
         s0 = first_step[tick]
         drive = _drive_at(inner_after[s0], start, start, end, first, last, actuated, n)
-        if tick == 0:
-            e = evaluate(q, qd, k, drive, partition, chain)
+        if tick == 0:  # on the terms given
+            e = forces_jumped(start_terms, q, qd, k, drive, partition, chain)
         else:  # on the terms of the step that ended here, the previous tick's last
-            e = forces_jumped(e, q, qd, k, drive, partition, chain)
+            e = forces_jumped(e.terms, q, qd, k, drive, partition, chain)
         qdd, B = e.terms.qdd, e.terms.velocity_map
         if np.isfinite(correction.time):
             qdd = corrected_accelerations(e.terms.M, B, qdd, qd, correction, partition)
@@ -138,7 +142,7 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
             for j in range(na):
                 rows.torques[s + 1, j] = drive[inner.shape[1] + actuated[j]] - joint_damping[j] * qd[actuated[j]]
             if on_jump[s]:  # restart at the drive's jump: the motion from it on, a fresh modal correction
-                e = forces_jumped(e, q, qd, k, _drive_at(inner_after[s + 1], t, start, end, first, last, actuated,
+                e = forces_jumped(e.terms, q, qd, k, _drive_at(inner_after[s + 1], t, start, end, first, last, actuated,
                                                          n), partition, chain)
                 qdd, B, correction = e.terms.qdd, e.terms.velocity_map, fresh
                 earlier = np.full((2, partition.integrated.size), np.nan)
@@ -152,18 +156,23 @@ def closed_loop_run(q, qd, correction: ModalCorrection, work, t0, tick_ends, fir
 @njit(cache=True, nogil=True)
 def held_period(carry: PlantCarry, end, start_step, end_step, step_times, on_jump, inner, inner_after,
                 k: Coefficients, partition: Partition, chain: ChainData, settings: StepSettings, actuated,
-                joint_damping, efforts):
+                joint_damping, tip: LinkTip, efforts):
     """One control period of the plant from its ``carry`` to ``end`` [s] under the efforts u [N m] (n_a,) held
     over it (the actuator torques u - ``joint_damping`` qd): a tick of :func:`closed_loop_run` whose controller
     commands u (no feedback), over the steps ``start_step`` .. ``end_step`` - 1 of a plan of steps
     (``step_times``, ``on_jump``, ``inner`` (S, 4) and ``inner_after`` (S + 1, 4) as there, the latter's row
-    ``start_step`` at the period's start).  The carry is updated in place when every step converged; returns the
-    status, the time reached and the end of the step that failed (that of the last step if none did)."""
+    ``start_step`` at the period's start), on the terms the carry holds; the deflection of the link ``tip``.
+    The carry is updated in place when every step converged; returns the status, the time reached and the end
+    of the step that failed (that of the last step if none did)."""
     na, s0, s1 = actuated.size, start_step, end_step
     zeros, held = np.zeros(na), np.empty((2, na))
     held[0], held[1] = efforts, efforts  # the feedforward at the period's start and at the next one's
     correction = ModalCorrection(carry.inertia, carry.damping, carry.modal[0], carry.modal[1])
-    run = closed_loop_run(carry.q, carry.qd, correction, carry.work, carry.clock[0], np.array([end]),
+    empty = np.empty(0)  # Q and qdd: not read
+    terms = Accelerations(carry.M, carry.h, empty, carry.gravity_forces, carry.gravity_potential[0],
+                          carry.ee_position, carry.ee_rotation, carry.ee_jacobian, carry.ee_bias, carry.A, carry.c,
+                          carry.velocity_map, empty)
+    run = closed_loop_run(carry.q, carry.qd, terms, correction, carry.work, carry.clock[0], np.array([end]),
                           np.array([0, s1 - s0]), step_times[s0:s1], on_jump[s0:s1], inner[s0:s1],
                           inner_after[s0:s1 + 1], k, partition, chain, settings, actuated, joint_damping, 1.0,
                           zeros.reshape(1, na), zeros.reshape(1, na), held, held, zeros, zeros, zeros,
@@ -171,13 +180,45 @@ def held_period(carry: PlantCarry, end, start_step, end_step, step_times, on_jum
     failed_at = step_times[min(s0 + run.steps, s1 - 1)]
     if run.status != CONVERGED:
         return run.status, run.t, failed_at
-    rows = run.rows
+    rows, terms = run.rows, run.last.terms
     carry.clock[0] = run.t
     carry.q[:], carry.qd[:], carry.work[:] = rows.q[-1], rows.qd[-1], rows.work[-1]
     carry.inertia[:], carry.damping[:] = run.correction.inertia, run.correction.damping
     carry.modal[0], carry.modal[1] = run.correction.time, run.correction.step
-    carry.ee_position[:], carry.ee_rotation[:] = rows.ee_position[-1], rows.ee_rotation[-1]
+    carry.M[:], carry.h[:], carry.gravity_forces[:] = terms.M, terms.h, terms.gravity_forces
+    carry.gravity_potential[0] = terms.gravity_potential
+    carry.ee_position[:], carry.ee_rotation[:] = terms.ee_position, terms.ee_rotation
+    carry.ee_jacobian[:], carry.ee_bias[:] = terms.ee_jacobian, terms.ee_bias
+    carry.A[:], carry.c[:], carry.velocity_map[:] = terms.A, terms.c, terms.velocity_map
+    carry.torques[:] = rows.torques[-1]
+    carry.ee_quaternion[:] = quaternion(terms.ee_rotation)
+    carry.deflection[:] = deflection_at(carry.q, tip, chain.kinds, chain.axes, chain.origins)
     return run.status, run.t, failed_at
+
+
+@njit(cache=True, nogil=True)
+def held_period_of_fields(carry, end, start_step, end_step, step_times, on_jump, inner, inner_after, k, partition,
+                          chain, settings, actuated, joint_damping, tip, efforts):
+    """:func:`held_period` with its structures (``carry``, ``k``, ``partition``, ``chain``, ``settings``,
+    ``tip``) given as plain tuples of their fields: numba types a plain tuple of arrays from its fingerprint in
+    C, a named one field by field in Python, and the plant calls this once per control period."""
+    return held_period(PlantCarry(*carry), end, start_step, end_step, step_times, on_jump, inner, inner_after,
+                       Coefficients(*k), Partition(*partition), ChainData(*chain), StepSettings(*settings), actuated,
+                       joint_damping, LinkTip(*tip), efforts)
+
+
+def plant_carry(t, q, qd, work, correction: ModalCorrection, terms: Accelerations, torques, tip: LinkTip,
+                chain: ChainData) -> PlantCarry:
+    """The carry of the plant at time t [s] in the state (q, qd) with its ``work`` accounts (3,) [J], modal
+    ``correction``, the evaluation's ``terms`` there and the actuator ``torques`` (n_a,) [N m or N] (copies of
+    them all)."""
+    return PlantCarry(np.array([t]), q.copy(), qd.copy(), work.copy(), correction.inertia.copy(),
+                      correction.damping.copy(), np.array([correction.time, correction.step]), terms.M.copy(),
+                      terms.h.copy(), terms.gravity_forces.copy(), np.array([terms.gravity_potential]),
+                      np.array(terms.ee_position, dtype=float), np.array(terms.ee_rotation, dtype=float),
+                      terms.ee_jacobian.copy(), terms.ee_bias.copy(), terms.A.copy(), terms.c.copy(),
+                      terms.velocity_map.copy(), np.array(torques, dtype=float), quaternion(terms.ee_rotation),
+                      deflection_at(q, tip, chain.kinds, chain.axes, chain.origins))
 
 
 @njit(cache=True, nogil=True)

@@ -16,7 +16,7 @@ from numba import njit
 
 from ..model.chain import ChainModel, FlexibleLink
 from .kinematics import forward_kinematics
-from .structures import ChainData
+from .structures import ChainData, LinkTip
 
 
 def flexible_link(model: ChainModel, name: str | None = None) -> FlexibleLink:
@@ -26,6 +26,16 @@ def flexible_link(model: ChainModel, name: str | None = None) -> FlexibleLink:
             return link
     known = ", ".join(link.name for link in model.flexible_links) or "none"
     raise ValueError(f"flexible link {name!r}: the crane's flexible links are {known}")
+
+
+def link_tip(model: ChainModel, name: str | None = None) -> LinkTip:
+    """The flexible link ``name``'s (default the first) :class:`~.structures.LinkTip` for :func:`deflection_at`;
+    the rigid chord's (no RFE angles: w = 0) if the crane has no flexible link and ``name`` is None."""
+    if name is None and not model.flexible_links:
+        return LinkTip(np.empty(0, dtype=np.int64), 0, 0, np.zeros(3))
+    flexible = flexible_link(model, name)
+    return LinkTip(np.asarray(flexible.springs, dtype=np.int64), flexible.root, flexible.last,
+                   np.asarray(flexible.tip, dtype=float))
 
 
 def rfe_indices(model: ChainModel, suffix: str = "", link: str | None = None) -> np.ndarray:
@@ -43,8 +53,7 @@ class TipDeflection:
 
     def __init__(self, model: ChainModel, chain: ChainData, link: str | None = None, link_frame: bool = True):
         flexible = flexible_link(model, link)
-        self._arguments = (flexible.springs, flexible.root, flexible.last, np.asarray(flexible.tip, dtype=float),
-                           chain.kinds, chain.axes, chain.origins)
+        self._arguments = (link_tip(model, flexible.name), chain.kinds, chain.axes, chain.origins)
         turned = link_frame and not np.array_equal(flexible.frame, np.eye(3))
         self._frame = flexible.frame if turned else None
 
@@ -61,16 +70,29 @@ def tip_deflection(model: ChainModel, chain: ChainData, q: np.ndarray, link: str
 
 
 @njit(cache=True, nogil=True)
-def _deflections(q, rfe, root, last, tip, kinds, axes, origins):
+def _deflections(q, tip: LinkTip, kinds, axes, origins):
     out = np.empty((q.shape[0], 3))
     for i in range(q.shape[0]):
-        T, _ = forward_kinematics(q[i], kinds, axes, origins)
-        chord = q[i].copy()
-        chord[rfe] = 0.0
-        T0, _ = forward_kinematics(chord, kinds, axes, origins)
-        gap = np.empty(3)  # r_tip - r_tip of the chord
-        for b in range(3):
-            gap[b] = T[last, b, 3] - T0[last, b, 3] + sum([(T[last, b, c] - T0[last, b, c]) * tip[c] for c in range(3)])
-        for a in range(3):  # R_0^T gap
-            out[i, a] = sum([T[root, b, a] * gap[b] for b in range(3)])
+        out[i] = deflection_at(q[i], tip, kinds, axes, origins)
     return out
+
+
+@njit(cache=True, nogil=True)
+def deflection_at(q, tip: LinkTip, kinds, axes, origins):
+    """w (3,) [m] of the module docstring at q (n,) in the frame of the link's first element (zero if ``tip``
+    has no RFE angles)."""
+    w = np.zeros(3)
+    if tip.springs.size == 0:
+        return w
+    T, _ = forward_kinematics(q, kinds, axes, origins)
+    chord = q.copy()
+    chord[tip.springs] = 0.0
+    T0, _ = forward_kinematics(chord, kinds, axes, origins)
+    last, root = tip.last, tip.root
+    gap = np.empty(3)  # r_tip - r_tip of the chord
+    for b in range(3):
+        gap[b] = T[last, b, 3] - T0[last, b, 3] + sum([(T[last, b, c] - T0[last, b, c]) * tip.point[c]
+                                                        for c in range(3)])
+    for a in range(3):  # R_0^T gap
+        w[a] = sum([T[root, b, a] * gap[b] for b in range(3)])
+    return w

@@ -291,11 +291,11 @@ def evaluate(q, qd, k: Coefficients, drive, partition: Partition, chain: ChainDa
 
 
 @njit(cache=True, nogil=True)
-def forces_jumped(e: Evaluation, q, qd, k: Coefficients, drive, partition: Partition, chain: ChainData):
-    """:func:`evaluate` at the (q, qd) of the evaluation ``e`` under another ``drive`` (the forces jumped there:
-    a new command, a jump of the column drive's torque): the position and velocity terms of ``e`` kept, Q
-    formed again from its Q_g and (8) solved again.  ``q``, ``qd`` and ``k`` are those ``e`` was evaluated at."""
-    s = e.terms
+def forces_jumped(s: Accelerations, q, qd, k: Coefficients, drive, partition: Partition, chain: ChainData):
+    """:func:`evaluate` at the (q, qd) of the terms ``s`` (those of an evaluation there) under another ``drive``
+    (the forces jumped there: a new command, a jump of the column drive's torque): the position and velocity
+    terms of ``s`` kept, Q formed again from its Q_g and (8) solved again (``s.forces`` and ``s.qdd`` are not
+    read).  ``q``, ``qd`` and ``k`` are those ``s`` was evaluated at."""
     forces = generalized_forces(q, qd, s.gravity_forces, chain, drive)
     e_dc = constraint_map(s.A, s.c, partition.independent, partition.dependent)[1]
     qdd = _solve_accelerations(s.M, forces - s.h, s.A, s.velocity_map, e_dc, s.c, partition)

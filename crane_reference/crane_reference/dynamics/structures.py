@@ -313,11 +313,27 @@ class LoopRun(NamedTuple):
     command: np.ndarray
 
 
+class LinkTip(NamedTuple):
+    """Where a flexible link's tip deflection is measured (:mod:`.deflection`): its RFE angles ``springs`` (indices
+    into q), the chain's index of its first element's frame (``root``) and of its last element's (``last``), and
+    the beam's end ``point`` (3,) [m] in the last element's frame."""
+
+    springs: np.ndarray
+    root: int
+    last: int
+    point: np.ndarray
+
+
 class PlantCarry(NamedTuple):
     """The actuated plant's state carried from one control period to the next in arrays that
     :func:`~.closed_loop.held_period` updates in place: the time ``clock`` (1,) [s], q and qd, the work accounts
     (3,) [J], the modal correction (:class:`ModalCorrection`: ``inertia``, ``damping``, ``modal`` (2,) its time
-    and step [s]) and E's position (3,) [m] and rotation (3, 3) in the world frame."""
+    and step [s]); the position and velocity terms of the evaluation at the last step's end, on which (8) is
+    solved again as the next period's command makes the forces jump (those of :class:`Accelerations` but Q and
+    qdd: M, h, Q_g, the ``gravity_potential`` (1,) [J], E's position (3,) [m] and rotation (3, 3) in the world
+    frame, C, d, A, c and B); and beside q and qd what the plant reports: the actuator ``torques`` (n_a,) [N m or
+    N] at the period's end, E's ``ee_quaternion`` (x, y, z, w) in the world frame and the tip ``deflection``
+    (3,) [m] (:func:`~.deflection.deflection_at`)."""
 
     clock: np.ndarray
     q: np.ndarray
@@ -326,5 +342,17 @@ class PlantCarry(NamedTuple):
     inertia: np.ndarray
     damping: np.ndarray
     modal: np.ndarray
+    M: np.ndarray
+    h: np.ndarray
+    gravity_forces: np.ndarray
+    gravity_potential: np.ndarray
     ee_position: np.ndarray
     ee_rotation: np.ndarray
+    ee_jacobian: np.ndarray
+    ee_bias: np.ndarray
+    A: np.ndarray
+    c: np.ndarray
+    velocity_map: np.ndarray
+    torques: np.ndarray
+    ee_quaternion: np.ndarray
+    deflection: np.ndarray
