@@ -57,7 +57,7 @@ from crane_reference.interface.bringup import PLANT_NODE, closed_loop_parameters
 from crane_reference.interface.serialized import SerializedJointState, SerializedPose, SerializedVector3
 from crane_reference.model.config import load_config
 from crane_reference.motion.simulation import Scenario
-from crane_reference.ros.loop import closed_loop_processes
+from crane_reference.ros.loop import bring_up, closed_loop_processes
 from crane_reference.ros.message_types import rclpy_types
 
 SUBSCRIBER = """
@@ -214,6 +214,10 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
                 dict({kv.key: kv.value for kv in status.values}, stamp=msg.header.stamp.sec + msg.header.stamp.nanosec
                      * 1e-9) for status in msg.status
                 if status.name.startswith(f"{PLANT_NODE}:")), 100)
+            starting = SingleThreadedExecutor(context=context)
+            starting.add_node(node)
+            bring_up(starting, node, processes, parameters, time.monotonic() + 600.0)
+            starting.remove_node(node)
             from rclpy.experimental import EventsExecutor  # rclpy >= 7.1.4
 
             executor = EventsExecutor(context=context)  # this listener takes as little of the cores as it can

@@ -251,7 +251,9 @@ def closed_loop(monkeypatch, tmp_path, **overrides):
     description = module.generate_launch_description()
     arguments = {a.args[0]: a.kwargs["default_value"] for a in description.args[0] if a.args}
     (opaque,) = [a for a in description.args[0] if "function" in a.kwargs]
-    return {node.kwargs["name"]: node for node in opaque.kwargs["function"]({**arguments, **overrides})}
+    actions = opaque.kwargs["function"]({**arguments, **overrides})
+    return ({node.kwargs["name"]: node for node in actions if "name" in node.kwargs},
+            [action for action in actions if "name" not in action.kwargs])
 
 
 @pytest.mark.ros  # reads the nodes' parameter tables (rclpy)
@@ -262,7 +264,7 @@ def test_the_closed_loop_launch_connects_the_three_nodes(monkeypatch, tmp_path, 
     from crane_reference.ros.parameters import SPECS
     from crane_reference.ros.plant_parameters import PLANT_SPECS
 
-    nodes = closed_loop(monkeypatch, tmp_path, clock_mode=clock_mode, namespace=namespace, control_rate="1000")
+    nodes, _ = closed_loop(monkeypatch, tmp_path, clock_mode=clock_mode, namespace=namespace, control_rate="1000")
     assert set(nodes) == {messages.NODE_NAME, plant_node.NODE_NAME, controller_node.NODE_NAME}
     setup = (ROOT / "setup.py").read_text()
     for node in nodes.values():
@@ -297,6 +299,36 @@ def test_the_closed_loop_launch_connects_the_three_nodes(monkeypatch, tmp_path, 
         plant_node.JOINT_STATES_TOPIC, namespace, plant_node.NODE_NAME)
     assert resolve(topics["command_topic"], namespace, "crane_controller") == resolve(
         plant_node.COMMANDS_TOPIC, namespace, plant_node.NODE_NAME)
+
+
+@pytest.mark.parametrize("clock_mode", ["lockstep", "realtime"])
+def test_in_real_time_the_reference_node_is_activated_once_the_plant_runs(monkeypatch, tmp_path, clock_mode):
+    """Real time: neither lifecycle node starts itself; the launch configures the reference node, then the plant,
+    activates the plant, then the reference node, each transition emitted as the one before ends (followed here
+    as launch follows its event handlers).  Lock-step: the nodes start themselves, and the launch emits nothing."""
+    nodes, actions = closed_loop(monkeypatch, tmp_path, clock_mode=clock_mode)
+    reference, plant = nodes["crane_reference"], nodes["crane_plant"]
+    for node in (reference, plant):
+        assert node.kwargs["parameters"][0]["autostart"] is (clock_mode == "lockstep")
+    if clock_mode == "lockstep":
+        assert actions == []
+        return
+    emitted = [action for action in actions if "event" in action.kwargs]
+    handlers = [action.args[0].kwargs for action in actions if "event" not in action.kwargs]
+    assert len(emitted) == 1
+    states = {Transition.TRANSITION_CONFIGURE: ("configuring", "inactive"),
+              Transition.TRANSITION_ACTIVATE: ("activating", "active")}
+    order, event = [], emitted[0].kwargs["event"].kwargs
+    while event is not None:
+        (_, node), transition = event["lifecycle_node_matcher"], event["transition_id"]
+        order.append((node.kwargs["name"], transition))
+        following = [handler for handler in handlers if handler["target_lifecycle_node"] is node
+                     and (handler["start_state"], handler["goal_state"]) == states[transition]]
+        assert len(following) <= 1
+        event = following[0]["entities"][0].kwargs["event"].kwargs if following else None
+    configure, activate = Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE
+    assert order == [("crane_reference", configure), ("crane_plant", configure), ("crane_plant", activate),
+                     ("crane_reference", activate)]
 
 
 def test_a_recording_of_the_loop_names_what_it_lacks():

@@ -5,6 +5,13 @@ The reference node publishes its preview over about a second (the controller rea
 joint_trajectory_controller reads its trajectory) and its joint states (the recording's reference): in lock-step
 a point and a sample every control period, and the reference and the controller follow the plant's /clock; in
 real time a point every 10 ms and samples at 100 Hz (the controller and the recording interpolate).
+
+In lock-step the reference's motion starts at the plant's clock start, whenever each node comes up.  In real time
+the reference's motion would start when its node is active, and the plant's time when its first command comes:
+a reference node that came up first would have the plant, still at rest, chase a motion seconds under way.  So
+in real time the two are started unconfigured and brought up in :data:`REALTIME_START`'s order: the reference's
+motion starts once the plant runs, at rest where the plant is held (both at the static equilibrium with E on
+the task's start point).
 """
 
 from __future__ import annotations
@@ -23,6 +30,10 @@ CLOCK_START = 1.0
 PREVIEW_HORIZON = 1.0  # [s], about
 REALTIME_POINT_PERIOD = 0.01  # [s] between preview points in real time
 REALTIME_PUBLISH_RATE = 100  # [Hz] of the reference's joint states in real time
+REALTIME_START = ((NODE_NAME, "configure"), (PLANT_NODE, "configure"), (PLANT_NODE, "activate"),
+                  (NODE_NAME, "activate"))
+"""The lifecycle transitions that bring up the real-time loop, each once the one before has ended: the reference
+node activated last (see the module docstring)."""
 RECORDED_HISTORY = 1000
 """Keep-last depth of the publishers of what ``crane-reference loop`` records (the plant's joint states, pose
 and tip deflection, the reference's joint states), which are also transient local: a second at 1 kHz, so that
@@ -33,7 +44,8 @@ writer drops what it no longer keeps; a volatile one sends nothing from before t
 def closed_loop_parameters(clock_mode: str, control_rate: int, model: str = "flexible", config_file: str = "",
                            namespace: str = "", feedforward: str = "none") -> dict[str, dict[str, object]]:
     """The parameters of the reference node, the plant and the controller (in ``namespace``), by node name, with
-    the controller's ``feedforward`` (``reference``: the preview carries its efforts).  The preview is
+    the controller's ``feedforward`` (``reference``: the preview carries its efforts); in real time the two
+    lifecycle nodes do not start themselves (:data:`REALTIME_START` brings them up).  The preview is
     transient-local on both ends (rclpy's ``qos_overrides``): a controller that starts after the reference node
     still gets its last preview, which in lock-step is the only one until the plant moves."""
     crane = {"model": model, "config_file": config_file}
@@ -55,10 +67,10 @@ def closed_loop_parameters(clock_mode: str, control_rate: int, model: str = "fle
     publish_rate = min(control_rate, MAX_PUBLISH_RATE if lockstep else REALTIME_PUBLISH_RATE)
     return {NODE_NAME: {**crane, "preview.points": points, "preview.horizon": (points - 1) * spacing / control_rate,
                         "preview.effort": feedforward == "reference", "publish_rate": publish_rate,
-                        "use_sim_time": lockstep, **recorded[NODE_NAME],
+                        "use_sim_time": lockstep, "autostart": lockstep, **recorded[NODE_NAME],
                         **{name: value for name, value in latched.items() if ".publisher." in name}},
             PLANT_NODE: {**crane, "clock_mode": clock_mode, "control_rate": control_rate, "all_coordinates": True,
-                         **recorded[PLANT_NODE]},
+                         "autostart": lockstep, **recorded[PLANT_NODE]},
             CONTROLLER_NODE: {**crane, "control_rate": control_rate, "feedforward": feedforward,
                               "use_sim_time": lockstep, **{name: value for name, value in latched.items()
                                                            if ".subscription." in name}}}

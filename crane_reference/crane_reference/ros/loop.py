@@ -24,7 +24,8 @@ import yaml
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetState
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
 
@@ -32,6 +33,7 @@ from ..interface.bringup import (
     CLOCK_START,
     CONTROLLER_NODE,
     PLANT_NODE,
+    REALTIME_START,
     LoopRecording,
     closed_loop_parameters,
     missing_messages,
@@ -45,7 +47,7 @@ MODULES = {NODE_NAME: "crane_reference.ros.node", PLANT_NODE: "crane_reference.r
 START_TIMEOUT = 600.0  # [s] of wall time for the three to start (a first start compiles the kernels)
 EXIT_TIMEOUT = 30.0  # [s] after SIGINT
 DISCOVERY_GRACE = 0.5  # [s] after the recorder sees the plant's publishers, before the plant is activated
-ANSWER_TIMEOUT = 10.0  # [s] for an answer of the plant's lifecycle services (then the state is asked)
+ANSWER_TIMEOUT = 10.0  # [s] for an answer of a lifecycle service (then the state is asked)
 COMPLETE_TIMEOUT = 10.0  # [s] of wall time after the loop's end for the messages still in flight
 
 
@@ -116,12 +118,20 @@ def _end(processes: dict[str, subprocess.Popen]) -> dict[str, int]:
     return codes
 
 
-def _start_plant(executor: SingleThreadedExecutor, node, processes: dict[str, subprocess.Popen],
-                 start_by: float) -> None:
-    """Configure the plant (started with ``autostart`` false) through its lifecycle service, wait until the
-    recorder ``node`` sees its publishers (so that it hears the first state: DDS discovery takes its time,
-    longer under load), then activate it."""
-    client = node.create_client(ChangeState, f"/{PLANT_NODE}/change_state")
+TRANSITIONS = {"configure": (Transition.TRANSITION_CONFIGURE, State.PRIMARY_STATE_UNCONFIGURED,
+                              State.PRIMARY_STATE_INACTIVE),
+               "activate": (Transition.TRANSITION_ACTIVATE, State.PRIMARY_STATE_INACTIVE, State.PRIMARY_STATE_ACTIVE)}
+"""A lifecycle transition's id, the state it leaves and the one it reaches."""
+
+
+def bring_up(executor: Executor, node: Node, processes: dict[str, subprocess.Popen],
+             parameters: dict[str, dict[str, object]], start_by: float) -> None:
+    """Bring up the loop ``processes`` started with ``parameters`` through the lifecycle services, from ``node``
+    spun by ``executor``, by the monotonic time ``start_by``: in lock-step configure the plant (which does not
+    start itself), in real time the two lifecycle nodes in turn (:data:`~..interface.bringup.REALTIME_START`);
+    before the plant is activated, wait until ``node`` sees its publishers (so that a recorder there hears the
+    first state: DDS discovery takes its time, longer under load).  :class:`LoopError` if a node ends, refuses or
+    does not answer in time."""
 
     def until(done: Callable[[], bool], what: str) -> None:
         while not done():
@@ -134,45 +144,52 @@ def _start_plant(executor: SingleThreadedExecutor, node, processes: dict[str, su
 
     def send(service, request):
         """``request``'s future, once ``service`` is ready."""
-        until(service.service_is_ready, f"no lifecycle service of {PLANT_NODE}")
+        until(service.service_is_ready, f"no lifecycle service of {service.srv_name}")
         return service.call_async(request)
 
     def answered(future) -> bool:
         """Whether ``future`` is done within ANSWER_TIMEOUT (a request or its answer can be lost while the service's
         discovery is under way)."""
         wait = time.monotonic() + ANSWER_TIMEOUT
-        until(lambda: future.done() or time.monotonic() > wait, f"{PLANT_NODE} did not answer")
+        until(lambda: future.done() or time.monotonic() > wait, "a lifecycle service did not answer")
         return future.done()
 
-    def transition(number: int, before: int, reached: int) -> None:
-        """Take the plant from the state ``before`` to ``reached`` by the transition ``number``: asked again if
-        the plant is still in ``before`` without an answer (lost), waited for while it is on the way."""
+    def transition(name: str, which: str) -> None:
+        """Take the node ``name`` through the transition ``which`` (:data:`TRANSITIONS`): asked again if it is still
+        where it was without an answer (lost), waited for while it is on the way."""
+        number, before, reached = TRANSITIONS[which]
+        if which == "activate" and name == PLANT_NODE:
+            until(lambda: all(node.count_publishers(f"/{PLANT_NODE}/{topic}") for topic in
+                              ("joint_states", "end_effector_pose", "tip_deflection")),
+                  f"the recorder saw no publisher of {PLANT_NODE}")
+            grace = time.monotonic() + DISCOVERY_GRACE  # for the plant's side of the discovery (near ours)
+            until(lambda: time.monotonic() > grace, "")
+        change, state = (node.create_client(kind, f"/{name}/{service}")
+                         for kind, service in ((ChangeState, "change_state"), (GetState, "get_state")))
         request = ChangeState.Request(transition=Transition(id=number))
-        future = send(client, request)
+        future = send(change, request)
         while not answered(future):
-            query = send(state_client, GetState.Request())
-            state = query.result().current_state.id if answered(query) else None
-            if state == reached:
-                return
-            if state == before:  # still where it was: the request was lost
-                future = send(client, request)
-        if not future.result().success:
-            raise LoopError(f"{PLANT_NODE} refused its lifecycle transition {number}")
+            query = send(state, GetState.Request())
+            now = query.result().current_state.id if answered(query) else None
+            if now == reached:
+                break
+            if now == before:  # still where it was: the request was lost
+                future = send(change, request)
+        else:
+            if not future.result().success:
+                raise LoopError(f"{name} refused its lifecycle transition {which}")
+        node.destroy_client(change)
+        node.destroy_client(state)
 
-    state_client = node.create_client(GetState, f"/{PLANT_NODE}/get_state")
-    transition(Transition.TRANSITION_CONFIGURE, State.PRIMARY_STATE_UNCONFIGURED, State.PRIMARY_STATE_INACTIVE)
-    until(lambda: all(node.count_publishers(f"/{PLANT_NODE}/{topic}") for topic in
-                      ("joint_states", "end_effector_pose", "tip_deflection")),
-          f"the recorder saw no publisher of {PLANT_NODE}")
-    grace = time.monotonic() + DISCOVERY_GRACE  # for the plant's side of the discovery (near ours, not with it)
-    until(lambda: time.monotonic() > grace, "")
-    transition(Transition.TRANSITION_ACTIVATE, State.PRIMARY_STATE_INACTIVE, State.PRIMARY_STATE_ACTIVE)
+    lockstep = parameters[PLANT_NODE]["clock_mode"] == "lockstep"
+    for name, which in ((PLANT_NODE, "configure"), (PLANT_NODE, "activate")) if lockstep else REALTIME_START:
+        transition(name, which)
 
 
 def _record(duration: float, parameters: dict[str, dict[str, object]],
             progress: Callable[[float], None] | None) -> LoopRecording:
     """The recorder's subscriptions first, then the nodes (:func:`closed_loop_processes`), the plant activated
-    once the recorder sees it (:func:`_start_plant`): it hears them from their first messages on."""
+    once the recorder sees it (:func:`bring_up`): it hears them from their first messages on."""
     context = rclpy.Context()
     rclpy.init(context=context)
     states, poses, deflections, references = {}, {}, {}, {}
@@ -205,7 +222,7 @@ def _record(duration: float, parameters: dict[str, dict[str, object]],
         held_plant = {**parameters, PLANT_NODE: {**parameters[PLANT_NODE], "autostart": False}}
         with closed_loop_processes(held_plant) as processes:
             start_by = time.monotonic() + START_TIMEOUT
-            _start_plant(executor, node, processes, start_by)
+            bring_up(executor, node, processes, held_plant, start_by)
             started = deadline = None
             lockstep = parameters[PLANT_NODE]["clock_mode"] == "lockstep"
             first = last = None  # in lock-step the plant's first state is stamped CLOCK_START: the run's origin

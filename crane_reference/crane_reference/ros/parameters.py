@@ -166,7 +166,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   from_config=lambda c: _torque_drive(c).end - _torque_drive(c).start),
     ParameterSpec("blend_time", DOUBLE, 2.0, "Duration of the C2 blend of the constraint parameters after a "
                   "change of ellipse.* or z.*", "s", (0.01, 600.0)),
-    ParameterSpec("command_lead", DOUBLE, 0.02, "A change of ellipse.*, z.* or speed_scaling and ~/pause "
+    ParameterSpec("command_lead", DOUBLE, 0.03, "A change of ellipse.*, z.* or speed_scaling and ~/pause "
                   "take effect at the last sample stamped within this time of their acceptance, at least the "
                   "one after the next to publish (the frames made beyond it are made again); a longer lead "
                   "tolerates a more loaded machine (diagnostics: {command}_margin_s)", "s", (0.001, 1.0)),
