@@ -212,8 +212,8 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
                                      lambda msg: commands.append(time.monotonic()), 10000, raw=True)
             node.create_subscription(DiagnosticArray, "/diagnostics", lambda msg: diagnostics.extend(
                 dict({kv.key: kv.value for kv in status.values}, stamp=msg.header.stamp.sec + msg.header.stamp.nanosec
-                     * 1e-9) for status in msg.status
-                if status.name.startswith(f"{PLANT_NODE}:")), 100)
+                     * 1e-9, level=int.from_bytes(status.level, "little"), message=status.message)
+                for status in msg.status if status.name.startswith(f"{PLANT_NODE}:")), 100)
             starting = SingleThreadedExecutor(context=context)
             starting.add_node(node)
             bring_up(starting, node, processes, parameters, time.monotonic() + 600.0)
@@ -260,6 +260,10 @@ def realtime(rate: int, duration: float, periods_share: float) -> None:
           f"{advanced / between:.3f} of real time; in the window {len(commands)} commands answered, command-to-state "
           f"latency p50 {np.median(latency) * 1e3:.2f} ms, p99 {np.quantile(latency, 0.99) * 1e3:.2f} ms, largest "
           f"{latency.max() * 1e3:.2f} ms")
+    if ticks + missed < round(between * rate) - 2:  # the periods due: the plant stopped running them
+        said = {(d["level"], d["message"]) for d in diagnostics if d["stamp"] >= before["stamp"] and d["level"]}
+        print("[realtime] the plant did not run every period due; its diagnostics in the window said: "
+              + ("; ".join(f"level {level}: {message}" for level, message in sorted(said)) or "nothing but OK"))
     share = shares[PLANT_NODE]
     print(f"[realtime] plant process CPU {share:.1f} % of a core; floor {floor + periods_share:.1f} % (publishing "
           f"only {floor:.1f} % + the periods alone {periods_share:.1f} %), ratio {share / (floor + periods_share):.2f}")

@@ -51,6 +51,7 @@ from crane_reference.ros.controller_node import CraneControllerNode
 from crane_reference.ros.node import CraneReferenceNode
 from crane_reference.ros.parameters import ParameterError
 from crane_reference.ros.plant_node import NODE_NAME, CranePlantNode
+from crane_reference.ros.settings import StartupError
 
 NS = 10**9
 PERIOD = 1e-3
@@ -319,13 +320,22 @@ def test_a_stopped_process_counts_the_periods_it_missed():
         process.communicate(timeout=30)
 
 
-def test_configuration_errors_name_the_parameter():
+def test_configuration_errors_name_the_parameter(tmp_path):
+    """A setting that does not fit names the parameter; a crane whose first period cannot be integrated (a column
+    torque of 1e6 N m from the start: the step does not converge) names the failure, not only that the node is
+    unconfigured."""
+    crane = tmp_path / "crane.yaml"
+    text = (CONFIG / "crane.yaml").read_text()
+    assert "  torque: 4000.0 " in text
+    crane.write_text(text.replace("  torque: 4000.0 ", "  torque: 1.0e6 "))
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
         with pytest.raises(Exception, match=r"rate = 300.0 Hz with step"):
             CranePlantNode(context=context, parameter_overrides=[Parameter("control_rate", value=300),
                                                                  Parameter("integrator.step", value=1e-3)])
+        with pytest.raises(StartupError, match=r"the step from t = 0 s with h = 0.001 s did not converge"):
+            CranePlantNode(context=context, parameter_overrides=[Parameter("config_file", value=str(crane))])
     finally:
         context.try_shutdown()
 
@@ -494,3 +504,24 @@ def test_a_real_time_loop_starts_its_reference_once_the_plant_runs(params):
     assert abs(recording.q[0, column] - held[column]) < 1e-9
     assert abs(recording.reference_q[0, column] - held[column]) < 0.1
     assert abs(recording.reference_q[0, luff] - held[luff]) < 5e-3
+
+
+@pytest.mark.slow
+def test_a_loop_whose_plant_stops_ends_with_why(tmp_path):
+    """A plant that stops mid-run (a column torque of 1e6 N m from 0.2 s: its step there does not converge; the
+    node stays up, at ERROR) leaves ``crane-reference loop`` without new states: it ends with a LoopError after
+    ``STALL_TIMEOUT`` that says so, with the plant's own words, instead of waiting for ever."""
+    from crane_reference.ros.loop import STALL_TIMEOUT, LoopError, run_loop
+
+    crane = tmp_path / "crane.yaml"
+    text = (CONFIG / "crane.yaml").read_text()
+    start = "  start: 0.0                        # [s]"
+    assert "  torque: 4000.0 " in text and start in text
+    crane.write_text(text.replace("  torque: 4000.0 ", "  torque: 1.0e6 ").replace(start, start.replace("0.0", "0.2")))
+    began = time.monotonic()
+    with pytest.raises(LoopError) as error:
+        run_loop(2.0, "lockstep", 1000, config_file=str(crane))
+    said = str(error.value)
+    assert said.startswith(f"the plant published no new state for {STALL_TIMEOUT:g} s of wall time, after 0.200 s")
+    assert "[crane_plant]: the plant stopped: the step from t = 0.2 s with h = 0.001 s did not converge" in said
+    assert time.monotonic() - began < 120.0

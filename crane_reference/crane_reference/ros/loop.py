@@ -48,6 +48,7 @@ START_TIMEOUT = 600.0  # [s] of wall time for the three to start (a first start 
 EXIT_TIMEOUT = 30.0  # [s] after SIGINT
 DISCOVERY_GRACE = 0.5  # [s] after the recorder sees the plant's publishers, before the plant is activated
 ANSWER_TIMEOUT = 10.0  # [s] for an answer of a lifecycle service (then the state is asked)
+STALL_TIMEOUT = 10.0  # [s] of wall time without a new state of the plant (one that stopped, or a loop that hangs)
 COMPLETE_TIMEOUT = 10.0  # [s] of wall time after the loop's end for the messages still in flight
 
 
@@ -223,9 +224,10 @@ def _record(duration: float, parameters: dict[str, dict[str, object]],
         with closed_loop_processes(held_plant) as processes:
             start_by = time.monotonic() + START_TIMEOUT
             bring_up(executor, node, processes, held_plant, start_by)
-            started = deadline = None
+            started = None
             lockstep = parameters[PLANT_NODE]["clock_mode"] == "lockstep"
             first = last = None  # in lock-step the plant's first state is stamped CLOCK_START: the run's origin
+            heard, count = time.monotonic(), 0  # when the plant's last new state came, and the states then
             while last is None or last - first < round(duration * NANOSECONDS):  # then exactly duration is kept
                 spin_once(executor, node, 0.05)
                 ended = [name for name, process in processes.items() if process.poll() is not None]
@@ -235,12 +237,13 @@ def _record(duration: float, parameters: dict[str, dict[str, object]],
                     first, last = round(CLOCK_START * NANOSECONDS) if lockstep else min(states), max(states)
                     if started is None:
                         started = time.monotonic()
-                        deadline = started + 100.0 * duration + 60.0
                     if progress is not None:
                         progress((last - first) / NANOSECONDS)
-                    if time.monotonic() > deadline:
-                        raise LoopError(f"the loop ran {(last - first) / NANOSECONDS:.3f} s of {duration:g} s in "
-                                        f"{time.monotonic() - started:.0f} s of wall time")
+                    if len(states) > count:
+                        heard, count = time.monotonic(), len(states)
+                    elif time.monotonic() - heard > STALL_TIMEOUT:
+                        raise LoopError(f"the plant published no new state for {STALL_TIMEOUT:g} s of wall time, "
+                                        f"after {(last - first) / NANOSECONDS:.3f} s of {duration:g} s")
                 elif time.monotonic() > start_by:
                     raise LoopError(f"no state of the plant within {START_TIMEOUT:g} s")
             wall = time.monotonic() - started

@@ -51,6 +51,7 @@ from ..model.config import ConfigError, load_config
 from ..model.units import NANOSECONDS
 from ..motion.integration import IntegrationError
 from ..motion.programmed_motion import ProjectionError
+from ..motion.simulation import SOLVER_FAILURES
 from ..stream.health import CANNOT
 from ..stream.threads import real_time_switching, start_named
 from .message_types import rclpy_types
@@ -110,7 +111,7 @@ class CranePlantNode(LifecycleNode):
         v = self._params
         try:
             self._server = PlantServer(load_config(v.config_file or None), v.settings())
-        except (ConfigError, ValueError) as error:
+        except (ConfigError, ValueError, *SOLVER_FAILURES) as error:  # a start that cannot run: say why
             self._doing = f"{CANNOT} configure: {error}"
             self.get_logger().error(self._doing)
             return TransitionCallbackReturn.FAILURE
