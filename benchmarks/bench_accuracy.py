@@ -61,7 +61,8 @@ from scipy.integrate import quad
 from scipy.signal import butter, sosfiltfilt
 
 from crane_reference.analysis.modal import linearise, modal_analysis, modes_at
-from crane_reference.dynamics import kernels
+from crane_reference.dynamics.modal_correction import iteration_factor
+from crane_reference.dynamics.step import first_iterate, predicted_accelerations, step_residual
 from crane_reference.model.config import load_config
 from crane_reference.model.description import CraneDescription
 from crane_reference.model.parameters import Damping, FlexibleDrive
@@ -295,17 +296,17 @@ def newton_matrix(params: CraneDescription) -> None:
             for j in range(a0.size):
                 delta = np.zeros_like(a0)
                 delta[j] = 1e-3 * max(1.0, abs(a0[j]))
-                plus, minus = (kernels.step_residual(a0 + sign * delta, state.q, state.qd, a0, state.correction, step,
+                plus, minus = (step_residual(a0 + sign * delta, state.q, state.qd, a0, state.correction, step,
                                                      k, drive, partition, chain, settings) for sign in (1.0, -1.0))
                 jacobian[:, j] = (plus - minus) / (2.0 * delta[j])
-            first = kernels.first_iterate(state.q, state.qd, state.qdd, a0,
-                                          kernels.predicted_accelerations(a0, state.earlier), step, k, partition, chain,
+            first = first_iterate(state.q, state.qd, state.qdd, a0,
+                                          predicted_accelerations(a0, state.earlier), step, k, partition, chain,
                                           settings)
             at_first = motion.solve(t1, first.q, first.qd)
             factors = {
-                "first iterate": kernels.iteration_factor(at_first.dynamics.M, at_first.velocity_map, step,
+                "first iterate": iteration_factor(at_first.dynamics.M, at_first.velocity_map, step,
                                                           state.correction, drive, partition, chain),
-                "step's start": kernels.iteration_factor(state.solution.dynamics.M, state.solution.velocity_map, step,
+                "step's start": iteration_factor(state.solution.dynamics.M, state.solution.velocity_map, step,
                                                          state.correction, drive, partition, chain)}
             parts = []
             for name, factor in factors.items():

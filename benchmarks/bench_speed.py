@@ -29,9 +29,13 @@ import numpy as np
 from common import aba_time, call_seconds, newton_iterations, run_times
 from numba import njit
 
-from crane_reference.dynamics import kernels
+from crane_reference.dynamics.evaluation import accelerations_at, evaluate
 from crane_reference.dynamics.inertia import world_pseudo_inertias
-from crane_reference.dynamics.structures import Coefficients
+from crane_reference.dynamics.modal_correction import iteration_factor, modal_correction
+from crane_reference.dynamics.projection import project_positions
+from crane_reference.dynamics.runs import evaluated_rows, integration_run
+from crane_reference.dynamics.step import newton_residual
+from crane_reference.dynamics.structures import Coefficients, StepStart
 from crane_reference.dynamics.terms import chain_terms, end_effector_jacobian, position_terms
 from crane_reference.model.config import load_config
 from crane_reference.model.description import CraneDescription
@@ -83,8 +87,9 @@ def step_times(scenario: Scenario, step: float, duration: float, after: float = 
     for i in range(times.size):
         k_i = Coefficients(k.Q[i:i + 1], k.g[i:i + 1], k.c[i:i + 1], k.order)
         start = time.perf_counter()
-        run = kernels.integration_run(q, qd, qdd, B, earlier, correction, t0, times[i:i + 1], k_i, drives[i:i + 1],
-                                      motion.partition, motion.dynamics.chain, settings, evaluated, stop_flag())
+        run = integration_run(StepStart(t0, q, qd, qdd, B, earlier, correction), times[i:i + 1], k_i,
+                              drives[i:i + 1], motion.partition, motion.dynamics.chain, settings, evaluated,
+                              stop_flag())
         walls[i] = time.perf_counter() - start
         last = run.last
         q, qd, qdd, earlier, correction, t0 = last.q, last.qd, run.rows.qdd[0], last.earlier, last.correction, times[i]
@@ -145,7 +150,7 @@ def _repeat_end_effector(q, chain, n):
 def _repeat_projection(q, k, holonomic_dependent, chain, n):
     total = 0.0
     for _ in range(n):
-        total += kernels.project_positions(q, k, holonomic_dependent, chain, 1e-9, 25).q[0]
+        total += project_positions(q, k, holonomic_dependent, chain, 1e-9, 25).q[0]
     return total
 
 
@@ -153,17 +158,17 @@ def _repeat_projection(q, k, holonomic_dependent, chain, n):
 def _repeat_accelerations(q, qd, k, drive, partition, chain, n):
     total = 0.0
     for _ in range(n):
-        total += kernels.accelerations_at(q, qd, k, drive, partition, chain).qdd[0]
+        total += accelerations_at(q, qd, k, drive, partition, chain).qdd[0]
     return total
 
 
 @njit
 def _repeat_residual(q, qd, a, k, drive, partition, chain, n):
-    at = kernels.project_positions(q, k, partition.holonomic_dependent, chain, 1e-9, 25)
+    at = project_positions(q, k, partition.holonomic_dependent, chain, 1e-9, 25)
     total = 0.0
     for _ in range(n):
         Hw = world_pseudo_inertias(at.T, chain.body_joint, chain.body_H)
-        total += kernels.newton_residual(q, qd, a, at.T, at.S, Hw, at.ee_position, at.ee_jacobian, k, drive,
+        total += newton_residual(q, qd, a, at.T, at.S, Hw, at.ee_position, at.ee_jacobian, k, drive,
                                          partition, chain)[1][0]
     return total
 
@@ -172,7 +177,7 @@ def _repeat_residual(q, qd, a, k, drive, partition, chain, n):
 def _repeat_factor(M, B, correction, drive, partition, chain, n):
     total = 0.0
     for _ in range(n):
-        total += kernels.iteration_factor(M, B, 1e-3, correction, drive, partition, chain)[0, 0]
+        total += iteration_factor(M, B, 1e-3, correction, drive, partition, chain)[0, 0]
     return total
 
 
@@ -180,7 +185,7 @@ def _repeat_factor(M, B, correction, drive, partition, chain, n):
 def _repeat_correction(reduced_mass, drive, partition, chain, settings, n):
     total = 0.0
     for _ in range(n):
-        total += kernels.modal_correction(reduced_mass, 1e-3, 0.0, drive, partition, chain, settings).inertia[0, 0]
+        total += modal_correction(reduced_mass, 1e-3, 0.0, drive, partition, chain, settings).inertia[0, 0]
     return total
 
 
@@ -188,7 +193,7 @@ def _repeat_correction(reduced_mass, drive, partition, chain, settings, n):
 def _repeat_evaluation(q, qd, k, drive, partition, chain, n):
     total = 0.0
     for _ in range(n):
-        total += kernels.evaluate(q, qd, k, drive, partition, chain).accounts[0]
+        total += evaluate(q, qd, k, drive, partition, chain).accounts[0]
     return total
 
 
@@ -196,7 +201,7 @@ def _repeat_evaluation(q, qd, k, drive, partition, chain, n):
 def _repeat_read_row(q, qd, qdd, k, drives, partition, chain, n):
     total = 0.0
     for _ in range(n):
-        total += kernels.evaluated_rows(q, qd, qdd, k, drives, partition, chain)[1][0]
+        total += evaluated_rows(q, qd, qdd, k, drives, partition, chain)[1][0]
     return total
 
 
@@ -213,11 +218,11 @@ def component_times(params: CraneDescription, rfe_count: int, repeat: int = 3000
     k, drive = motion.constraints.coefficients(0.5), motion.dynamics.drive.kernel_parameters(0.5)
     off = q.copy()
     off[motion.holonomic_dependent] += 1e-6  # a predictor 1e-6 rad off the constraints
-    acc = kernels.accelerations_at(q, qd, k, drive, partition, chain)
+    acc = accelerations_at(q, qd, k, drive, partition, chain)
     settings = ExactFrequencyTrapezoidal(motion).settings
     B = acc.velocity_map
     reduced_mass = B.T @ acc.M @ B
-    correction = kernels.modal_correction(reduced_mass, 1e-3, 0.0, drive, partition, chain, settings)
+    correction = modal_correction(reduced_mass, 1e-3, 0.0, drive, partition, chain, settings)
     parts = (("M, gravity, E's Jacobian (position_terms)", _repeat_position_terms, (q, chain)),
              ("E's position and Jacobian (kinematics only)", _repeat_end_effector, (q, chain)),
              ("projection on the position constraints", _repeat_projection,

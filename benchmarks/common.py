@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from crane_reference.dynamics import kernels
+from crane_reference.dynamics.runs import integration_run
 from crane_reference.model.urdf import model_to_urdf
 from crane_reference.motion.integration import (
     EVALUATIONS,
@@ -79,10 +79,8 @@ def run_times(scenario: Scenario, step: float, duration: float, every_row: bool,
     for first in range(0, round(duration / step), per_run):
         times = step * np.arange(first + 1, first + per_run + 1)
         k, drives = motion.constraints.coefficients_at(times), motion.dynamics.drive.kernel_parameters(times)
-        run = kernels.integration_run(state.q, state.qd, state.solution.qdd, state.solution.velocity_map,
-                                      state.earlier, state.correction, state.t, times, k,
-                                      drives, motion.partition, motion.dynamics.chain, integrator.settings,
-                                      np.full(times.size, every_row), stop_flag())
+        run = integration_run(state.step_start(), times, k, drives, motion.partition, motion.dynamics.chain,
+                              integrator.settings, np.full(times.size, every_row), stop_flag())
         state = StepState(times[-1], run.last.q, run.last.qd, motion.solution_from_evaluation(run.last.evaluation),
                           run.last.correction, run.last.earlier)
         if paced:

@@ -17,6 +17,7 @@ from rosbags.interfaces import QosDurability, QosReliability
 from rosbags.rosbag2 import Reader
 
 from crane_reference import cli
+from crane_reference.base.health import Level
 from crane_reference.interface import bag as bag_export
 from crane_reference.interface import messages
 from crane_reference.interface.bag import BagError, BagWriter
@@ -32,7 +33,6 @@ from crane_reference.interface.reference_bag import (
     node_stream,
 )
 from crane_reference.model.config import load_config
-from crane_reference.stream.health import Level
 
 RATE = 50
 DURATION = 2.0  # [s]: samples 0 .. 100, diagnostics at 1 s and 2 s

@@ -25,7 +25,9 @@ from scipy.linalg import eigh
 from scipy.signal import butter, sosfiltfilt
 from velocity_map import random_velocity_map
 
-from crane_reference.dynamics import kernels
+from crane_reference.dynamics.modal_correction import iteration_factor, modal_correction
+from crane_reference.dynamics.runs import integration_run
+from crane_reference.dynamics.step import first_iterate, predicted_accelerations, step_residual
 from crane_reference.dynamics.structures import ACCOUNTS, ModalCorrection, Partition
 from crane_reference.motion.integration import CUTOFF, ExactFrequencyTrapezoidal, stop_flag
 from crane_reference.motion.simulation import MotionStepper, Scenario
@@ -48,7 +50,7 @@ def _reduced_mass(scenario, q):
 def _terms(scenario, q, t):
     motion = scenario.motion
     settings = ExactFrequencyTrapezoidal(motion).settings
-    return kernels.modal_correction(_reduced_mass(scenario, q), STEP, t, motion.dynamics.drive.kernel_parameters(0.0),
+    return modal_correction(_reduced_mass(scenario, q), STEP, t, motion.dynamics.drive.kernel_parameters(0.0),
                                     motion.partition, motion.dynamics.chain, settings)
 
 
@@ -102,10 +104,8 @@ def test_evaluated_rows_do_not_change_the_motion_and_hold_the_kkt_reactions(scen
     drives = motion.dynamics.drive.kernel_parameters(times)
 
     def run(evaluated):
-        return kernels.integration_run(state.q, state.qd, state.solution.qdd, state.solution.velocity_map,
-                                       state.earlier, state.correction, state.t, times,
-                                       coefficients, drives, motion.partition, motion.dynamics.chain, settings,
-                                       evaluated, stop_flag())
+        return integration_run(state.step_start(), times, coefficients, drives, motion.partition,
+                               motion.dynamics.chain, settings, evaluated, stop_flag())
 
     every = run(np.ones(times.size, dtype=bool)).rows
     sparse_mask = np.arange(times.size) % 7 == 3
@@ -144,12 +144,12 @@ def test_the_predictor_extrapolates_a_quadratic_exactly():
 
     t0 = 0.37
     earlier = np.array([a(t0 - h), a(t0 - 2 * h)])
-    np.testing.assert_allclose(kernels.predicted_accelerations(a(t0), earlier), a(t0 + h), rtol=1e-13)
+    np.testing.assert_allclose(predicted_accelerations(a(t0), earlier), a(t0 + h), rtol=1e-13)
     earlier[1] = np.nan
     line = a(t0) + (a(t0) - a(t0 - h))
-    np.testing.assert_allclose(kernels.predicted_accelerations(a(t0), earlier), line, rtol=1e-13)
+    np.testing.assert_allclose(predicted_accelerations(a(t0), earlier), line, rtol=1e-13)
     earlier[0] = np.nan
-    np.testing.assert_array_equal(kernels.predicted_accelerations(a(t0), earlier), a(t0))
+    np.testing.assert_array_equal(predicted_accelerations(a(t0), earlier), a(t0))
 
 
 def test_a_run_does_not_depend_on_how_it_is_cut_into_calls(scenario):
@@ -207,7 +207,7 @@ def test_the_iteration_matrix_is_the_dense_formula(scenario, servo):
         P = np.eye(n)[:, independent] if servo else B
         expected = P.T @ (M + 0.25 * STEP**2 * stiffness + 0.5 * STEP * chain.damping) @ B - inertia \
             + 0.5 * STEP * damping
-        factor = kernels.iteration_factor(M, B, STEP, ModalCorrection(inertia, damping, 0.0, STEP), drive,
+        factor = iteration_factor(M, B, STEP, ModalCorrection(inertia, damping, 0.0, STEP), drive,
                                           Partition(independent, dependent, independent, dependent, servo), chain)
         matrix = np.linalg.inv(factor) if servo else factor @ factor.T
         np.testing.assert_allclose(matrix, expected, rtol=1e-11, atol=1e-11 * np.abs(expected).max())
@@ -231,19 +231,19 @@ def test_newton_matrix_is_the_jacobian_of_the_step_residual(scenario):
     correction = state.correction
 
     def residual(a1):
-        return kernels.step_residual(a1, state.q, state.qd, a0, correction, STEP, k, drive, partition, chain, settings)
+        return step_residual(a1, state.q, state.qd, a0, correction, STEP, k, drive, partition, chain, settings)
 
     jacobian = np.empty((a0.size, a0.size))
     for j in range(a0.size):
         delta = np.zeros_like(a0)
         delta[j] = 1e-3 * max(1.0, abs(a0[j]))
         jacobian[:, j] = (residual(a0 + delta) - residual(a0 - delta)) / (2.0 * delta[j])
-    first = kernels.first_iterate(state.q, state.qd, state.qdd, a0, kernels.predicted_accelerations(a0, state.earlier),
+    first = first_iterate(state.q, state.qd, state.qdd, a0, predicted_accelerations(a0, state.earlier),
                                   STEP, k, partition, chain, settings)
     at_first = motion.solve(t1, first.q, first.qd)
-    at_end = kernels.iteration_factor(at_first.dynamics.M, at_first.velocity_map, STEP, correction, drive, partition,
+    at_end = iteration_factor(at_first.dynamics.M, at_first.velocity_map, STEP, correction, drive, partition,
                                       chain)
-    at_start = kernels.iteration_factor(state.solution.dynamics.M, state.solution.velocity_map, STEP, correction,
+    at_start = iteration_factor(state.solution.dynamics.M, state.solution.velocity_map, STEP, correction,
                                         drive, partition, chain)
 
     def error_norm(factor):

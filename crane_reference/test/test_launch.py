@@ -275,9 +275,9 @@ def test_the_closed_loop_launch_connects_the_three_nodes(monkeypatch, tmp_path, 
     qos = {name for name in (*reference, *plant, *controller) if name.startswith("qos_overrides.")}
     assert set(reference) - {"use_sim_time"} - qos <= set(SPECS) and set(plant) - qos <= set(PLANT_SPECS)
     for node, parameters, topic in ((messages.NODE_NAME, reference, messages.JOINT_STATES_TOPIC),
-                                    (plant_node.NODE_NAME, plant, plant_node.JOINT_STATES_TOPIC),
-                                    (plant_node.NODE_NAME, plant, plant_node.END_EFFECTOR_POSE_TOPIC),
-                                    (plant_node.NODE_NAME, plant, plant_node.TIP_DEFLECTION_TOPIC)):
+                                    (plant_node.NODE_NAME, plant, messages.JOINT_STATES_TOPIC),
+                                    (plant_node.NODE_NAME, plant, messages.END_EFFECTOR_POSE_TOPIC),
+                                    (plant_node.NODE_NAME, plant, messages.TIP_DEFLECTION_TOPIC)):
         # what `crane-reference loop` records, kept for a recorder that lags or is matched late
         overrides = f"qos_overrides.{resolve(topic, namespace, node)}.publisher"
         assert parameters[f"{overrides}.depth"] == RECORDED_HISTORY
@@ -296,9 +296,9 @@ def test_the_closed_loop_launch_connects_the_three_nodes(monkeypatch, tmp_path, 
     assert resolve(topics["reference_topic"], namespace, "crane_controller") == resolve(
         messages.REFERENCE_PREVIEW_TOPIC, namespace, messages.NODE_NAME)
     assert resolve(topics["state_topic"], namespace, "crane_controller") == resolve(
-        plant_node.JOINT_STATES_TOPIC, namespace, plant_node.NODE_NAME)
+        messages.JOINT_STATES_TOPIC, namespace, plant_node.NODE_NAME)
     assert resolve(topics["command_topic"], namespace, "crane_controller") == resolve(
-        plant_node.COMMANDS_TOPIC, namespace, plant_node.NODE_NAME)
+        messages.COMMANDS_TOPIC, namespace, plant_node.NODE_NAME)
 
 
 @pytest.mark.parametrize("clock_mode", ["lockstep", "realtime"])

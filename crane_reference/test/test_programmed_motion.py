@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from crane_reference.dynamics import kernels
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
+from crane_reference.dynamics.evaluation import evaluate, forces_jumped, step_evaluation
 from crane_reference.dynamics.structures import Evaluation
 from crane_reference.model.chain import VARIANTS, build_model
 from crane_reference.model.config import load_config
@@ -132,12 +132,12 @@ def test_forces_jumped_is_a_fresh_evaluation_under_the_new_drive(cases, realisat
         k = motion.constraints.coefficients(t)
         before = np.concatenate((case.dynamics.drive.kernel_parameters(t, True), rng.normal(0.0, 1e3, n)))
         after = np.concatenate((before[:4] + rng.normal(0.0, 1e2, 4), rng.normal(0.0, 1e3, n)))
-        step = kernels.step_evaluation(q, qd, rng.normal(0.0, 1.0, n), k, before, partition, chain)
-        jumped = kernels.forces_jumped(step.terms, q, qd, k, after, partition, chain)
-        fresh = kernels.evaluate(q, qd, k, after, partition, chain)
+        step = step_evaluation(q, qd, rng.normal(0.0, 1.0, n), k, before, partition, chain)
+        jumped = forces_jumped(step.terms, q, qd, k, after, partition, chain)
+        fresh = evaluate(q, qd, k, after, partition, chain)
         for (name, got), (_, expected) in zip(_fields(jumped), _fields(fresh), strict=True):
             np.testing.assert_array_equal(got, expected, err_msg=name)
-        assert not np.array_equal(jumped.terms.qdd, kernels.evaluate(q, qd, k, before, partition, chain).terms.qdd)
+        assert not np.array_equal(jumped.terms.qdd, evaluate(q, qd, k, before, partition, chain).terms.qdd)
 
 
 def _fields(e: Evaluation) -> list[tuple[str, object]]:

@@ -42,6 +42,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 from waiting import wait_for
 
+from crane_reference.base.health import Level
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.interface import messages
 from crane_reference.model.chain import build_model
@@ -53,7 +54,6 @@ from crane_reference.ros.message_types import rclpy_types
 from crane_reference.ros.node import CraneReferenceNode
 from crane_reference.ros.parameters import PARAMETERS, SPECS, NodeParameters, field_name
 from crane_reference.ros.publishing import NodeTime
-from crane_reference.stream.health import Level
 from crane_reference.stream.reference_stream import ERROR, ReferenceStream
 from crane_reference.stream.server import LOOKAHEAD
 

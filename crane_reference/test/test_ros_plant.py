@@ -42,6 +42,7 @@ from std_msgs.msg import Float64MultiArray
 from waiting import wait_for
 
 from crane_reference.analysis.tracking.closed_loop import TrackingSpec, run_tracking
+from crane_reference.base.health import StartupError
 from crane_reference.control.plant import held_start
 from crane_reference.control.plant_server import CommandRefusedError, PlantServer, PlantSettings
 from crane_reference.model.paper_layout import ACTUATED as ACTUATED_JOINTS
@@ -51,7 +52,6 @@ from crane_reference.ros.controller_node import CraneControllerNode
 from crane_reference.ros.node import CraneReferenceNode
 from crane_reference.ros.parameters import ParameterError
 from crane_reference.ros.plant_node import NODE_NAME, CranePlantNode
-from crane_reference.ros.settings import StartupError
 
 NS = 10**9
 PERIOD = 1e-3

@@ -18,8 +18,8 @@ from rclpy.parameter import Parameter
 from test_ros_node import NODE, NS, Harness, change_state, diagnostic_messages, stamp_ns
 
 from crane_reference.ros.node import CraneReferenceNode
+from crane_reference.ros.parameter_policy import refusal
 from crane_reference.ros.retarget_action import goal_parameters
-from crane_reference.ros.settings import refusal
 
 RATE = 100  # [Hz]
 ON_PATH = 1e-9  # E's ellipse residual (5.1) on the path (as the node's parameter test)

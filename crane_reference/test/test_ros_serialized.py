@@ -20,7 +20,7 @@ from crane_reference.interface.serialized import (
     SerializedVector3,
 )
 from crane_reference.ros.message_types import rclpy_types
-from crane_reference.stream.sample import ReferenceSample, Samples
+from crane_reference.stream.sample import ReferenceRows, ReferenceSample
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 JOINT_STATE, POSE, VECTOR, TRAJECTORY = ("sensor_msgs/msg/JointState", "geometry_msgs/msg/PoseStamped",
@@ -106,8 +106,8 @@ def test_previews_filled_in_place_equal_rosbags_serialization(effort, little_end
             assert (writer.frame_id, writer.joint_names, writer.effort, writer.points) == (frame_id, names, effort,
                                                                                            points)
             for stamp in STAMPS:
-                samples = Samples.stack([random_sample(rng, n) for _ in range(3)])
-                preview = Samples.stack([random_sample(rng, n) for _ in range(points - 1)])
+                samples = ReferenceRows.stack([random_sample(rng, n) for _ in range(3)])
+                preview = ReferenceRows.stack([random_sample(rng, n) for _ in range(points - 1)])
                 data = writer.fill_row(stamp, samples, 1, preview)
                 expected = messages.reference_preview(types, stamp, frame_id, names, indices, offsets,
                                                       [samples.row(1), *preview.rows()], effort)
@@ -154,7 +154,7 @@ def test_a_prototype_that_does_not_fit_is_refused():
         SerializedPreview(bytes(TYPESTORE.serialize_cdr(trajectory, TRAJECTORY)), [0, 1, 2])
     with pytest.raises(ValueError, match="a preview of 2 points for a prototype of 1"):
         SerializedPreview(bytes(TYPESTORE.serialize_cdr(trajectory, TRAJECTORY)), [0, 1]).fill_row(
-            0, Samples.stack([zero_sample(2)]), 0, Samples.stack([zero_sample(2)] * 2))
+            0, ReferenceRows.stack([zero_sample(2)]), 0, ReferenceRows.stack([zero_sample(2)] * 2))
     with pytest.raises(ValueError, match="ends inside its float64 fields"):
         SerializedPose(bytes(TYPESTORE.serialize_cdr(messages.end_effector_pose(types, 0, "w", zero_sample(3)),
                                                      POSE))[:-8])
@@ -182,8 +182,9 @@ def test_a_batch_of_frames_is_published_as_rclpy_and_rosbags_serialize_each_samp
     goes out; the previews a row at a time, :meth:`fill_row`), are rclpy's serialization of each sample's message
     objects, read back field by field, and rosbags' bytes in both byte orders."""
     from crane_reference.model.paper_layout import ACTUATED as ACTUATED_JOINTS
+    from crane_reference.stream.frame_maker import make_frames
     from crane_reference.stream.reference_stream import ReferenceStream
-    from crane_reference.stream.schedule import FrameSchedule, make_frames
+    from crane_reference.stream.schedule import FrameSchedule
 
     stream = ReferenceStream(params, "rigid", step=1e-3)
     schedule = FrameSchedule(rate, rate, 0.1, 1.0, stream.sample(0.0))

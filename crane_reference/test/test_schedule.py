@@ -13,9 +13,11 @@ import pytest
 
 from crane_reference.model.parameters import Task
 from crane_reference.model.units import NANOSECONDS
+from crane_reference.stream.frame_maker import FRAME_CHUNK, checked, make_frames
+from crane_reference.stream.frames import FrameBatch, Frames
 from crane_reference.stream.reference_stream import ReferenceStream
-from crane_reference.stream.sample import ReferenceSample, Samples
-from crane_reference.stream.schedule import FRAME_CHUNK, FrameBatch, Frames, FrameSchedule, checked, make_frames
+from crane_reference.stream.sample import ReferenceRows, ReferenceSample
+from crane_reference.stream.schedule import FrameSchedule
 
 RATE = 100  # [Hz]
 LEAD = 0.25  # [s]
@@ -44,7 +46,7 @@ def frame_of(frames: Frames, row: int) -> Frame:
 
 def frames_of(sample, k: int, count: int) -> Frames:
     """Frames k .. k + count - 1 at their stream times, each ``sample``."""
-    return Frames(k, np.arange(k, k + count) / RATE, Samples.repeated(sample, count))
+    return Frames(k, np.arange(k, k + count) / RATE, ReferenceRows.repeated(sample, count))
 
 
 def ks(schedule: FrameSchedule) -> list[int]:
@@ -149,8 +151,8 @@ def test_a_non_finite_frame_is_replaced_by_the_last_valid_sample_held(stream_fac
     valid, later, before = stream.sample(0.3), stream.sample(0.31), stream.sample(0.29)
     nan_q = dataclasses.replace(valid, q=np.full_like(valid.q, np.nan))
     inf_qd = dataclasses.replace(valid, qd=np.full_like(valid.qd, np.inf))
-    samples = Samples.stack([valid, nan_q, inf_qd, later])
-    previews = {1: Samples.stack([valid]), 3: Samples.stack([nan_q]), 0: Samples.stack([later])}
+    samples = ReferenceRows.stack([valid, nan_q, inf_qd, later])
+    previews = {1: ReferenceRows.stack([valid]), 3: ReferenceRows.stack([nan_q]), 0: ReferenceRows.stack([later])}
     frames, non_finite, fault = checked(Frames(0, np.arange(4) / RATE, samples, previews), before)
     rows = [frames.samples.row(i) for i in range(4)]
     assert non_finite == 2 and "non-finite" in fault and set(frames.previews) == {0}
@@ -160,7 +162,7 @@ def test_a_non_finite_frame_is_replaced_by_the_last_valid_sample_held(stream_fac
         assert row.held and np.all(row.qd == 0.0) and np.all(row.qdd == 0.0)
     np.testing.assert_array_equal(rows[3].qd, later.qd)
     assert not rows[0].held and not rows[3].held
-    first, count, _ = checked(Frames(0, np.zeros(1), Samples.stack([nan_q])), before)
+    first, count, _ = checked(Frames(0, np.zeros(1), ReferenceRows.stack([nan_q])), before)
     assert count == 1 and first.samples.row(0).held
     np.testing.assert_array_equal(first.samples.row(0).q, before.q)
     schedule = schedule_with(valid)
@@ -208,7 +210,8 @@ def test_a_frame_batch_crosses_a_pipe_unchanged(stream_factory):
     made = make_frames(stream, schedule.request(schedule.plan(), 12, 0.2, 5, 4, None))
     held = Frames.held(12, [0.12], made.frames.samples.row(11))
     frames = Frames(0, np.concatenate((made.frames.tau, held.tau)),
-                    Samples(*(np.concatenate((a, b)) for a, b in zip(made.frames.samples, held.samples, strict=True))),
+                    ReferenceRows(*(np.concatenate((a, b))
+                                    for a, b in zip(made.frames.samples, held.samples, strict=True))),
                     made.frames.previews, made.frames.horizon)
     batch = dataclasses.replace(made, frames=frames, compute_wall=0.25, non_finite=1, fault="why")
     read = pickle.loads(pickle.dumps(batch))

@@ -15,14 +15,16 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import pytest
 
+from crane_reference.base.health import Health, Level, startup_health
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import Task
 from crane_reference.motion.programmed_motion import ConstraintSingularityError
 from crane_reference.motion.simulation import MotionStepper
 from crane_reference.stream import solver as solver_module
-from crane_reference.stream.health import Health, Level, serving_health, startup_health
+from crane_reference.stream.frames import FrameRequest
+from crane_reference.stream.health import serving_health
 from crane_reference.stream.reference_stream import ERROR, PAUSED, RUNNING, ReferenceStream
-from crane_reference.stream.schedule import URGENT_PART, FrameRequest, FrameSchedule
+from crane_reference.stream.schedule import URGENT_PART, FrameSchedule
 from crane_reference.stream.server import (
     COMPUTE_SLICE,
     URGENT_REFILL,

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..dynamics.closed_loop import controller_tick
+from ..dynamics.structures import ControllerArrays
 
 CONTROLLERS = ("pd", "pid")
 
@@ -78,10 +79,11 @@ class JointController:
         self.ticks = 0
 
     @property
-    def arrays(self) -> tuple[np.ndarray, ...]:
-        """kp, kd, ki, the limits, the integral and the saturated ticks per joint, as the compiled loop takes
-        them (:func:`~crane_reference.dynamics.closed_loop.controller_tick`; the last two updated in place)."""
-        return self._kp, self.damping, self._ki, self._limit, self._integral, self.saturated_ticks
+    def arrays(self) -> ControllerArrays:
+        """The controller as the compiled loop ticks it (:func:`~crane_reference.dynamics.closed_loop.controller_tick`;
+        its integral and saturated ticks updated in place)."""
+        return ControllerArrays(self._kp, self.damping, self._ki, self._limit, self.period, self._integral,
+                                self.saturated_ticks)
 
     def __call__(self, error: np.ndarray, reference_rate: np.ndarray, rate: np.ndarray,
                  feedforward: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..dynamics.chain_dynamics import CraneDynamics
-from ..dynamics.kernels import imbalance_rows
+from ..dynamics.evaluation import imbalance_rows
 from ..model.chain import build_model
 from ..model.description import CraneDescription
 from ..model.drive import make_drive
@@ -40,7 +40,7 @@ class RigidInverseDynamics:
         """tau_ff [N m or N] (order of the actuated joints; (N, a) for N rows) at the reference's
         (q, qd, qdd) at t [s] (or rows (N, n) at times (N,); with ``left_limit`` the drive just before t: at a
         jump of its torque, with the qdd from before it), by O(n) inverse dynamics
-        (:func:`~crane_reference.dynamics.kernels.imbalance_rows`)."""
+        (:func:`~crane_reference.dynamics.evaluation.imbalance_rows`)."""
         rows = [np.ascontiguousarray(np.atleast_2d(x)[:, self._columns], dtype=float) for x in (q, qd, qdd)]
         drives = np.atleast_2d(self.dynamics.drive.kernel_parameters(np.atleast_1d(t), left_limit))
         out = imbalance_rows(*rows, drives, self.dynamics.chain)[:, self._actuated]

@@ -42,11 +42,10 @@ class HeldPeriods:
         self._t0 = state.t
         self._stepper = stepper
         self._drive = plant.drive.drive
-        k, settings = stepper.motion.constraints.coefficients(state.t), stepper.integrator.settings
-        self._model = (tuple(k), tuple(stepper.motion.partition), tuple(plant.dynamics.chain), tuple(settings),
-                       plant.actuated, plant.joint_damping, tuple(tip))  # as held_period_of_fields takes them
-        self._carry = tuple(self.carry)
-        self._arguments: tuple = ()  # the plan's arrays, then the model's
+        model = plant.compiled_model()  # as held_period_of_fields takes it: plain tuples of the fields
+        self._model = (*(tuple(part) for part in model[:4]), *model[4:])
+        self._carry, self._tip = tuple(self.carry), tuple(tip)
+        self._steps: tuple = ()  # the plan's steps
         self._plan: StepPlan | None = None
         self._planned = 0  # the first period of the plan
 
@@ -66,8 +65,8 @@ class HeldPeriods:
         first = self._plan.first
         end = self._t0 + (self.count + 1) * self.period
         try:
-            status, t, failed_at = held_period_of_fields(self._carry, end, first[i], first[i + 1], *self._arguments,
-                                                         np.asarray(efforts, dtype=float))
+            status, t, failed_at = held_period_of_fields(self._carry, end, first[i], first[i + 1], self._steps,
+                                                         self._model, self._tip, np.asarray(efforts, dtype=float))
         except np.linalg.LinAlgError as error:  # the carry is updated only after every step converged
             raise IntegrationError(f"the period from t = {self.t:.6g} s to {end:.6g} s met a linear system it "
                                    f"cannot solve: {error}") from error
@@ -83,4 +82,4 @@ class HeldPeriods:
         left = self._drive.kernel_parameters(plan.times, left_limit=True)
         right = self._drive.kernel_parameters(np.concatenate(([self.t], plan.times)))
         self._plan, self._planned = plan, self.count
-        self._arguments = (plan.times, plan.on_jump, left, right, *self._model)
+        self._steps = (plan.times, plan.on_jump, left, right)

@@ -20,8 +20,8 @@ import numpy as np
 
 from ..dynamics.chain_dynamics import CraneDynamics
 from ..dynamics.closed_loop import closed_loop_run
-from ..dynamics.kernels import accelerations_at
-from ..dynamics.structures import ACCOUNTS, CONVERGED, Accelerations, LoopRows
+from ..dynamics.evaluation import accelerations_at
+from ..dynamics.structures import ACCOUNTS, CONVERGED, Accelerations, LoopRows, PlannedSteps, PlantModel, Ticks
 from ..model.chain import build_model
 from ..model.description import CraneDescription
 from ..model.drive import Actuated, make_drive
@@ -136,17 +136,14 @@ class Plant:
         inner = self.drive.drive
         left = inner.kernel_parameters(plan.times, left_limit=True)
         after = inner.kernel_parameters(np.concatenate(([stepper.state.t], plan.times)))
-        kp, kd, ki, limit, integral, saturated = controller.arrays
         state = stepper.state
+        ticks = Ticks(np.asarray(ends, dtype=float), plan.first, np.ascontiguousarray(reference_q, dtype=float),
+                      np.ascontiguousarray(reference_qd, dtype=float),
+                      np.ascontiguousarray(feedforward_start, dtype=float),
+                      np.ascontiguousarray(feedforward_end, dtype=float))
         run = closed_loop_run(state.q, state.qd, self.terms(), state.correction, stepper.snapshot().work, state.t,
-                              np.asarray(ends, dtype=float), plan.first, plan.times, plan.on_jump, left, after,
-                              motion.constraints.coefficients(state.t), motion.partition, self.dynamics.chain,
-                              stepper.integrator.settings, self.actuated, self.joint_damping, controller.period,
-                              np.ascontiguousarray(reference_q, dtype=float),
-                              np.ascontiguousarray(reference_qd, dtype=float),
-                              np.ascontiguousarray(feedforward_start, dtype=float),
-                              np.ascontiguousarray(feedforward_end, dtype=float), kp, kd, ki, limit, integral,
-                              saturated)
+                              ticks, PlannedSteps(plan.times, plan.on_jump, left, after), self.compiled_model(),
+                              controller.arrays)
         controller.ticks += run.ticks
         if run.status != CONVERGED:  # the plant stays where it was; the controller went on to the failed tick
             raise stepper.integrator.failure(run.status, run.t, float(plan.times[run.steps]))
@@ -159,6 +156,12 @@ class Plant:
         last_start = plan.first[-2]
         self.drive.command(float(plan.times[last_start - 1]) if last_start else state.t, float(ends[-1]),
                            *(self._forces(torques) for torques in run.command))
+
+    def compiled_model(self) -> PlantModel:
+        """The plant as the compiled loop steps it."""
+        motion = self.stepper.motion
+        return PlantModel(motion.constraints.coefficients(self.stepper.state.t), motion.partition, self.dynamics.chain,
+                          self.stepper.integrator.settings, self.actuated, self.joint_damping)
 
     def terms(self) -> Accelerations:
         """The position and velocity terms of (8) at the plant's state now (an evaluation there, with the column

@@ -35,8 +35,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..base.health import Level
 from ..dynamics.cache import WarmUp, cache_counts
-from ..dynamics.kernels import imbalance_rows
+from ..dynamics.evaluation import imbalance_rows
 from ..model.chain import VARIANTS
 from ..model.config import load_config
 from ..model.description import CraneDescription
@@ -253,11 +254,9 @@ class PlantServer:
 
 @dataclass(frozen=True)
 class PlantHealth:
-    """The plant's health as /diagnostics reports it: ``level`` with the values of
-    diagnostic_msgs/DiagnosticStatus (0 OK, 1 WARN, 2 ERROR, as :class:`crane_reference.stream.health.Level`),
-    a ``message`` and the key/value pairs."""
+    """The plant's health as /diagnostics reports it: its ``level``, a ``message`` and the key/value pairs."""
 
-    level: int
+    level: Level
     message: str
     values: dict[str, str]
 
@@ -271,17 +270,17 @@ def plant_health(server: PlantServer, doing: str, failure: str, missed_ticks: in
               "commands_refused": str(server.refused), "last_refusal": server.last_refusal,
               "timeouts": str(server.timeouts), "missed_ticks": str(missed_ticks)}
     if failure:
-        return PlantHealth(2, f"integration failed: {failure}; the plant stopped (cleanup and configure start it "
-                              "again)", values)
+        return PlantHealth(Level.ERROR, f"integration failed: {failure}; the plant stopped (cleanup and configure "
+                                        "start it again)", values)
     if server.holding:
-        return PlantHealth(1, f"{doing}: no command for {server.settings.command_timeout:g} s: the hold command "
-                              "acts", values)
+        return PlantHealth(Level.WARN, f"{doing}: no command for {server.settings.command_timeout:g} s: the hold "
+                                       "command acts", values)
     if server.refused and server.refused_last:
-        return PlantHealth(1, f"{doing}: command refused: {server.last_refusal}", values)
+        return PlantHealth(Level.WARN, f"{doing}: command refused: {server.last_refusal}", values)
     if newly_missed:
-        return PlantHealth(1, f"{doing}: {newly_missed} periods missed (the machine is too slow for the control "
-                              "rate)", values)
-    return PlantHealth(0, doing, values)
+        return PlantHealth(Level.WARN, f"{doing}: {newly_missed} periods missed (the machine is too slow for the "
+                                       "control rate)", values)
+    return PlantHealth(Level.OK, doing, values)
 
 
 def warm_up_plant() -> WarmUp:

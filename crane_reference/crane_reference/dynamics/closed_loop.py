@@ -3,10 +3,10 @@
 The controller is :mod:`crane_reference.control.controller`'s (its tick is :func:`controller_tick`,
 which the Python controller calls too); the plant is the crane without programmed constraints driven by an
 :class:`~crane_reference.model.drive.Actuated` drive (:mod:`crane_reference.control.plant`), stepped
-by :func:`~.kernels.integration_step` exactly as :class:`~crane_reference.motion.simulation.MotionStepper`
+by :func:`~.step.integration_step` exactly as :class:`~crane_reference.motion.simulation.MotionStepper`
 steps it: at each tick the command's forces jump and (8) is solved again there keeping the modal correction
-(:func:`~.kernels.corrected_accelerations`), on the position and velocity terms of the step that ended there
-(:func:`~.kernels.forces_jumped`: the state did not move; at a call's first tick, on the terms it is given at
+(:func:`~.modal_correction.corrected_accelerations`), on the position and velocity terms of the step that ended there
+(:func:`~.evaluation.forces_jumped`: the state did not move; at a call's first tick, on the terms it is given at
 its start); at a jump of the column drive's torque the step ends on it and the integrator restarts there; every
 step is evaluated in full and its powers integrated by the trapezoidal rule into the work accounts.
 """
@@ -17,8 +17,10 @@ import numpy as np
 from numba import njit
 
 from .deflection import deflection_at
-from .kernels import corrected_accelerations, forces_jumped, integration_step, step_evaluation
+from .evaluation import forces_jumped, step_evaluation
 from .kinematics import quaternion
+from .modal_correction import corrected_accelerations
+from .step import integration_step
 from .structures import (
     ACCOUNTS,
     CONVERGED,
@@ -27,13 +29,18 @@ from .structures import (
     Accelerations,
     ChainData,
     Coefficients,
+    ControllerArrays,
     LinkTip,
     LoopRows,
     LoopRun,
     ModalCorrection,
     Partition,
+    PlannedSteps,
     PlantCarry,
+    PlantModel,
     StepSettings,
+    StepStart,
+    Ticks,
 )
 
 
@@ -68,24 +75,21 @@ def _drive_at(inner, t, start, end, first, last, actuated, n):
 
 
 @njit(cache=True, nogil=True)
-def closed_loop_run(q, qd, start_terms: Accelerations, correction: ModalCorrection, work, t0, tick_ends, first_step,
-                    step_times, on_jump, inner, inner_after, k: Coefficients, partition: Partition, chain: ChainData,
-                    settings: StepSettings, actuated, joint_damping, period, reference_q, reference_qd,
-                    feedforward_start, feedforward_end, kp, kd, ki, limit, integral, saturated):
-    """Ticks of the controller from the plant state (t0, q, qd), the position and velocity terms ``start_terms``
+def closed_loop_run(q, qd, start_terms: Accelerations, correction: ModalCorrection, work, t0, ticks: Ticks,
+                    steps: PlannedSteps, plant: PlantModel, controller: ControllerArrays):
+    """The controller's ``ticks`` from the plant state (t0, q, qd), the position and velocity terms ``start_terms``
     there (an evaluation's at (q, qd): its Q and qdd are not read), its modal ``correction`` and ``work`` accounts
-    (3,) [J]; tick k runs from the plant's time then to ``tick_ends`` [k] (K,) [s] over the steps
-    first_step[k] .. first_step[k + 1] - 1 ending at ``step_times`` (S,), ``on_jump`` where a step ends on a
-    jump of the column drive (``inner`` (S, 4): the column drive's parameters at the step ends, left limits
-    there; ``inner_after`` (S + 1, 4): right limits at t0 and at the step ends, where the integrator
-    restarts; K >= 1).  Tick k commands u_k (:func:`controller_tick` every ``period`` [s] on ``reference_q`` [k]
-    - q and ``reference_qd`` [k] of the ``actuated`` coordinates, feedforward ``feedforward_start`` [k]) at its
-    start, linear to clip(u_k + feedforward_end[k + 1] - feedforward_start[k], +-limit) at its end;
-    ``integral`` and ``saturated`` are updated in place; the actuator torques are the commands minus
-    ``joint_damping`` qd (the joint drives' velocity loops, in the plant's damping).  Stops at the first
-    step that fails; returns a :class:`LoopRun` (its rows: the start under the first command, then every
-    step; at a drive jump qdd, the constraint forces and the drive torque from after it, as
-    ``MotionStepper``'s)."""
+    (3,) [J]; tick k runs from the plant's time then to ``ticks.ends`` [k] over its planned ``steps`` (K >= 1).
+    Tick k commands u_k (:func:`controller_tick` of ``controller`` on ``ticks.reference_q`` [k] - q and
+    ``ticks.reference_qd`` [k] of the plant's actuated coordinates, feedforward ``ticks.feedforward_start`` [k]) at
+    its start, linear to clip(u_k + feedforward_end[k + 1] - feedforward_start[k], +-limit) at its end (the
+    controller's integral and saturated ticks updated in place); the actuator torques are the commands minus the
+    plant's ``joint_damping`` qd (the joint drives' velocity loops, in the plant's damping).  Stops at the first
+    step that fails; returns a :class:`LoopRun` (its rows: the start under the first command, then every step; at
+    a drive jump qdd, the constraint forces and the drive torque from after it, as ``MotionStepper``'s)."""
+    k, partition, chain, settings, actuated, joint_damping = plant
+    step_times, on_jump, inner, inner_after = steps
+    first_step, limit = ticks.first_step, controller.limit
     n, S, na = q.size, step_times.size, actuated.size
     rows = LoopRows(np.empty((S + 1, n)), np.empty((S + 1, n)), np.empty((S + 1, n)), np.empty((S + 1, n)),
                     np.empty((S + 1, len(ACCOUNTS))), np.empty((S + 1, 3)), np.empty((S + 1, 3)),
@@ -94,16 +98,17 @@ def closed_loop_run(q, qd, start_terms: Accelerations, correction: ModalCorrecti
     work, t, done = work.copy(), t0, 0
     earlier = np.full((2, partition.integrated.size), np.nan)
     command = np.zeros((2, na))
-    for tick in range(tick_ends.size):
-        start, end = t, tick_ends[tick]
+    for tick in range(ticks.ends.size):
+        start, end = t, ticks.ends[tick]
         error, rate = np.empty(na), np.empty(na)
         for j in range(na):
-            error[j], rate[j] = reference_q[tick, j] - q[actuated[j]], qd[actuated[j]]
-        first = controller_tick(kp, kd, ki, limit, period, integral, saturated, error, reference_qd[tick], rate,
-                                feedforward_start[tick])
+            error[j], rate[j] = ticks.reference_q[tick, j] - q[actuated[j]], qd[actuated[j]]
+        first = controller_tick(controller.kp, controller.kd, controller.ki, limit, controller.period,
+                                controller.integral, controller.saturated, error, ticks.reference_qd[tick], rate,
+                                ticks.feedforward_start[tick])
         last = np.empty(na)
         for j in range(na):
-            change = feedforward_end[tick + 1, j] - feedforward_start[tick, j]  # first: none held exactly
+            change = ticks.feedforward_end[tick + 1, j] - ticks.feedforward_start[tick, j]  # first: none held exactly
             last[j] = min(max(first[j] + change, -limit[j]), limit[j])
         command[0], command[1] = first, last
         # the forces jump: (8) solved again at the tick's start, the modal correction kept
@@ -128,7 +133,8 @@ def closed_loop_run(q, qd, start_terms: Accelerations, correction: ModalCorrecti
         for s in range(s0, first_step[tick + 1]):
             drive = _drive_at(inner[s], step_times[s], start, end, first, last, actuated, n)
             h = step_times[s] - t
-            step = integration_step(q, qd, qdd, B, earlier, correction, t, h, k, drive, partition, chain, settings)
+            step = integration_step(StepStart(t, q, qd, qdd, B, earlier, correction), h, k, drive, partition, chain,
+                                    settings)
             if step.status != CONVERGED:
                 return LoopRun(done, s, step.status, _first_rows(rows, s + 1), t, e, correction, earlier, command)
             t, q, qd, qdd, B, earlier, correction = (step_times[s], step.q, step.qd, step.qdd, step.velocity_map,
@@ -142,8 +148,8 @@ def closed_loop_run(q, qd, start_terms: Accelerations, correction: ModalCorrecti
             for j in range(na):
                 rows.torques[s + 1, j] = drive[inner.shape[1] + actuated[j]] - joint_damping[j] * qd[actuated[j]]
             if on_jump[s]:  # restart at the drive's jump: the motion from it on, a fresh modal correction
-                e = forces_jumped(e.terms, q, qd, k, _drive_at(inner_after[s + 1], t, start, end, first, last, actuated,
-                                                         n), partition, chain)
+                e = forces_jumped(e.terms, q, qd, k, _drive_at(inner_after[s + 1], t, start, end, first, last,
+                                                               actuated, n), partition, chain)
                 qdd, B, correction = e.terms.qdd, e.terms.velocity_map, fresh
                 earlier = np.full((2, partition.integrated.size), np.nan)
                 powers = e.accounts[POWERS]
@@ -154,17 +160,15 @@ def closed_loop_run(q, qd, start_terms: Accelerations, correction: ModalCorrecti
 
 
 @njit(cache=True, nogil=True)
-def held_period(carry: PlantCarry, end, start_step, end_step, step_times, on_jump, inner, inner_after,
-                k: Coefficients, partition: Partition, chain: ChainData, settings: StepSettings, actuated,
-                joint_damping, tip: LinkTip, efforts):
-    """One control period of the plant from its ``carry`` to ``end`` [s] under the efforts u [N m] (n_a,) held
-    over it (the actuator torques u - ``joint_damping`` qd): a tick of :func:`closed_loop_run` whose controller
-    commands u (no feedback), over the steps ``start_step`` .. ``end_step`` - 1 of a plan of steps
-    (``step_times``, ``on_jump``, ``inner`` (S, 4) and ``inner_after`` (S + 1, 4) as there, the latter's row
-    ``start_step`` at the period's start), on the terms the carry holds; the deflection of the link ``tip``.
-    The carry is updated in place when every step converged; returns the status, the time reached and the end
-    of the step that failed (that of the last step if none did)."""
-    na, s0, s1 = actuated.size, start_step, end_step
+def held_period(carry: PlantCarry, end, start_step, end_step, steps: PlannedSteps, plant: PlantModel, tip: LinkTip,
+                efforts):
+    """One control period of the ``plant`` from its ``carry`` to ``end`` [s] under the efforts u [N m or N] (n_a,)
+    held over it (the actuator torques u - kd qd): a tick of :func:`closed_loop_run` whose controller commands u
+    (no feedback), over the steps ``start_step`` .. ``end_step`` - 1 of the planned ``steps``, on the terms the
+    carry holds; the carry's deflection is the link ``tip``'s.  The carry is updated in place when every step
+    converged; returns the status, the time reached and the end of the step that failed (that of the last step if
+    none did)."""
+    na, s0, s1 = plant.actuated.size, start_step, end_step
     zeros, held = np.zeros(na), np.empty((2, na))
     held[0], held[1] = efforts, efforts  # the feedforward at the period's start and at the next one's
     correction = ModalCorrection(carry.inertia, carry.damping, carry.modal[0], carry.modal[1])
@@ -172,12 +176,13 @@ def held_period(carry: PlantCarry, end, start_step, end_step, step_times, on_jum
     terms = Accelerations(carry.M, carry.h, empty, carry.gravity_forces, carry.gravity_potential[0],
                           carry.ee_position, carry.ee_rotation, carry.ee_jacobian, carry.ee_bias, carry.A, carry.c,
                           carry.velocity_map, empty)
-    run = closed_loop_run(carry.q, carry.qd, terms, correction, carry.work, carry.clock[0], np.array([end]),
-                          np.array([0, s1 - s0]), step_times[s0:s1], on_jump[s0:s1], inner[s0:s1],
-                          inner_after[s0:s1 + 1], k, partition, chain, settings, actuated, joint_damping, 1.0,
-                          zeros.reshape(1, na), zeros.reshape(1, na), held, held, zeros, zeros, zeros,
-                          np.full(na, np.inf), zeros.copy(), np.zeros(na, np.int64))
-    failed_at = step_times[min(s0 + run.steps, s1 - 1)]
+    period = PlannedSteps(steps.times[s0:s1], steps.on_jump[s0:s1], steps.inner[s0:s1], steps.inner_after[s0:s1 + 1])
+    no_feedback = ControllerArrays(zeros, zeros, zeros, np.full(na, np.inf), 1.0, zeros.copy(),
+                                   np.zeros(na, np.int64))
+    run = closed_loop_run(carry.q, carry.qd, terms, correction, carry.work, carry.clock[0],
+                          Ticks(np.array([end]), np.array([0, s1 - s0]), zeros.reshape(1, na), zeros.reshape(1, na),
+                                held, held), period, plant, no_feedback)
+    failed_at = steps.times[min(s0 + run.steps, s1 - 1)]
     if run.status != CONVERGED:
         return run.status, run.t, failed_at
     rows, terms = run.rows, run.last.terms
@@ -192,19 +197,20 @@ def held_period(carry: PlantCarry, end, start_step, end_step, step_times, on_jum
     carry.A[:], carry.c[:], carry.velocity_map[:] = terms.A, terms.c, terms.velocity_map
     carry.torques[:] = rows.torques[-1]
     carry.ee_quaternion[:] = quaternion(terms.ee_rotation)
+    chain = plant.chain
     carry.deflection[:] = deflection_at(carry.q, tip, chain.kinds, chain.axes, chain.origins)
     return run.status, run.t, failed_at
 
 
 @njit(cache=True, nogil=True)
-def held_period_of_fields(carry, end, start_step, end_step, step_times, on_jump, inner, inner_after, k, partition,
-                          chain, settings, actuated, joint_damping, tip, efforts):
-    """:func:`held_period` with its structures (``carry``, ``k``, ``partition``, ``chain``, ``settings``,
-    ``tip``) given as plain tuples of their fields: numba types a plain tuple of arrays from its fingerprint in
+def held_period_of_fields(carry, end, start_step, end_step, steps, plant, tip, efforts):
+    """:func:`held_period` with its structures given as plain tuples of their fields (``plant``: those of its
+    coefficients, partition, chain and settings too): numba types a plain tuple of arrays from its fingerprint in
     C, a named one field by field in Python, and the plant calls this once per control period."""
-    return held_period(PlantCarry(*carry), end, start_step, end_step, step_times, on_jump, inner, inner_after,
-                       Coefficients(*k), Partition(*partition), ChainData(*chain), StepSettings(*settings), actuated,
-                       joint_damping, LinkTip(*tip), efforts)
+    model = PlantModel(Coefficients(*plant[0]), Partition(*plant[1]), ChainData(*plant[2]), StepSettings(*plant[3]),
+                       plant[4], plant[5])
+    return held_period(PlantCarry(*carry), end, start_step, end_step, PlannedSteps(*steps), model, LinkTip(*tip),
+                       efforts)
 
 
 def plant_carry(t, q, qd, work, correction: ModalCorrection, terms: Accelerations, torques, tip: LinkTip,

@@ -84,7 +84,7 @@ class StepSettings(NamedTuple):
 
 class ModalCorrection(NamedTuple):
     """The integrator's modal terms in the independent coordinates (n_ic, n_ic), computed at ``time`` [s]
-    for the step ``step`` [s] (see :func:`crane_reference.dynamics.kernels.modal_correction`): ``inertia``
+    for the step ``step`` [s] (see :func:`crane_reference.dynamics.modal_correction.modal_correction`): ``inertia``
     Delta M_r, removed from the reduced mass so that the trapezoidal rule turns each resolved mode by
     exactly omega h per step, and ``damping`` D_u, which gives each resolved mode its exact decay per step
     and damps the modes the step does not resolve."""
@@ -228,6 +228,20 @@ STATUS_MESSAGES = {
 overflowed; the messages of the failures (formatted with t0, t1, h and iterations)."""
 
 
+class StepStart(NamedTuple):
+    """The state an integration step starts from: the time ``t`` [s], q, qd and the integrator's qdd there, the
+    velocity map B there (``velocity_map``), the integrated coordinates' accelerations at the two steps' starts
+    before (``earlier`` (2, n_x), NaN where unknown) and the modal ``correction`` in use."""
+
+    t: float
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    velocity_map: np.ndarray
+    earlier: np.ndarray
+    correction: ModalCorrection
+
+
 class Advance(NamedTuple):
     """One integration step's end: q, qd and the integrator's qdd, the velocity map B, the integrated
     coordinates' accelerations at the step's start and the one before (the next step's ``earlier``), E's
@@ -277,6 +291,59 @@ class Run(NamedTuple):
     status: int
     rows: StepRows
     last: Step
+
+
+class PlantModel(NamedTuple):
+    """The actuated plant as the compiled closed loop steps it: the constraint coefficients ``k`` (the plant has
+    none), its ``partition``, ``chain`` and integrator ``settings``, the ``actuated`` coordinates (n_a,) and the
+    joint drives' velocity loops ``joint_damping`` kd (n_a,) [N m s/rad or N s/m]."""
+
+    k: Coefficients
+    partition: Partition
+    chain: ChainData
+    settings: StepSettings
+    actuated: np.ndarray
+    joint_damping: np.ndarray
+
+
+class PlannedSteps(NamedTuple):
+    """Integration steps planned ahead (``MotionStepper.step_plan``): their end ``times`` (S,) [s], ``on_jump`` (S,)
+    where a step ends on a jump of the column drive's torque, and the column drive's parameters at the step ends,
+    left limits there (``inner`` (S, 4)), and at the start and the step ends, right limits, where the integrator
+    restarts (``inner_after`` (S + 1, 4))."""
+
+    times: np.ndarray
+    on_jump: np.ndarray
+    inner: np.ndarray
+    inner_after: np.ndarray
+
+
+class Ticks(NamedTuple):
+    """What the controller's ticks of a compiled closed loop read: tick k ends at ``ends`` [k] (K,) [s] and spans
+    the steps first_step[k] .. first_step[k + 1] - 1 (``first_step`` (K + 1,)); the reference ``reference_q`` and
+    ``reference_qd`` (K, n_a) and the feedforward at its start ``feedforward_start`` (K, n_a) and at the next
+    tick's (``feedforward_end`` (K + 1, n_a)) [N m or N]."""
+
+    ends: np.ndarray
+    first_step: np.ndarray
+    reference_q: np.ndarray
+    reference_qd: np.ndarray
+    feedforward_start: np.ndarray
+    feedforward_end: np.ndarray
+
+
+class ControllerArrays(NamedTuple):
+    """A joint controller as the compiled loop ticks it (``control.controller.JointController``): kp, kd, ki and
+    the torque ``limit`` per joint, its tick ``period`` [s], and per joint its ``integral`` and the ``saturated``
+    ticks (both updated in place)."""
+
+    kp: np.ndarray
+    kd: np.ndarray
+    ki: np.ndarray
+    limit: np.ndarray
+    period: float
+    integral: np.ndarray
+    saturated: np.ndarray
 
 
 class LoopRows(NamedTuple):

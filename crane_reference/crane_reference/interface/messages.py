@@ -42,6 +42,10 @@ MARKERS_TOPIC = "~/markers"
 ROBOT_DESCRIPTION_TOPIC = "~/robot_description"
 SPEED_SCALING_TOPIC = "~/speed_scaling"  # input, std_msgs/Float64
 DIAGNOSTICS_TOPIC = "/diagnostics"
+# the plant's own (its joint states and E's pose on the names above, in its namespace)
+COMMANDS_TOPIC = "~/commands"  # input, std_msgs/Float64MultiArray
+TIP_DEFLECTION_TOPIC = "~/tip_deflection"
+CLOCK_TOPIC = "/clock"  # lock-step
 PUBLISHER_DEPTH = 10  # keep-last depth of every publisher (reliable, volatile)
 DIAGNOSTICS_PERIOD = 1.0  # [s]
 MAX_PUBLISH_RATE = 1000  # [Hz], upper bound of the publish_rate parameter

@@ -22,11 +22,11 @@ from collections.abc import Callable, Mapping, Sequence
 
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 
+from ..base.health import Level
 from ..model.description import CraneDescription
 from ..model.drive import column_drive
 from ..model.units import NANOSECONDS
 from ..motion.steps import ONLINE_STEP
-from ..stream.health import Level
 from ..stream.reference_stream import ERROR, ReferenceStream
 from ..stream.sample import ReferenceSample
 from ..stream.schedule import stamp_at

@@ -28,7 +28,7 @@ import numpy as np
 from ..model.units import NANOSECONDS
 
 if TYPE_CHECKING:
-    from ..stream.sample import ReferenceSample, Samples
+    from ..stream.sample import ReferenceRows, ReferenceSample
 
 ENCAPSULATION = 4
 """[bytes] before the body."""
@@ -158,7 +158,7 @@ class SerializedJointState(_SerializedMessage):
         self._effort[:] = sample.effort
         return self._stamped(stamp_ns)
 
-    def rows(self, samples: Samples) -> SerializedRows:
+    def rows(self, samples: ReferenceRows) -> SerializedRows:
         """The serialized JointStates of stacked ``samples``, a row each, their numbers written at once (stamped as
         each goes out: :meth:`SerializedRows.stamped`)."""
         rows = self._rows(len(samples.t))
@@ -185,7 +185,7 @@ class SerializedPose(_SerializedMessage):
         self._pose[3:] = sample.ee_quaternion
         return self._stamped(stamp_ns)
 
-    def rows(self, samples: Samples) -> SerializedRows:
+    def rows(self, samples: ReferenceRows) -> SerializedRows:
         """The serialized PoseStamped of E in stacked ``samples``, a row each, their numbers written at once
         (stamped as each goes out: :meth:`SerializedRows.stamped`)."""
         rows = self._rows(len(samples.t))
@@ -247,7 +247,7 @@ class SerializedPreview(_SerializedMessage):
     def points(self) -> int:
         return len(self._points)
 
-    def fill_row(self, stamp_ns: int, samples: Samples, row: int, preview: Samples) -> bytes:
+    def fill_row(self, stamp_ns: int, samples: ReferenceRows, row: int, preview: ReferenceRows) -> bytes:
         """The serialized preview stamped ``stamp_ns`` of row ``row`` of stacked ``samples`` (its first point) and
         the samples of ``preview`` (the points after it, as many as the prototype has)."""
         if len(preview.t) != self.points - 1:

@@ -26,7 +26,8 @@ Their velocity form is Psi = 0 itself, and their acceleration form
 A new task constraint is a new :class:`EndEffectorConstraint` (holonomic: writes the coefficients of
 a :class:`Quadric` with their first two time derivatives) or :class:`EndEffectorRateConstraint` (first
 order: a :class:`RateQuadric` with its first time derivative); the solver (compiled,
-:mod:`crane_reference.dynamics.kernels`) does not change.  The formulas above are implemented once, in
+:mod:`crane_reference.dynamics.evaluation` and :mod:`~crane_reference.dynamics.step`) does not change.  The
+formulas above are implemented once, in
 :mod:`crane_reference.dynamics.quadrics`; the methods here call them.
 For the ellipse, the paper's u and v are Phi_p C / 2 and (Phi_p d + convective) / 2: it divides (6.3)
 by two, which changes only the scale of the multiplier.

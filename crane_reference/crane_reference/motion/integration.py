@@ -32,7 +32,7 @@ tan(omega h / 2) / (omega h / 2) (the positions are exact).  With the model's da
 d_i = phi_i^T D_r phi_i) the same idea maps both roots lambda of each mode exactly: the rule turns a root
 lambda_hat of its equation into z = (1 + lambda_hat h / 2) / (1 - lambda_hat h / 2), which is exp(lambda h)
 for lambda_hat = (2 / h) tanh(lambda h / 2), and a mass and a damping correction per mode make those the
-roots (:func:`crane_reference.dynamics.kernels.modal_correction`): each damped mode turns and decays per
+roots (:func:`crane_reference.dynamics.modal_correction`): each damped mode turns and decays per
 step as the model's does.
 
 Modes with omega h at or above the cutoff (0.8 pi: the output sampled every step cannot show them;
@@ -57,7 +57,7 @@ from the constraints.
 The step's nonlinear equation is solved by a modified Newton method on the residual (from O(n) inverse
 dynamics, without forming M), from the accelerations of the integrated coordinates at the two previous
 steps' starts and this one's extrapolated quadratically, a_1 = 3 a_0 - 3 a_-1 + a_-2
-(:func:`~crane_reference.dynamics.kernels.predicted_accelerations`; linearly, or a_0 itself, after a start,
+(:func:`~crane_reference.dynamics.predicted_accelerations`; linearly, or a_0 itself, after a start,
 a restart or a new step size, until there are three), with the iteration matrix B^T (M + h^2/4 K + h/2 D) B -
 Delta M_r + h/2 D_u with M and B at the step's predicted end (its first iterate): exact for the stiff
 linear springs, to first order in h for the configuration's change over the step, approximate for gravity,
@@ -80,7 +80,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..dynamics import kernels
+from ..dynamics.modal_correction import corrected_accelerations
+from ..dynamics.runs import integration_run
 from ..dynamics.structures import (
     CONSTRAINTS_UNSOLVABLE,
     CONVERGED,
@@ -89,6 +90,7 @@ from ..dynamics.structures import (
     ModalCorrection,
     StepRows,
     StepSettings,
+    StepStart,
 )
 from .programmed_motion import MotionSolution, ProgrammedMotion, ProjectionError
 
@@ -132,7 +134,7 @@ def stop_flag() -> np.ndarray:
 class StepState:
     """Integrator state at t: full q, qd, the solution of (8) there, the modal correction in use and the
     integrated coordinates' accelerations at the two previous steps' starts (2, n_x; NaN where unknown: the
-    predictor's, :func:`~crane_reference.dynamics.kernels.predicted_accelerations`)."""
+    predictor's, :func:`~crane_reference.dynamics.step.predicted_accelerations`)."""
 
     t: float
     q: np.ndarray
@@ -144,6 +146,11 @@ class StepState:
     @property
     def qdd(self) -> np.ndarray:
         return self.solution.qdd
+
+    def step_start(self) -> StepStart:
+        """The state as the compiled steps start from it."""
+        return StepStart(self.t, self.q, self.qd, self.solution.qdd, self.solution.velocity_map, self.earlier,
+                         self.correction)
 
 
 class ExactFrequencyTrapezoidal:
@@ -193,7 +200,7 @@ class ExactFrequencyTrapezoidal:
         solution = self.motion.solve(state.t, state.q, state.qd)
         if not keep_modes or not math.isfinite(state.correction.time):
             return StepState(state.t, state.q, state.qd, solution, self._fresh(), self.no_earlier())
-        qdd = kernels.corrected_accelerations(solution.dynamics.M, solution.velocity_map, solution.qdd, state.qd,
+        qdd = corrected_accelerations(solution.dynamics.M, solution.velocity_map, solution.qdd, state.qd,
                                               state.correction, self.motion.partition)
         return StepState(state.t, state.q, state.qd, replace(solution, qdd=qdd), state.correction, self.no_earlier())
 
@@ -238,11 +245,9 @@ class ExactFrequencyTrapezoidal:
         if ends_on_jump:
             drives[-1] = drive.kernel_parameters(times[-1], left_limit=True)
         try:
-            run = kernels.integration_run(
-                state.q, state.qd, state.solution.qdd, state.solution.velocity_map, state.earlier, state.correction,
-                state.t, times, motion.constraints.coefficients_at(times), drives, motion.partition,
-                motion.dynamics.chain, self.settings, np.full(times.size, every_row),
-                stop_flag() if stop is None else stop)
+            run = integration_run(state.step_start(), times, motion.constraints.coefficients_at(times), drives,
+                                  motion.partition, motion.dynamics.chain, self.settings,
+                                  np.full(times.size, every_row), stop_flag() if stop is None else stop)
         except np.linalg.LinAlgError as error:
             raise self._unsolvable_step(state, times, ends_on_jump, error) from error
         if run.status != CONVERGED:

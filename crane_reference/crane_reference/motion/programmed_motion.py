@@ -33,8 +33,10 @@ from itertools import combinations
 
 import numpy as np
 
-from ..dynamics import kernels
 from ..dynamics.chain_dynamics import CraneDynamics, DynamicsTerms
+from ..dynamics.evaluation import evaluate
+from ..dynamics.projection import PROJECTION_ITERATIONS, dependent_velocities, project_positions, projection_matrix
+from ..dynamics.runs import evaluated_rows
 from ..dynamics.structures import Evaluation, Partition
 from ..model.config import ConfigError
 from ..model.description import BASE_JOINTS
@@ -213,11 +215,11 @@ class ProgrammedMotion:
                 "the end-effector task is at or near a stretch/fold singularity")
 
     def project_positions(self, t: float, q: np.ndarray, tolerance: float = POSITION_TOLERANCE,
-                          max_iterations: int = kernels.PROJECTION_ITERATIONS
+                          max_iterations: int = PROJECTION_ITERATIONS
                           ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """q with q_hd solved from Phi(q, t) = 0 (Newton, Jacobian Phi_p C[:, hd]; the paper's K_dc), and
         (p_E, C) at the returned q; Newton stops after a correction of at most ``tolerance`` [rad or m]."""
-        projection = kernels.project_positions(np.ascontiguousarray(q, dtype=float), self.constraints.coefficients(t),
+        projection = project_positions(np.ascontiguousarray(q, dtype=float), self.constraints.coefficients(t),
                                                self.holonomic_dependent, self.dynamics.chain, tolerance, max_iterations)
         if not projection.solved:
             raise ProjectionError(f"position constraints not met after {max_iterations} Newton iterations at "
@@ -229,7 +231,7 @@ class ProgrammedMotion:
         """qd with its dependent part solved from the velocity-level constraints (eq. (7) for the paper's);
         ``kinematics`` = (p_E, C) at q if known."""
         p, C = self.dynamics.end_effector(q) if kinematics is None else kinematics
-        qd, converged = kernels.dependent_velocities(np.ascontiguousarray(qd, dtype=float), p, C,
+        qd, converged = dependent_velocities(np.ascontiguousarray(qd, dtype=float), p, C,
                                                      self.constraints.coefficients(t), self.dependent)
         if not converged:
             raise ProjectionError(f"velocity constraints not met at t = {t:.6g} s")
@@ -250,12 +252,12 @@ class ProgrammedMotion:
 
     def projection(self, solution: MotionSolution) -> np.ndarray:
         """P of (8) at a solution: B (ideal constraints) or E_ic (servo-constraints)."""
-        return kernels.projection_matrix(solution.velocity_map, self.independent, self.servo)
+        return projection_matrix(solution.velocity_map, self.independent, self.servo)
 
     def solve(self, t: float, q: np.ndarray, qd: np.ndarray, left_limit: bool = False) -> MotionSolution:
         """qdd from the programmed motion equations (8) and the multipliers lambda (drive taken just
         before t with ``left_limit``)."""
-        return self.solution_from_evaluation(kernels.evaluate(
+        return self.solution_from_evaluation(evaluate(
             np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float),
             self.constraints.coefficients(t), self.dynamics.drive.kernel_parameters(t, left_limit), self.partition,
             self.dynamics.chain))
@@ -266,9 +268,9 @@ class ProgrammedMotion:
         (:meth:`~.integration.ExactFrequencyTrapezoidal.run` with ``every_row`` False): at each of ``times``
         (N,) [s], with the rows of q, qd and the integrator's qdd (N, n) there, the generalized force of the
         constraints (N, n), the drive torque (N,) [N m] and the constraint distances (N, m) [m]; by O(n)
-        inverse dynamics, without M (:func:`~crane_reference.dynamics.kernels.evaluated_rows`)."""
+        inverse dynamics, without M (:func:`~crane_reference.dynamics.evaluated_rows`)."""
         times = np.asarray(times, dtype=float)
-        return kernels.evaluated_rows(np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float),
+        return evaluated_rows(np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float),
                                       np.ascontiguousarray(qdd, dtype=float), self.constraints.coefficients_at(times),
                                       self.dynamics.drive.kernel_parameters(times), self.partition,
                                       self.dynamics.chain)

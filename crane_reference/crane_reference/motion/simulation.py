@@ -39,7 +39,7 @@ from .programmed_motion import (
     choose_dependent,
 )
 from .steps import ANALYSIS_STEP, ONLINE_STEP
-from .trajectory import Sample, Trajectory, make_sample, stack_samples
+from .trajectory import MotionSample, Trajectory, make_sample, stack_samples
 
 SAMPLED_ACCOUNTS = ("kinetic_energy", "potential_energy", "drive_torque", "kdc_min_singular_value")
 """Accounts a sample carries under their own names."""
@@ -136,7 +136,7 @@ class StepperSnapshot(NamedTuple):
     state: StepState
     k: int
     work: np.ndarray
-    sample: Sample
+    sample: MotionSample
     motion: ProgrammedMotion
 
 
@@ -173,7 +173,8 @@ class MotionStepper:
         self.state: StepState = self.integrator.start(t0, q0, qd0)
         self._work = np.zeros(3) if every_row else np.full(3, np.nan)
         self._breakpoints = sorted(motion.dynamics.drive.breakpoints)
-        self.sample: Sample = make_sample(self.state.t, self.state.q, self.state.qd, self.state.solution, self._work)
+        self.sample: MotionSample = make_sample(self.state.t, self.state.q, self.state.qd, self.state.solution,
+                                                self._work)
 
     @property
     def motion(self) -> ProgrammedMotion:
@@ -225,19 +226,19 @@ class MotionStepper:
         return StepPlan(np.concatenate([np.empty(0), *times]), np.concatenate([np.zeros(0, bool), *jumps]),
                         np.array(first, dtype=np.int64), t, k)
 
-    def continue_from(self, state: StepState, k: int, work: np.ndarray, sample: Sample) -> None:
+    def continue_from(self, state: StepState, k: int, work: np.ndarray, sample: MotionSample) -> None:
         """Continue from ``state`` at grid index k with the work accounts and sample there (steps taken
         elsewhere, e.g. a compiled closed loop, along a :meth:`step_plan`)."""
         self.state, self._k, self._work, self.sample = state, k, work.copy(), sample
 
-    def advance(self) -> Sample:
+    def advance(self) -> MotionSample:
         """One step to the next grid time, or to a drive jump before it (then restart there)."""
         self._run_block(self._t0 + (self._k + 1) * self.step_size)
         return self.sample
 
     def advance_until(self, t_end: float, stop: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Steps through the first grid time >= t_end in compiled runs (cut at drive jumps, restarting
-        there): the samples' fields (:class:`Sample`) stacked per step.  A ``stop`` flag set meanwhile
+        there): the samples' fields (:class:`MotionSample`) stacked per step.  A ``stop`` flag set meanwhile
         (:func:`~.integration.stop_flag`) ends it after the step in progress (at least one is taken)."""
         blocks = []
         while self.state.t < t_end - 1e-9 * self.step_size and not (blocks and stop is not None and stop[0]):
@@ -362,7 +363,7 @@ def simulate_reference(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, s
 
     edges = sorted({t0, t_end, *(b for b in dyn.drive.breakpoints if t0 < b < t_end)})
     y = np.concatenate([start.q[ic], start.qd[ic], np.zeros(3)])
-    samples: list[Sample] = []
+    samples: list[MotionSample] = []
     for a, b in pairwise(edges):
         def rhs(t: float, y: np.ndarray, b: float = b) -> np.ndarray:
             q, qd = full_state(t, y)

@@ -19,7 +19,7 @@ from .programmed_motion import MotionSolution
 
 
 @dataclass(frozen=True)
-class Sample:
+class MotionSample:
     """One instant of the motion (E's orientation as the rotation matrix of link 4's frame)."""
 
     t: float
@@ -42,11 +42,11 @@ class Sample:
     work_damping: float
 
 
-def make_sample(t: float, q: np.ndarray, qd: np.ndarray, solution: MotionSolution, work: np.ndarray) -> Sample:
-    """Assemble a :class:`Sample` from the solution of (8) at (t, q, qd) and the work done so far by the
+def make_sample(t: float, q: np.ndarray, qd: np.ndarray, solution: MotionSolution, work: np.ndarray) -> MotionSample:
+    """Assemble a :class:`MotionSample` from the solution of (8) at (t, q, qd) and the work done so far by the
     drive, the constraint forces and the dampers."""
     dyn, con = solution.dynamics, solution.constraints
-    return Sample(t, q, qd, solution.qdd, solution.reactions, solution.constraint_forces, solution.drive_torque,
+    return MotionSample(t, q, qd, solution.qdd, solution.reactions, solution.constraint_forces, solution.drive_torque,
                   dyn.ee_position, dyn.ee_rotation, dyn.ee_jacobian @ qd, con.residual, con.distance,
                   solution.kdc_min_singular_value, solution.kinetic_energy, solution.potential_energy,
                   float(work[0]), float(work[1]), float(work[2]))
@@ -88,9 +88,9 @@ def generalized_effort(constraint_forces: np.ndarray, drive_torque: float | np.n
     return effort
 
 
-def stack_samples(samples: list[Sample]) -> dict[str, np.ndarray]:
+def stack_samples(samples: list[MotionSample]) -> dict[str, np.ndarray]:
     """The fields of ``samples`` stacked into arrays (first axis: sample)."""
-    return {f.name: np.array([getattr(s, f.name) for s in samples]) for f in fields(Sample)}
+    return {f.name: np.array([getattr(s, f.name) for s in samples]) for f in fields(MotionSample)}
 
 
 @dataclass(frozen=True)
@@ -120,13 +120,14 @@ class Trajectory:
     work_damping: np.ndarray
 
     @classmethod
-    def from_samples(cls, variant: str, joint_names: list[str], drive_joint: int, samples: list[Sample]) -> Trajectory:
+    def from_samples(cls, variant: str, joint_names: list[str], drive_joint: int,
+                     samples: list[MotionSample]) -> Trajectory:
         return cls.from_arrays(variant, joint_names, drive_joint, stack_samples(samples))
 
     @classmethod
     def from_arrays(cls, variant: str, joint_names: list[str], drive_joint: int,
                     arrays: dict[str, np.ndarray]) -> Trajectory:
-        """From the fields of :class:`Sample` stacked per sample (:func:`stack_samples`)."""
+        """From the fields of :class:`MotionSample` stacked per sample (:func:`stack_samples`)."""
         arrays = dict(arrays)
         arrays["ee_quaternion"] = Rotation.from_matrix(arrays.pop("ee_rotation")).as_quat()
         return cls(variant=variant, joint_names=tuple(joint_names), drive_joint=drive_joint, **arrays)

@@ -31,6 +31,7 @@ from trajectory_msgs.msg import JointTrajectory
 from ..control.controller import JointGains
 from ..control.plant import default_gains
 from ..control.preview_tracking import PREVIEW_FEEDFORWARDS, Preview, PreviewTracker
+from ..interface.bringup import CONTROLLER_NODE
 from ..model.chain import VARIANTS
 from ..model.config import load_config
 from ..model.units import NANOSECONDS
@@ -49,7 +50,7 @@ from .parameters import (
 from .publishing import OVERRIDABLE
 from .running import run_node
 
-NODE_NAME = "crane_controller"
+NODE_NAME = CONTROLLER_NODE
 DEPTH = 10
 
 _TOPICS = (

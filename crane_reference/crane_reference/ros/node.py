@@ -3,7 +3,7 @@
 A managed (lifecycle) node that only wires, as ros2/demos' lifecycle talker does: the reference is served by the
 ROS-free :class:`~crane_reference.stream.server.ReferenceServer` (frame schedule, computing ahead, commands and
 their timing; its solver in a process of its own or a thread); the parameters are one declared table
-(:mod:`.parameters`) whose changes :mod:`.settings` refuses or applies; :mod:`.publishing` sends each sample at
+(:mod:`.parameters`) whose changes :mod:`.parameter_policy` refuses or applies; :mod:`.publishing` sends each sample at
 its stamp, ~/markers and /diagnostics.  ``configure`` starts the solver (kernels made ready, the start and the
 first second of motion computed) and creates the publishers; ``activate`` publishes; ``deactivate`` ramps a
 moving reference to rest, publishes it to the first sample at rest and stops; ``cleanup`` / ``shutdown`` end
@@ -28,14 +28,14 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
+from ..base.health import CANNOT, StartupError
 from ..interface import messages
 from ..model.config import ConfigError, load_config
 from ..model.units import NANOSECONDS
-from ..stream.health import CANNOT
 from ..stream.reference_stream import PAUSED, RUNNING
 from ..stream.server import CommandRefusedError, ReferenceServer, Reply
 from ..stream.solver import SolverStoppedError
-from . import settings
+from . import parameter_policy
 from .message_types import rclpy_types
 from .parameters import (
     SPECS,
@@ -48,7 +48,6 @@ from .parameters import (
 from .publishing import DiagnosticsPublisher, SamplePublisher
 from .retarget_action import RetargetActionServer
 from .running import spin_once
-from .settings import StartupError
 
 NODE_NAME = messages.NODE_NAME
 
@@ -135,9 +134,9 @@ class CraneReferenceNode(LifecycleNode):
                               "first start, else loaded) and computes the start")
             self.get_logger().info(f"starting the solver {where} (with an empty kernel cache it compiles for a minute "
                                    "or two; `crane-reference compile` after installing does it ahead)")
-            solver = settings.start_solver(v, config, self._stopping)
-            server = ReferenceServer(solver, v.publish_rate, v.command_lead, settings.preview(v))
-            messages_settings = settings.publish_settings(v, server.info.joint_names)
+            solver = parameter_policy.start_solver(v, config, self._stopping)
+            server = ReferenceServer(solver, v.publish_rate, v.command_lead, parameter_policy.preview(v))
+            messages_settings = parameter_policy.publish_settings(v, server.info.joint_names)
         except (StartupError, ConfigError, ParameterError) as error:
             self._starting = (f"{CANNOT} configure: {error}; unconfigured: set the parameter it names (or mend the "
                               "crane file), then configure")
@@ -259,12 +258,12 @@ class CraneReferenceNode(LifecycleNode):
             self.get_logger().error(f"~/speed_scaling rejected: {result.reason}", throttle_duration_sec=1.0)
 
     def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        """On-set callback: :func:`.settings.refusal`."""
-        reason = settings.refusal(parameters, self._params, self._server)
+        """On-set callback: :func:`.parameter_policy.refusal`."""
+        reason = parameter_policy.refusal(parameters, self._params, self._server)
         return SetParametersResult(successful=reason is None, reason=reason or "")
 
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
-        """Post-set callback: apply accepted values (:func:`.settings.apply`)."""
+        """Post-set callback: apply accepted values (:func:`.parameter_policy.apply`)."""
         names = [p.name for p in parameters if p.name in SPECS]
         self._params = self._params.changed(parameters)
         if "status_period" in names:
@@ -273,10 +272,10 @@ class CraneReferenceNode(LifecycleNode):
         server = self._server
         if server is None:  # the values are read at configure
             return
-        if set(settings.MESSAGE_PARAMETERS) & set(names):
-            self._publisher.settings = settings.publish_settings(self._params, server.info.joint_names)
+        if set(parameter_policy.MESSAGE_PARAMETERS) & set(names):
+            self._publisher.settings = parameter_policy.publish_settings(self._params, server.info.joint_names)
         try:
-            for line in settings.apply(server, self._params, names, self._now()):
+            for line in parameter_policy.apply(server, self._params, names, self._now()):
                 self.get_logger().info(line)
         except CommandRefusedError as error:  # the solver stopped since the on-set check
             self.get_logger().error(f"{', '.join(names)} set but not applied: {error}")

@@ -16,7 +16,7 @@ hold command on a timeout); the parameters are :mod:`.plant_parameters`.
 * ``clock_mode`` realtime: a period every period of the steady clock (a thread of its own paces them,
   :mod:`~crane_reference.control.pacing`: after a stall the periods it skipped are missed, counted in
   /diagnostics' ``missed_ticks`` at the next wake-up; while they run, Python's thread switch interval is
-  :data:`~crane_reference.stream.threads.SWITCH_INTERVAL`), stamped with the node's clock; the plant's time
+  :data:`~crane_reference.base.threads.SWITCH_INTERVAL`), stamped with the node's clock; the plant's time
   (and its column drive's program) starts with the first command, until which its held start is published
   every period;
   lockstep: the node publishes /clock (``clock_start`` plus the plant's time) and advances one period per
@@ -43,30 +43,25 @@ from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock as ClockMessage
 from std_msgs.msg import Float64MultiArray
 
+from ..base.health import CANNOT, StartupError
+from ..base.threads import real_time_switching, start_named
 from ..control.pacing import Pacing
 from ..control.plant_server import CommandRefusedError, PlantServer, PlantState, plant_health
 from ..interface import messages
+from ..interface.bringup import PLANT_NODE
 from ..interface.serialized import SerializedJointState, SerializedPose, SerializedVector3
 from ..model.config import ConfigError, load_config
 from ..model.units import NANOSECONDS
 from ..motion.integration import IntegrationError
 from ..motion.programmed_motion import ProjectionError
 from ..motion.simulation import SOLVER_FAILURES
-from ..stream.health import CANNOT
-from ..stream.threads import real_time_switching, start_named
 from .message_types import rclpy_types
 from .parameters import check, pre_set_callback
 from .plant_parameters import declare_plant
 from .publishing import OVERRIDABLE, run_until_shutdown
 from .running import run_node
-from .settings import StartupError
 
-NODE_NAME = "crane_plant"
-COMMANDS_TOPIC = "~/commands"
-JOINT_STATES_TOPIC = "~/joint_states"
-END_EFFECTOR_POSE_TOPIC = "~/end_effector_pose"
-TIP_DEFLECTION_TOPIC = "~/tip_deflection"
-CLOCK_TOPIC = "/clock"
+NODE_NAME = PLANT_NODE
 HEARTBEAT = 0.5  # [s] of wall time between repetitions of an unanswered lock-step state
 
 
@@ -93,7 +88,7 @@ class CranePlantNode(LifecycleNode):
         self._missed = 0  # real-time periods missed (control/pacing.py) since configured
         self._missed_reported = 0
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_subscription(Float64MultiArray, COMMANDS_TOPIC, self._on_command, messages.PUBLISHER_DEPTH)
+        self.create_subscription(Float64MultiArray, messages.COMMANDS_TOPIC, self._on_command, messages.PUBLISHER_DEPTH)
         self._diagnostics = self.create_publisher(self._types.DiagnosticArray, messages.DIAGNOSTICS_TOPIC,
                                                   messages.PUBLISHER_DEPTH)
         self.create_timer(messages.DIAGNOSTICS_PERIOD, self._publish_diagnostics, clock=self._steady)
@@ -119,11 +114,11 @@ class CranePlantNode(LifecycleNode):
         depth = messages.PUBLISHER_DEPTH
         self._outputs = {
             name: self.create_lifecycle_publisher(message_type, topic, depth, qos_overriding_options=OVERRIDABLE)
-            for name, message_type, topic in (("joints", types.JointState, JOINT_STATES_TOPIC),
-                                              ("pose", types.PoseStamped, END_EFFECTOR_POSE_TOPIC),
-                                              ("deflection", types.Vector3Stamped, TIP_DEFLECTION_TOPIC))}
+            for name, message_type, topic in (("joints", types.JointState, messages.JOINT_STATES_TOPIC),
+                                              ("pose", types.PoseStamped, messages.END_EFFECTOR_POSE_TOPIC),
+                                              ("deflection", types.Vector3Stamped, messages.TIP_DEFLECTION_TOPIC))}
         if v.clock_mode == "lockstep":
-            self._outputs["clock"] = self.create_lifecycle_publisher(ClockMessage, CLOCK_TOPIC, depth)
+            self._outputs["clock"] = self.create_lifecycle_publisher(ClockMessage, messages.CLOCK_TOPIC, depth)
         self._made = {}
         self._failure = ""
         self._missed = self._missed_reported = 0

@@ -37,13 +37,14 @@ from std_msgs.msg import String
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
+from ..base.health import Level, startup_health
+from ..base.threads import real_time_switching, start_named
 from ..interface import messages
 from ..interface.serialized import SerializedJointState, SerializedPose, SerializedPreview, SerializedRows
 from ..model.units import NANOSECONDS
-from ..stream.health import Level, serving_health, startup_health
-from ..stream.sample import Samples
+from ..stream.health import serving_health
+from ..stream.sample import ReferenceRows
 from ..stream.server import Outgoing, ReferenceServer
-from ..stream.threads import real_time_switching, start_named
 
 OVERRIDABLE = QoSOverridingOptions([QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH, QoSPolicyKind.RELIABILITY,
                                     QoSPolicyKind.DURABILITY])
@@ -187,7 +188,7 @@ class SamplePublisher:
         that clock again (at least every MAX_WAIT), so it follows ROS time and stops within SLEEP_LIMIT.  The
         node clock is read once a wake-up (:class:`NodeTime`); the time the publishing took is added from the
         monotonic clock.  A wait of up to SLEEP_LIMIT is a plain sleep.  While it publishes, Python's thread switch
-        interval is short (:func:`~crane_reference.stream.threads.real_time_switching`), so that a wake-up gets the
+        interval is short (:func:`~crane_reference.base.threads.real_time_switching`), so that a wake-up gets the
         GIL from the node's other threads within it.
         """
         with NodeTime(self.node.get_clock()) as clock:
@@ -212,7 +213,7 @@ class SamplePublisher:
                     elif left > 0:  # within a period at 50 Hz or faster: one system call (an Event's wait takes locks)
                         time.sleep(left / NANOSECONDS)
 
-    def encode(self, samples: Samples) -> SampleMessages:
+    def encode(self, samples: ReferenceRows) -> SampleMessages:
         """The joint states and E's poses of stacked ``samples`` (a batch of frames), serialized at once in the
         frame of the settings, a row a sample (the prototypes serialized once per frame)."""
         frame_id, writers = self.settings.frame_id, self._writers

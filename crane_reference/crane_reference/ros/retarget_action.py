@@ -3,7 +3,7 @@ and result, served as joint_trajectory_controller serves ``follow_joint_trajecto
 
 * A goal is refused (REJECTED at the goal response, the reason in the log, as joint_trajectory_controller refuses
   an invalid trajectory) while the node is not active, or if its targets or blend time are not allowed: they are
-  checked as the target parameters are (:func:`.settings.refusal`: their ranges, NaN, E's reach).
+  checked as the target parameters are (:func:`.parameter_policy.refusal`: their ranges, NaN, E's reach).
 * An accepted goal is checked again as it begins; one that has become invalid meanwhile is aborted with
   ``INVALID_GOAL`` and the reason.  Otherwise it re-targets the stream over its blend time
   (:class:`~crane_reference.stream.retarget_goal.RetargetGoal`) and sets the target parameters to its targets,
@@ -37,8 +37,8 @@ from ..motion.simulation import SOLVER_FAILURES
 from ..stream.reference_stream import ERROR
 from ..stream.retarget_goal import PREEMPTED, REACHED, STOPPED, GoalEnd, RetargetGoal
 from ..stream.server import CommandRefusedError, ReferenceServer
+from .parameter_policy import refusal
 from .parameters import TARGET_PARAMETERS, NodeParameters, field_name
-from .settings import refusal
 
 OUTCOME_CODES = {REACHED: Retarget.Result.SUCCESSFUL, PREEMPTED: Retarget.Result.PREEMPTED,
                  STOPPED: Retarget.Result.STOPPED}
@@ -72,7 +72,7 @@ class RetargetActionServer:
     def destroy(self) -> None:
         """End an active goal (STOPPED) and the action server."""
         if self._goal is not None:
-            self._finish(self._goal[0].abort, Retarget.Result.STOPPED, "the node was destroyed")
+            self._end_active(self._goal[0].abort, Retarget.Result.STOPPED, "the node was destroyed")
         self._timer.cancel()
         self._node.destroy_timer(self._timer)
         self._action.destroy()
@@ -103,21 +103,21 @@ class RetargetActionServer:
         targets, blend = parameters[:len(GOAL_FIELDS)], parameters[len(GOAL_FIELDS):]
         Result = Retarget.Result
         if goal_handle.is_cancel_requested:
-            return self._end(goal_handle, goal_handle.canceled, Result.CANCELED, "canceled before it began")
+            return self._end_goal(goal_handle, goal_handle.canceled, Result.CANCELED, "canceled before it began")
         if server is None or not self._active():
-            return self._end(goal_handle, goal_handle.abort, Result.STOPPED, "the node is no longer active")
+            return self._end_goal(goal_handle, goal_handle.abort, Result.STOPPED, "the node is no longer active")
         if server.stream.state == ERROR:
-            return self._end(goal_handle, goal_handle.abort, Result.STOPPED,
+            return self._end_goal(goal_handle, goal_handle.abort, Result.STOPPED,
                              f"the stream is in ERROR ({server.stream.last_error})")
         try:
             server.check_computing()  # a stopped solver is STOPPED, not an invalid goal
             reason = refusal(parameters, params, server)
             if reason is not None:
-                return self._end(goal_handle, goal_handle.abort, Result.INVALID_GOAL, reason)
+                return self._end_goal(goal_handle, goal_handle.abort, Result.INVALID_GOAL, reason)
             goal = RetargetGoal(server, params.changed(targets).targets(), params.changed(blend).blend_time,
                                 self._node.get_clock().now().nanoseconds)
         except (CommandRefusedError, *SOLVER_FAILURES) as error:
-            return self._end(goal_handle, goal_handle.abort, Result.STOPPED, f"{type(error).__name__}: {error}")
+            return self._end_goal(goal_handle, goal_handle.abort, Result.STOPPED, f"{type(error).__name__}: {error}")
         self._preempt("a newer goal took over")
         result = self._node.set_parameters_atomically(targets)  # the targets in force: no second re-target
         if not result.successful:
@@ -136,12 +136,13 @@ class RetargetActionServer:
         goal_handle, goal, _ = self._goal
         end = goal.end(self._serving(goal))
         if end is not None:
-            self._conclude(end)
+            self._end_by_outcome(end)
         elif goal_handle.is_cancel_requested:
             result = self._node.set_parameters_atomically([Parameter(name, value=getattr(goal.previous, field))
                                                            for name, field in TARGET_PARAMETERS.items()])
-            self._finish(goal_handle.canceled, Retarget.Result.CANCELED, f"canceled: blending back to {goal.previous}"
-                         if result.successful else f"canceled, but the targets before it were refused: {result.reason}")
+            self._end_active(goal_handle.canceled, Retarget.Result.CANCELED,
+                             f"canceled: blending back to {goal.previous}" if result.successful
+                             else f"canceled, but the targets before it were refused: {result.reason}")
         else:
             published = goal.server.last_sample()
             if published.sample is not None:
@@ -155,27 +156,27 @@ class RetargetActionServer:
         pre-empted for ``why``."""
         if self._goal is not None:
             goal = self._goal[1]
-            self._conclude(goal.end(self._serving(goal), preempted_by=why) or GoalEnd(PREEMPTED, why))
+            self._end_by_outcome(goal.end(self._serving(goal), preempted_by=why) or GoalEnd(PREEMPTED, why))
 
     def _serving(self, goal: RetargetGoal) -> bool:
         """Whether the goal's server still publishes for it."""
         return self._server() is goal.server and self._active()
 
-    def _conclude(self, end: GoalEnd) -> None:
+    def _end_by_outcome(self, end: GoalEnd) -> None:
         """End the active goal as ``end`` says: succeeded if reached, else aborted with the outcome's code."""
         goal_handle = self._goal[0]
-        self._finish(goal_handle.succeed if end.outcome == REACHED else goal_handle.abort, OUTCOME_CODES[end.outcome],
-                     end.message)
+        self._end_active(goal_handle.succeed if end.outcome == REACHED else goal_handle.abort,
+                         OUTCOME_CODES[end.outcome], end.message)
 
-    def _finish(self, end: Callable[[], None], code: int, message: str) -> None:
+    def _end_active(self, end: Callable[[], None], code: int, message: str) -> None:
         """End the active goal with ``end`` (succeed, abort, canceled), the result ``code`` and ``message``."""
         goal_handle, goal, done = self._goal
         self._goal = None
         self._timer.cancel()
-        done.set_result(self._end(goal_handle, end, code, message, goal.blend_stamp_ns, goal.path_stamp_ns))
+        done.set_result(self._end_goal(goal_handle, end, code, message, goal.blend_stamp_ns, goal.path_stamp_ns))
 
-    def _end(self, goal_handle: ServerGoalHandle, end: Callable[[], None], code: int, message: str,
-             blend_stamp_ns: int | None = None, path_stamp_ns: int | None = None) -> Retarget.Result:
+    def _end_goal(self, goal_handle: ServerGoalHandle, end: Callable[[], None], code: int, message: str,
+                  blend_stamp_ns: int | None = None, path_stamp_ns: int | None = None) -> Retarget.Result:
         """End ``goal_handle`` with ``end`` and its result: ``code``, ``message`` and the stamps (zero if not
         published)."""
         end()

@@ -20,11 +20,10 @@ from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from ..base.health import CANNOT, StartupError
 from ..model.config import ConfigError
 from ..motion.simulation import SOLVER_FAILURES
-from ..stream.health import CANNOT
 from .parameters import ParameterError
-from .settings import StartupError
 
 try:
     from rclpy.experimental import EventsExecutor as NodeExecutor

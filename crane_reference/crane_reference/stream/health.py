@@ -1,43 +1,14 @@
-"""The reference's health as diagnostics report it: a level and a message, decided without ROS.
-
-The levels have the values of diagnostic_msgs/DiagnosticStatus (OK 0, WARN 1, ERROR 2, STALE 3).  Before the
-server publishes, the health is what the node is doing while it starts, at ERROR if it cannot
-(:func:`startup_health`); once it publishes, :func:`serving_health` ranks what can be wrong, the worst first:
+"""The reference's health as diagnostics report it while the server publishes (:mod:`crane_reference.base.health`
+before): :func:`serving_health` ranks what can be wrong, the worst first:
 the solver stopped, the stream failed (or the server faulted), the clock went back, the clock leapt forward,
 samples were held because the solver was late; else OK with the stream's state.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from enum import IntEnum
-
+from ..base.health import Health, Level
 from .reference_stream import ERROR
 from .server import ServerStatus
-
-CANNOT = "cannot"
-"""How a start-up message that says why the node cannot start begins ("cannot configure: ...")."""
-
-
-class Level(IntEnum):
-    """Severity, with the values of diagnostic_msgs/DiagnosticStatus."""
-
-    OK = 0
-    WARN = 1
-    ERROR = 2
-    STALE = 3
-
-
-@dataclass(frozen=True)
-class Health:
-    level: Level
-    message: str
-
-
-def startup_health(doing: str) -> Health:
-    """Before publishing: what the node is doing (OK), or why it cannot start (ERROR, ``doing`` begins with
-    :data:`CANNOT`)."""
-    return Health(Level.ERROR if doing.startswith(CANNOT) else Level.OK, doing)
 
 
 def serving_health(status: ServerStatus, newly_held: int) -> Health:

@@ -16,7 +16,7 @@ import numpy as np
 from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import StepperSnapshot
 from ..motion.trajectory import generalized_effort
-from .sample import Samples, quaternions
+from .sample import ReferenceRows, quaternions
 
 TIME_SLACK = 1e-12  # [s], rounding slack when locating a motion time among the computed ones
 STEP_FIELDS = ("t", "q", "qd", "qdd", "ee_position", "ee_rotation", "effort", "feedforward", "residual_distance")
@@ -123,7 +123,7 @@ class History:
         return Instant(float(self._rows["t"][row]), self._rows["q"][row].copy(), self._rows["qd"][row].copy(),
                        self._motions[self._motion[row]])
 
-    def read(self, k: np.ndarray) -> Samples:
+    def read(self, k: np.ndarray) -> ReferenceRows:
         """The reference samples of steps ``k`` (indices), evaluated first where no read has yet."""
         rows = self._begin + np.asarray(k, dtype=np.int64)
         distance = self._rows["residual_distance"]
@@ -137,7 +137,7 @@ class History:
             r["feedforward"][some] = forces
             distance[some] = np.max(distances, axis=-1)
         r = self._rows
-        return Samples(r["t"][rows], r["q"][rows], r["qd"][rows], r["qdd"][rows], r["effort"][rows],
+        return ReferenceRows(r["t"][rows], r["q"][rows], r["qd"][rows], r["qdd"][rows], r["effort"][rows],
                        r["feedforward"][rows], r["ee_position"][rows], quaternions(r["ee_rotation"][rows]),
                        distance[rows], np.zeros(rows.size, dtype=bool))
 

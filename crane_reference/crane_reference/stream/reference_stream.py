@@ -42,7 +42,7 @@ from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import SOLVER_FAILURES, MotionStepper, Scenario, TaskConstraints, paper_task_constraints
 from ..motion.steps import ONLINE_STEP
 from .history import History
-from .sample import ReferenceSample, Samples, between, warped
+from .sample import ReferenceRows, ReferenceSample, between, warped
 from .targets import blend_constraints, check_task
 from .time_warp import TimeWarp, check_rate
 
@@ -240,7 +240,7 @@ class ReferenceStream:
         """The reference at publish time tau (which must not exceed :attr:`computed_until`)."""
         return self.samples([tau]).rows()[0]
 
-    def samples(self, taus) -> Samples:
+    def samples(self, taus) -> ReferenceRows:
         """The references at the publish times ``taus`` (none beyond :attr:`computed_until`): the computed
         steps themselves, or interpolated between two of them (:func:`~.sample.between`, all at once); in ERROR,
         the held sample at the times beyond the last valid step."""
@@ -249,7 +249,7 @@ class ReferenceStream:
         end = history.end_time
         held = t > end + 1e-12
         if self._hold is not None and held.all():
-            return Samples.repeated(self._hold, len(taus))
+            return ReferenceRows.repeated(self._hold, len(taus))
         if self._hold is None and held.any():
             raise ValueError(f"t = {t.max():.6g} s is beyond the computed motion ({end:.6g} s): call compute()")
         k, exact = history.locate(np.minimum(t, end))
@@ -262,7 +262,7 @@ class ReferenceStream:
                 field[inside] = values
         samples = warped(made, rate, rate_change)
         if held.any():
-            for field, values in zip(samples, Samples.repeated(self._hold, int(held.sum())), strict=True):
+            for field, values in zip(samples, ReferenceRows.repeated(self._hold, int(held.sum())), strict=True):
                 field[held] = values
         return samples
 
@@ -272,7 +272,7 @@ class ReferenceStream:
         ahead = np.asarray(taus, dtype=float)[:, None] + horizon * np.arange(1, count + 1) / count
         return np.minimum(ahead, self.computed_until)
 
-    def preview(self, tau: float, horizon: float, count: int) -> Samples:
+    def preview(self, tau: float, horizon: float, count: int) -> ReferenceRows:
         """``count`` samples over (tau, tau + horizon] (:meth:`preview_times`), computed first if need be."""
         self.compute(tau + horizon)
         return self.samples(self.preview_times([tau], horizon, count)[0])

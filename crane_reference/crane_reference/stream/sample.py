@@ -44,7 +44,7 @@ class ReferenceSample:
         return math.isfinite(np.concatenate(arrays).sum() + self.residual_distance)
 
 
-class Samples(NamedTuple):
+class ReferenceRows(NamedTuple):
     """Reference samples stacked, one row per sample: the fields of :class:`ReferenceSample` (t (N,), q, qd,
     qdd, effort and feedforward (N, n), ee_position (N, 3), ee_quaternion (N, 4), residual_distance (N,), held
     (N,)).  The stream makes and moves samples in this form; a few arrays pickle (to the node's process) at a
@@ -62,24 +62,24 @@ class Samples(NamedTuple):
     held: np.ndarray
 
     @classmethod
-    def stack(cls, samples: list[ReferenceSample]) -> Samples:
+    def stack(cls, samples: list[ReferenceSample]) -> ReferenceRows:
         """``samples`` stacked."""
         return cls(*(np.array([getattr(s, f.name) for s in samples]) for f in dataclass_fields(ReferenceSample)))
 
     @classmethod
-    def concatenated(cls, parts: list[Samples]) -> Samples:
+    def concatenated(cls, parts: list[ReferenceRows]) -> ReferenceRows:
         """The rows of ``parts`` in turn."""
         return parts[0] if len(parts) == 1 else cls(*(np.concatenate(field) for field in zip(*parts, strict=True)))
 
     @classmethod
-    def repeated(cls, sample: ReferenceSample, count: int) -> Samples:
+    def repeated(cls, sample: ReferenceSample, count: int) -> ReferenceRows:
         """``sample`` ``count`` times."""
         return cls(*(np.repeat(np.asarray(getattr(sample, f.name))[None], count, axis=0)
                      for f in dataclass_fields(ReferenceSample)))
 
-    def take(self, index: np.ndarray) -> Samples:
+    def take(self, index: np.ndarray) -> ReferenceRows:
         """The rows ``index``."""
-        return Samples(*(field[index] for field in self))
+        return ReferenceRows(*(field[index] for field in self))
 
     def row(self, i: int) -> ReferenceSample:
         """Row i as a :class:`ReferenceSample` (its arrays are rows of the stacked ones)."""
@@ -114,7 +114,7 @@ def quaternions(rotations: np.ndarray) -> np.ndarray:
     return Rotation.from_matrix(rotations, **_TRUSTED).as_quat()
 
 
-def between(a: Samples, b: Samples, t: np.ndarray, poses) -> Samples:
+def between(a: ReferenceRows, b: ReferenceRows, t: np.ndarray, poses) -> ReferenceRows:
     """The references at a.t[i] < t[i] < b.t[i]: q cubic Hermite in q and qd, qd cubic Hermite in qd and qdd
     (both :func:`~crane_reference.motion.trajectory.hermite_segment`), qdd, effort and feedforward linear; E's pose from
     ``poses(q)`` -> (positions (N, 3), rotation matrices (N, 3, 3)), the kinematics at the interpolated q."""
@@ -127,11 +127,11 @@ def between(a: Samples, b: Samples, t: np.ndarray, poses) -> Samples:
     effort = (1 - s) * a.effort + s * b.effort
     feedforward = (1 - s) * a.feedforward + s * b.feedforward
     positions, rotations = poses(q)
-    return Samples(t, q, qd, qdd, effort, feedforward, positions, quaternions(rotations),
+    return ReferenceRows(t, q, qd, qdd, effort, feedforward, positions, quaternions(rotations),
                    np.maximum(a.residual_distance, b.residual_distance), np.zeros(t.size, dtype=bool))
 
 
-def warped(samples: Samples, rate: np.ndarray, rate_change: np.ndarray) -> Samples:
+def warped(samples: ReferenceRows, rate: np.ndarray, rate_change: np.ndarray) -> ReferenceRows:
     """``samples`` of the motion at their own times t, published at rates dt/dtau = ``rate`` (N,) changing by
     ``rate_change`` (N,) per second of publish time: velocity r q'(t), acceleration r^2 q''(t) + r' q'(t)
     (see :mod:`~.time_warp`).  Unchanged at r = 1, r' = 0."""

@@ -8,8 +8,8 @@ and no ROS types, so every rule here is tested without rclpy.  Frames stay stack
 arrays a batch) from the solver to the publisher, which writes a row's numbers into the serialized messages:
 no object is made per sample on the way.
 
-* making frames (:meth:`FrameSchedule.plan`, :meth:`FrameSchedule.request`, :func:`make_frames` on the
-  solver's side, :meth:`FrameSchedule.accept`): up to the look-ahead, after one slice of computing ahead,
+* making frames (:meth:`FrameSchedule.plan`, :meth:`FrameSchedule.request`, :func:`~.frame_maker.make_frames`
+  on the solver's side, :meth:`FrameSchedule.accept`): up to the look-ahead, after one slice of computing ahead,
   with a preview every ``decimation`` frames; a frame that is not finite is replaced by the last valid
   sample held;
 * commands (:meth:`FrameSchedule.command_point`, :meth:`FrameSchedule.after_command`): a command takes
@@ -23,195 +23,20 @@ no object is made per sample on the way.
 from __future__ import annotations
 
 import math
-import time
 from collections import deque
-from dataclasses import dataclass, field, replace
-from typing import Any
-
-import numpy as np
+from dataclasses import dataclass, field
 
 from ..model.units import NANOSECONDS
-from .reference_stream import ReferenceStream
-from .sample import ReferenceSample, Samples
+from .frames import FrameBatch, FrameRequest, Frames, Plan
+from .sample import ReferenceSample
 
-TIME_TOLERANCE = 1e-9  # [s], rounding slack when comparing stream times
-COMPUTE_MARGIN = 0.05  # [s] of motion computed beyond the preview horizon
 URGENT_PART = 4  # frames within lookahead / URGENT_PART of publishing are made before their preview horizon
-FRAME_CHUNK = 100  # frames that are not urgent are made this many at a time (a waiting request ends them)
 
 
 def stamp_at(start_ns: int, k: int, rate: int) -> int:
     """Stamp [ns] of sample k of a stream at ``rate`` Hz that starts at ``start_ns`` (exact when the rate
     divides 10^9 ns, otherwise rounded down to the nanosecond without accumulating an error)."""
     return start_ns + k * NANOSECONDS // rate
-
-
-@dataclass(frozen=True, eq=False)
-class Frames:
-    """Frames k .. k + N - 1 of the reference, stacked: their stream publish times ``tau`` (N,) [s], their samples
-    (:class:`~.sample.Samples`, a row each) and the previews of some of them (row -> the preview's samples) over
-    ``horizon`` seconds.  The solver makes them, the pipe carries them and the publisher reads them in this form:
-    a few arrays a batch, no object a sample.  ``wire``: what the publisher made of the samples at once when the
-    batch came (its messages, a row a sample: :attr:`~.server.ReferenceServer.encode`), or None."""
-
-    k: int
-    tau: np.ndarray
-    samples: Samples
-    previews: dict[int, Samples] = field(default_factory=dict)
-    horizon: float = 0.0
-    wire: Any = None
-
-    def __len__(self) -> int:
-        return self.tau.size
-
-    @property
-    def end(self) -> int:
-        """The frame after the last."""
-        return self.k + self.tau.size
-
-    @classmethod
-    def held(cls, k: int, taus: np.ndarray, sample: ReferenceSample) -> Frames:
-        """Frames k, ... at ``taus``, each ``sample`` held."""
-        return cls(k, np.asarray(taus, dtype=float), Samples.repeated(sample.hold(), len(taus)))
-
-    def head(self, count: int) -> Frames:
-        """The first ``count`` frames (the wire's rows beyond them are never read)."""
-        return Frames(self.k, self.tau[:count], self.samples.take(slice(0, count)),
-                      {i: p for i, p in self.previews.items() if i < count}, self.horizon, self.wire)
-
-    def renumbered(self, k: int) -> Frames:
-        """The same frames as frames k, ..."""
-        return replace(self, k=k)
-
-@dataclass(frozen=True)
-class Plan:
-    """What the worker makes next: frames from k at stream time tau, for buffer ``generation``, at most
-    ``room`` of them, the next preview due at ``next_preview_k``."""
-
-    k: int
-    tau: float
-    generation: int
-    next_preview_k: int
-    room: int
-
-
-@dataclass(frozen=True)
-class FrameRequest:
-    """What the solver makes for a :class:`Plan` (built by :meth:`FrameSchedule.request`, carried to the
-    solver, which may be another process): up to ``count`` frames at ``rate`` Hz, a ``horizon``-second
-    preview of ``points`` points every ``decimation`` frames, after computing ahead for at most
-    ``compute_budget`` s of wall time (None: unbounded); frames before ``urgent_until`` are made as soon as
-    their own motion is computed; ``last_valid`` is the last finite sample made."""
-
-    plan: Plan
-    count: int
-    rate: int
-    horizon: float
-    points: int
-    decimation: int
-    compute_budget: float | None
-    urgent_until: int
-    last_valid: ReferenceSample
-
-
-@dataclass(frozen=True)
-class FrameBatch:
-    """What the solver made for a :class:`FrameRequest`: the frames, the next frame due a preview, whether
-    the motion is still short of the preview horizon (``busy``), the wall time spent computing and the
-    motion computed in it [s], frames replaced because they were not finite and the fault that says why."""
-
-    frames: Frames
-    next_preview_k: int
-    busy: bool
-    compute_wall: float = 0.0
-    compute_motion: float = 0.0
-    non_finite: int = 0
-    fault: str = ""
-
-
-def make_frames(stream: ReferenceStream, request: FrameRequest, stop: np.ndarray | None = None) -> FrameBatch:
-    """The frames of ``request`` as far as the motion is computed, after computing ahead far enough for
-    them and for their previews (or until the ``stop`` flag is set: a request is waiting for the solver; then only
-    urgent frames are made, the motion computed so far is kept and the batch is busy; frames that are not urgent
-    are made FRAME_CHUNK at a time, and the flag set meanwhile drops them too).  A frame due a
-    preview waits until its horizon is computed, so previews keep their cadence; an urgent frame (just after
-    a command) is made as soon as its own motion is computed, without the preview due to it if its horizon
-    is not computed yet (the next one is due a decimation later: the cadence stays).  A frame that is not
-    finite is replaced by the last valid sample held (:func:`checked`)."""
-    plan, count, horizon = request.plan, request.count, request.horizon
-    dt = 1.0 / request.rate
-    tau, next_preview_k = plan.tau, plan.next_preview_k
-    ahead = tau + count * dt + horizon + COMPUTE_MARGIN
-    frames_until = tau + (count - 1) * dt + 2 * TIME_TOLERANCE
-    before = stream.computed_until
-    target = frames_until if plan.k < request.urgent_until else ahead  # urgent: the frames' own motion only
-    wall = motion = 0.0
-    if before < target:
-        start = time.perf_counter()
-        stream.compute(target, request.compute_budget, stop)
-        if math.isfinite(stream.computed_until):
-            wall, motion = time.perf_counter() - start, stream.computed_until - before
-    times = tau + dt * np.arange(count)  # in ERROR: the motion up to its last valid step, held beyond
-
-    def waited() -> FrameBatch | None:
-        """No frames (busy) if a request waits: it comes first (a command may drop these frames); urgent frames
-        are made still."""
-        if plan.k >= request.urgent_until and stop is not None and stop[0]:
-            return FrameBatch(Frames(plan.k, times[:0], stream.samples(times[:0])), plan.next_preview_k, True, wall,
-                              motion)
-        return None
-
-    if batch := waited():
-        return batch
-    computed_until = stream.computed_until
-    made = int(np.count_nonzero(times <= computed_until - TIME_TOLERANCE))
-    previewed = []  # the rows with a preview
-    decimation = max(1, request.decimation)
-    row = max(0, next_preview_k - plan.k)
-    while row < made:  # the frames due a preview, in turn
-        if computed_until >= float(times[row]) + horizon:
-            previewed.append(row)
-        elif plan.k + row >= request.urgent_until:
-            made = row  # this frame's preview is not computed yet: make it on a later call
-            break
-        next_preview_k = plan.k + row + decimation  # (urgent, not computed: it goes without)
-        row += decimation
-    parts, points = [], request.points
-    previews: dict[int, Samples] = {}
-    for first in range(0, made, FRAME_CHUNK):  # a chunk's frames and their previews read at once
-        if batch := waited():
-            return batch
-        end = min(made, first + FRAME_CHUNK)
-        rows = [row for row in previewed if first <= row < end]
-        read = stream.samples(np.concatenate((times[first:end],
-                                              stream.preview_times(times[rows], horizon, points).ravel())))
-        parts.append(read.take(slice(0, end - first)))
-        for i, row in enumerate(rows):
-            start = end - first + i * points
-            previews[row] = read.take(slice(start, start + points))
-    samples = Samples.concatenated(parts) if parts else stream.samples(times[:0])
-    frames, non_finite, fault = checked(Frames(plan.k, times[:made], samples, previews, horizon), request.last_valid)
-    return FrameBatch(frames, next_preview_k, computed_until < ahead, wall, motion, non_finite, fault)
-
-
-def checked(frames: Frames, last_valid: ReferenceSample) -> tuple[Frames, int, str]:
-    """``frames`` with each frame that is not finite replaced by the last valid sample before it (or
-    ``last_valid``) held, and previews that are not finite dropped; how many were replaced and the fault that
-    says why ("" if none): NaN is never published."""
-    samples = frames.samples
-    previews = {row: p for row, p in frames.previews.items() if np.all(p.finite())}
-    bad = np.flatnonzero(~samples.finite())
-    if not bad.size:
-        return (frames if len(previews) == len(frames.previews) else replace(frames, previews=previews)), 0, ""
-    samples = Samples(*(field.copy() for field in samples))
-    for row in bad.tolist():
-        held = (samples.row(row - 1) if row else last_valid).hold()
-        for name, values in zip(Samples._fields, samples, strict=True):
-            values[row] = getattr(held, name)
-        previews.pop(row, None)
-    tau = float(frames.tau[bad[-1]])
-    return (replace(frames, samples=samples, previews=previews), int(bad.size),
-            f"non-finite sample at stream time {tau:.3f} s: holding the last valid one")
 
 
 @dataclass

@@ -61,15 +61,16 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
 
+from ..base.threads import start_named
 from ..model.parameters import Task
 from ..model.units import NANOSECONDS
 from ..motion.simulation import SOLVER_FAILURES
+from .frames import FrameBatch, FrameRequest, Frames, Plan
 from .history import TIME_SLACK
 from .reference_stream import ERROR, PAUSED, RUNNING
-from .sample import ReferenceSample, Samples
-from .schedule import FrameBatch, FrameRequest, Frames, FrameSchedule, Plan, stamp_at
+from .sample import ReferenceRows, ReferenceSample
+from .schedule import FrameSchedule, stamp_at
 from .solver import STREAM_COMMANDS, SolverClient, SolverStoppedError, StreamStatus
-from .threads import start_named
 
 LOOKAHEAD = 2.0  # [s] of frames kept ready ahead of publishing
 COMPUTE_SLICE = 0.25  # [s] of wall time the solver computes per request while publishing (a command cuts it short)
@@ -223,7 +224,7 @@ class ReferenceServer:
         self._unstamped: dict[str, int] = {}  # command made while not publishing -> its frame, stamped at begin
         self._milestones: list[Milestone] = []  # not yet published
         self._rates_reference = (0, 0.0, 0.0, 0)
-        self.encode: Callable[[Samples], Any] | None = None
+        self.encode: Callable[[ReferenceRows], Any] | None = None
         """What the publisher makes of a batch's samples at once (its messages, a row a sample), set by it: made
         in the thread that receives the batch, outside the lock, and kept as the frames' ``wire``."""
         self._worker = start_named(self._work, "ref_frames") if worker else None

@@ -1,7 +1,7 @@
 """The stream's solver side, in the caller's thread or in a process of its own.
 
 :class:`StreamSolver` owns a :class:`~.reference_stream.ReferenceStream` and answers the requests of a
-reference server (:mod:`.server`): frames to make (:func:`~.schedule.make_frames`), commands applied at a
+reference server (:mod:`.server`): frames to make (:func:`~.frame_maker.make_frames`), commands applied at a
 stream time, target checks, the crane's reach.  Two clients carry the requests to it, with the methods of
 :class:`SolverClient` (each returns the result and keeps the stream's :class:`StreamStatus` of the reply;
 a request names the solver's method itself, which pickles by reference, never a string):
@@ -14,7 +14,7 @@ a request names the solver's method itself, which pickles by reference, never a 
 
 Both clients have :meth:`interrupt`: a caller with a command waiting for the solver cuts the request in
 progress short, so the command waits for one integrator step of computing ahead or one chunk of frames, not a
-whole slice (:func:`~.schedule.make_frames` returns the urgent frames made so far, and no others).  It sets
+whole slice (:func:`~.frame_maker.make_frames` returns the urgent frames made so far, and no others).  It sets
 the solver's stop flag (:func:`~crane_reference.motion.integration.stop_flag`), which the compiled runs read at
 every step; the process's flag is a byte of memory shared with the caller.  The flag is cleared before any
 request but a frame request (so a command's own frames are made whole), and after a frame request (an
@@ -63,9 +63,10 @@ from ..model.drive import column_drive
 from ..model.parameters import Task
 from ..model.urdf import model_to_urdf
 from ..motion.integration import stop_flag
+from .frame_maker import make_frames
+from .frames import FrameBatch, FrameRequest
 from .reference_stream import ReferenceStream
 from .sample import ReferenceSample
-from .schedule import FrameBatch, FrameRequest, make_frames
 from .targets import reach
 from .warmup import warm_up
 
@@ -170,7 +171,7 @@ class StreamSolver:
                             stream.settled_at(), stream.blend_time)
 
     def frames(self, request: FrameRequest, keep: float) -> FrameBatch:
-        """The frames of ``request`` (:func:`~.schedule.make_frames`); then the motion older than ``keep``
+        """The frames of ``request`` (:func:`~.frame_maker.make_frames`); then the motion older than ``keep``
         seconds before the request's first frame is forgotten."""
         batch = make_frames(self.stream, request, self.stop)
         self.stream.release(request.plan.tau, keep)
@@ -484,8 +485,8 @@ class SolverProcess(SolverClient):
 if __name__ == "__main__":
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the caller decides when the solver ends (see the module)
     os.nice(SOLVER_NICENESS)
+    from crane_reference.base.threads import name_this_thread
     from crane_reference.stream import solver  # the classes under their importable names (pickled replies)
-    from crane_reference.stream.threads import name_this_thread
 
     name_this_thread("ref_solver")
     stop_flag, beats = solver.shared_memory(int(sys.argv[3]))

@@ -9,7 +9,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from ..dynamics import kernels
+from ..dynamics.projection import PROJECTION_ITERATIONS, held_points
 from ..model.parameters import Task
 from ..model.profiles import Blend, Constant, Profile
 from ..motion.constraints import ConstraintSet, paper_constraints
@@ -53,12 +53,12 @@ def _motion(scenario: Scenario, a: float, b: float, z: float) -> ProgrammedMotio
 def _hold(check: ProgrammedMotion, slew: Slew, q: np.ndarray, points: np.ndarray, margin: float) -> np.ndarray:
     """q with E held at each of ``points`` (N, 3) [m] in turn on ``check``'s constraints, by continuation from
     ``q`` with the ``slew`` joint at the azimuth atan2(y, x)
-    (:func:`~crane_reference.dynamics.kernels.held_points`): the
+    (:func:`~crane_reference.dynamics.held_points`): the
     solution at the last point; :class:`UnreachableTargetError` at the first point where E cannot be held, or
     only with the smallest singular value of K_dc below ``margin``."""
-    q, held, positions, singular_values = kernels.held_points(
+    q, held, positions, singular_values = held_points(
         np.ascontiguousarray(q, dtype=float), points, check.constraints.coefficients(0.0), check.holonomic_dependent,
-        check.dynamics.chain, np.array(slew, dtype=float), POSITION_TOLERANCE, kernels.PROJECTION_ITERATIONS)
+        check.dynamics.chain, np.array(slew, dtype=float), POSITION_TOLERANCE, PROJECTION_ITERATIONS)
     off = np.hypot(positions[:, 0] - points[:, 0], positions[:, 1] - points[:, 1])
     failed = np.flatnonzero(~held | ~(off <= POINT_TOLERANCE) | ~(singular_values >= margin))
     if failed.size:

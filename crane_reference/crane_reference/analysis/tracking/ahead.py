@@ -13,10 +13,10 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
+from ...base.threads import start_named
 from ...motion.programmed_motion import ProgrammedMotion
 from ...motion.simulation import joined
 from ...motion.trajectory import Trajectory
-from ...stream.threads import start_named
 
 
 class ComputedAhead:

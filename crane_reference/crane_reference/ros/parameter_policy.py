@@ -9,6 +9,7 @@ from collections.abc import Callable
 
 from rclpy.parameter import Parameter
 
+from ..base.health import StartupError
 from ..model.description import CraneDescription
 from ..motion.simulation import SOLVER_FAILURES
 from ..stream.server import CommandRefusedError, Preview, ReferenceServer
@@ -16,11 +17,6 @@ from ..stream.solver import LocalSolver, SolverClient, SolverProcess, StreamSpec
 from ..stream.targets import UnreachableTargetError
 from .parameters import COMMANDING_PARAMETERS, TARGET_PARAMETERS, NodeParameters, ParameterError, check
 from .publishing import PublishSettings
-
-
-class StartupError(RuntimeError):
-    """The node cannot start (unusable configuration or target)."""
-
 
 MESSAGE_PARAMETERS = ("frame_id", "frame_prefix", "preview.joints", "preview.effort")
 """The parameters that change the messages' :class:`~.publishing.PublishSettings`."""
