@@ -183,6 +183,18 @@ class StreamSolver:
         ``request`` (:meth:`frames`): one request, so a command's first frames are ready without a second trip."""
         return method(self, tau, *args), self.frames(request, keep)
 
+    def call(self, method: Callable[..., Any], *args: Any) -> Any:
+        """``method(self, *args)`` with the stop flag cleared as the module says: before any call but one of
+        :meth:`frames` (an interrupt set it for the call that waited), and after a call of :meth:`frames`."""
+        frames = method is StreamSolver.frames
+        if not frames:
+            self.stop[0] = 0
+        try:
+            return method(self, *args)
+        finally:
+            if frames:
+                self.stop[0] = 0
+
     def after_reply(self) -> None:
         """Tidy up after a reply is sent (:meth:`~.reference_stream.ReferenceStream.free_forgotten`)."""
         self.stream.free_forgotten()
@@ -288,16 +300,11 @@ class LocalSolver(SolverClient):
         self.solver.stop[0] = 1
 
     def _call(self, method: Callable[..., Any], *args: Any) -> Any:
-        """``method(solver, *args)``; :attr:`status` is the stream's after it (also if it raised); the stop
-        flag cleared as the module says."""
-        frames = method is StreamSolver.frames
-        if not frames:
-            self.solver.stop[0] = 0
+        """``method(solver, *args)`` (:meth:`StreamSolver.call`); :attr:`status` is the stream's after it (also
+        if it raised)."""
         try:
-            return method(self.solver, *args)
+            return self.solver.call(method, *args)
         finally:
-            if frames:
-                self.solver.stop[0] = 0
             self.status = self.solver.status()
             self.solver.after_reply()
 
@@ -322,8 +329,8 @@ def beat(counter: np.ndarray) -> None:
 
 def _serve(requests: Connection, replies: Connection, stop: np.ndarray) -> None:
     """The solver process: read the :class:`StreamSpec`, build the solver with the ``stop`` flag shared with
-    the caller, then answer (method, args) requests until the pipe closes or None comes, clearing the flag as
-    the module says.  Replies are (ok, result or exception, status)."""
+    the caller, then answer (method, args) requests (:meth:`StreamSolver.call`) until the pipe closes or None
+    comes.  Replies are (ok, result or exception, status)."""
     try:
         spec = requests.recv()
         solver = StreamSolver(spec, stop)
@@ -342,14 +349,10 @@ def _serve(requests: Connection, replies: Connection, stop: np.ndarray) -> None:
         if request is None:
             return
         method, args = request
-        if method is not StreamSolver.frames:
-            stop[0] = 0
         try:
-            reply = (True, method(solver, *args))
+            reply = (True, solver.call(method, *args))
         except Exception as error:  # reported to the caller, which raises it
             reply = (False, _portable(error))
-        if method is StreamSolver.frames:
-            stop[0] = 0
         replies.send((*reply, solver.status()))
         del reply
         solver.after_reply()
