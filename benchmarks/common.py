@@ -10,14 +10,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from crane_reference.dynamics.runs import integration_run
 from crane_reference.model.urdf import model_to_urdf
 from crane_reference.motion.integration import (
     EVALUATIONS,
     ONLINE_TOLERANCE,
     ExactFrequencyTrapezoidal,
-    StepState,
-    stop_flag,
 )
 from crane_reference.motion.simulation import MotionStepper, Scenario
 
@@ -71,18 +68,13 @@ def run_times(scenario: Scenario, step: float, duration: float, every_row: bool,
     steps alone (only each run's last row evaluated, what a caller that reads the motion needs) or with
     every row's full evaluation (reactions, residuals, energy accounts: what ``simulate`` records); ``paced``:
     each run waits until its motion's end is reached in wall time (as a real-time solver runs them)."""
-    motion = scenario.motion
-    integrator = ExactFrequencyTrapezoidal(motion)
+    integrator = ExactFrequencyTrapezoidal(scenario.motion)
     state = integrator.start(0.0, scenario.equilibrium.q, np.zeros_like(scenario.equilibrium.q))
     per_run = round(chunk / step)
     start = time.perf_counter()
     for first in range(0, round(duration / step), per_run):
         times = step * np.arange(first + 1, first + per_run + 1)
-        k, drives = motion.constraints.coefficients_at(times), motion.dynamics.drive.kernel_parameters(times)
-        run = integration_run(state.step_start(), times, k, drives, motion.partition, motion.dynamics.chain,
-                              integrator.settings, np.full(times.size, every_row), stop_flag())
-        state = StepState(times[-1], run.last.q, run.last.qd, motion.solution_from_evaluation(run.last.evaluation),
-                          run.last.correction, run.last.earlier)
+        state, _ = integrator.run(state, times, every_row=every_row)
         if paced:
             time.sleep(max(0.0, start + times[-1] - time.perf_counter()))
     return time.perf_counter() - start
