@@ -70,7 +70,8 @@ def _in_turn(nodes, steps):
     for (name, which), after in itertools.pairwise(steps):
         _, passing, reached = TRANSITIONS[which]
         actions.append(RegisterEventHandler(OnStateTransition(target_lifecycle_node=nodes[name], start_state=passing,
-                                                              goal_state=reached, entities=[emit(*after)])))
+                                                              goal_state=reached, entities=[emit(*after)],
+                                                              handle_once=True)))
     return actions
 
 

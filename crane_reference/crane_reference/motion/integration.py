@@ -32,7 +32,7 @@ tan(omega h / 2) / (omega h / 2) (the positions are exact).  With the model's da
 d_i = phi_i^T D_r phi_i) the same idea maps both roots lambda of each mode exactly: the rule turns a root
 lambda_hat of its equation into z = (1 + lambda_hat h / 2) / (1 - lambda_hat h / 2), which is exp(lambda h)
 for lambda_hat = (2 / h) tanh(lambda h / 2), and a mass and a damping correction per mode make those the
-roots (:func:`crane_reference.dynamics.modal_correction`): each damped mode turns and decays per
+roots (:func:`crane_reference.dynamics.modal_correction.modal_correction`): each damped mode turns and decays per
 step as the model's does.
 
 Modes with omega h at or above the cutoff (0.8 pi: the output sampled every step cannot show them;
@@ -57,7 +57,7 @@ from the constraints.
 The step's nonlinear equation is solved by a modified Newton method on the residual (from O(n) inverse
 dynamics, without forming M), from the accelerations of the integrated coordinates at the two previous
 steps' starts and this one's extrapolated quadratically, a_1 = 3 a_0 - 3 a_-1 + a_-2
-(:func:`~crane_reference.dynamics.predicted_accelerations`; linearly, or a_0 itself, after a start,
+(:func:`~crane_reference.dynamics.step.predicted_accelerations`; linearly, or a_0 itself, after a start,
 a restart or a new step size, until there are three), with the iteration matrix B^T (M + h^2/4 K + h/2 D) B -
 Delta M_r + h/2 D_u with M and B at the step's predicted end (its first iterate): exact for the stiff
 linear springs, to first order in h for the configuration's change over the step, approximate for gravity,

@@ -154,7 +154,7 @@ correction this small."""
 
 class ProgrammedMotion:
     """Equations (7)-(8) of a crane model under a :class:`ConstraintSet` (evaluated by the compiled
-    kernels of :mod:`crane_reference.dynamics.kernels`).
+    kernels of :mod:`crane_reference.dynamics.evaluation`).
 
     ``realisation`` says who enforces the constraints.  ``"ideal"`` (the paper): ideal forces at E,
     and the dynamic rows of (8) are projected with B on the directions the constraints leave free.
@@ -268,7 +268,7 @@ class ProgrammedMotion:
         (:meth:`~.integration.ExactFrequencyTrapezoidal.run` with ``every_row`` False): at each of ``times``
         (N,) [s], with the rows of q, qd and the integrator's qdd (N, n) there, the generalized force of the
         constraints (N, n), the drive torque (N,) [N m] and the constraint distances (N, m) [m]; by O(n)
-        inverse dynamics, without M (:func:`~crane_reference.dynamics.evaluated_rows`)."""
+        inverse dynamics, without M (:func:`~crane_reference.dynamics.runs.evaluated_rows`)."""
         times = np.asarray(times, dtype=float)
         return evaluated_rows(np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float),
                                       np.ascontiguousarray(qdd, dtype=float), self.constraints.coefficients_at(times),

@@ -43,7 +43,7 @@ from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock as ClockMessage
 from std_msgs.msg import Float64MultiArray
 
-from ..base.health import CANNOT, StartupError
+from ..base.health import CANNOT, StartupError, startup_health
 from ..base.threads import real_time_switching, start_named
 from ..control.pacing import Pacing
 from ..control.plant_server import CommandRefusedError, PlantServer, PlantState, plant_health
@@ -272,7 +272,8 @@ class CranePlantNode(LifecycleNode):
 
     def _publish_diagnostics(self) -> None:
         if self._server is None:
-            level, message, values = (2 if self._doing.startswith(CANNOT) else 0), self._doing, {}
+            health = startup_health(self._doing)
+            level, message, values = health.level, health.message, {}
         else:
             missed = self._missed
             health = plant_health(self._server, self._doing, self._failure, missed, missed - self._missed_reported)

@@ -100,9 +100,9 @@ class FrameSchedule:
 
     def request(self, plan: Plan, count: int, horizon: float, points: int, decimation: int,
                 compute_budget: float | None) -> FrameRequest:
-        """What the solver makes next for ``plan`` (see :func:`make_frames`): up to ``count`` frames, with a
-        ``horizon``-second preview of ``points`` points every ``decimation`` frames, after computing ahead for
-        at most ``compute_budget`` s of wall time (None: unbounded); with a budget, frames within 1 /
+        """What the solver makes next for ``plan`` (see :func:`~.frame_maker.make_frames`): up to ``count``
+        frames, with a ``horizon``-second preview of ``points`` points every ``decimation`` frames, after computing
+        ahead for at most ``compute_budget`` s of wall time (None: unbounded); with a budget, frames within 1 /
         URGENT_PART of the look-ahead from publishing are urgent."""
         urgent_until = self.urgent_until if compute_budget is not None else plan.k
         return FrameRequest(plan, count, self.rate, horizon, points, decimation, compute_budget, urgent_until,

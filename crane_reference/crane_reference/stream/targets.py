@@ -53,7 +53,7 @@ def _motion(scenario: Scenario, a: float, b: float, z: float) -> ProgrammedMotio
 def _hold(check: ProgrammedMotion, slew: Slew, q: np.ndarray, points: np.ndarray, margin: float) -> np.ndarray:
     """q with E held at each of ``points`` (N, 3) [m] in turn on ``check``'s constraints, by continuation from
     ``q`` with the ``slew`` joint at the azimuth atan2(y, x)
-    (:func:`~crane_reference.dynamics.held_points`): the
+    (:func:`~crane_reference.dynamics.projection.held_points`): the
     solution at the last point; :class:`UnreachableTargetError` at the first point where E cannot be held, or
     only with the smallest singular value of K_dc below ``margin``."""
     q, held, positions, singular_values = held_points(
