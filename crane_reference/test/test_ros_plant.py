@@ -488,21 +488,22 @@ def test_a_message_rclpy_cannot_convert_is_lost_with_a_warning_and_other_errors_
 @pytest.mark.slow
 def test_a_real_time_loop_starts_its_reference_once_the_plant_runs(params):
     """``crane-reference loop`` in real time (100 Hz, 1 s): the reference node is activated after the plant, so the
-    loop runs and is recorded from the plant's first state, where the plant is at rest at its held start and the
-    reference has barely left its own start (the held start but for the boom's bending under the two ways E is
-    held, the reference's E by its constraint and the plant's by its joints): its column less than 0.1 rad off,
-    what the column drive turns it in the 0.13 s after its start.  (With the reference node starting itself, the
-    plant's first command chased a motion under way: here its first step did not converge, or the recording
-    began half a second late.)"""
+    loop runs and is recorded from the first state of the plant after the reference's first sample (the two
+    activations apart: well under 0.3 s), where the plant is still at rest at its held start and the reference has
+    barely left its own start: its column less than 0.01 rad off (the column drive turns it that much in 0.06 s),
+    its luff within the two starts' difference (the boom bends under the two ways E is held: the reference's E by
+    its constraint, the plant's by its joints).  (With the reference node starting itself, the plant's first
+    command chased a motion under way: here its first step did not converge, or the recording began 0.5-0.8 s
+    late.)"""
     from crane_reference.ros.loop import run_loop
 
     recording = run_loop(1.0, "realtime", 100)
     held = held_start(Scenario(params, "flexible")).q
     names = list(recording.joint_names)
     column, luff = names.index("column_slew"), names.index("boom_luff")
-    assert recording.t[0] < 0.05 and recording.t[-1] - recording.t[0] >= 0.98
+    assert recording.t[0] < 0.3 and recording.t[-1] > 0.95
     assert abs(recording.q[0, column] - held[column]) < 1e-9
-    assert abs(recording.reference_q[0, column] - held[column]) < 0.1
+    assert abs(recording.reference_q[0, column] - held[column]) < 0.01
     assert abs(recording.reference_q[0, luff] - held[luff]) < 5e-3
 
 
