@@ -31,3 +31,24 @@ def expect_config_error(data: object, *fragments: str) -> str:
     for fragment in fragments:
         assert fragment in message, f"{fragment!r} not in {message!r}"
     return message
+
+
+def with_trolley(data: dict) -> dict:
+    """The crane ``data`` (the loader crane's) with a 100 kg trolley free to roll along its last link, the jib
+    (no spring, no drive): a crane without a static equilibrium."""
+    data["links"].append({"name": "trolley", "joint": {"name": "roll", "type": "prismatic", "axis": [1.0, 0.0, 0.0],
+                                                        "origin": {"xyz": [2.0, 0.0, 0.0]}},
+                          "inertial": {"mass": 100.0, "center_of_mass": [0.0, 0.0, 0.0],
+                                       "inertia": {"ixx": 1.0, "iyy": 1.0, "izz": 1.0}}})
+    return data
+
+
+def spinning_crane(path: Path, start: float = 0.0) -> Path:
+    """The packaged crane with a column torque of 1e6 N m (the largest ``drive.torque`` allows) from ``start`` [s]
+    written to ``path``: it spins the slew faster than the integrator's steps can follow."""
+    text = (CONFIG / "crane.yaml").read_text()
+    torque, begin = "  torque: 4000.0 ", "  start: 0.0                        # [s]"
+    assert torque in text and begin in text
+    path.write_text(text.replace(torque, "  torque: 1.0e6 ").replace(begin, begin.replace("0.0", f"{start:.1f}")))
+    return path
+

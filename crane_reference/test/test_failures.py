@@ -19,7 +19,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from cranes import CONFIG
+from cranes import CONFIG, with_trolley
 
 from crane_reference.dynamics.kinematics import forward_kinematics
 from crane_reference.model.config import load_config, parse_config, read_yaml
@@ -81,12 +81,7 @@ def test_a_target_rising_out_of_reach_stops_the_integrator_and_the_check_refuses
 def test_a_trolley_free_on_an_inclined_jib_has_no_static_equilibrium():
     """The loader crane with a 100 kg trolley beyond E, free to roll along the jib (no spring, no drive): held on
     the task, the jib keeps its slope, so gravity's component along it, m g sin(slope), is never balanced."""
-    data = read_yaml(CONFIG / "loader_crane.yaml")
-    data["links"].append({"name": "trolley", "joint": {"name": "roll", "type": "prismatic", "axis": [1.0, 0.0, 0.0],
-                                                        "origin": {"xyz": [2.0, 0.0, 0.0]}},
-                          "inertial": {"mass": 100.0, "center_of_mass": [0.0, 0.0, 0.0],
-                                       "inertia": {"ixx": 1.0, "iyy": 1.0, "izz": 1.0}}})
-    scenario = Scenario(parse_config(data), "rigid")
+    scenario = Scenario(parse_config(with_trolley(read_yaml(CONFIG / "loader_crane.yaml"))), "rigid")
     with pytest.raises(EquilibriumError, match=r"largest unbalanced generalized force .* N on roll ") as info:
         scenario.equilibrium  # noqa: B018 (computed on first use)
     jib = scenario.model.index("knuckle")

@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 import rclpy
 import yaml
+from cranes import spinning_crane, with_trolley
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from lifecycle_msgs.msg import Transition
@@ -820,10 +821,7 @@ def test_a_numerical_failure_holds_the_last_sample_reports_error_and_restart_rec
     start of that step (finite, zero velocity; what a ROS-free stream holds) with an ERROR that names the
     failure, its time and the remedies; deactivate, ~/restart and activate publish the motion from its start
     again (the slew a whole number of turns on: the restart goes the shortest way)."""
-    crane = tmp_path / "crane.yaml"
-    text = (Path(__file__).resolve().parent.parent / "config" / "crane.yaml").read_text()
-    assert "  torque: 4000.0 " in text
-    crane.write_text(text.replace("  torque: 4000.0 ", "  torque: 1.0e6 "))
+    crane = spinning_crane(tmp_path / "crane.yaml")
     rate = 100
     ros.start(config_file=str(crane), publish_rate=rate, model="rigid")
     ros.wait_for(lambda: any("IntegrationError" in m for m in diagnostic_messages(ros)), "the failure reported")
@@ -1079,12 +1077,7 @@ def test_a_crane_of_its_own_from_a_urdf_and_its_overlay(ros: Harness) -> None:
 
 def _trolley_crane(text: str) -> str:
     """The loader crane with a 100 kg trolley free to roll along its jib (test_failures: no static equilibrium)."""
-    data = yaml.safe_load(text)
-    data["links"].append({"name": "trolley", "joint": {"name": "roll", "type": "prismatic", "axis": [1.0, 0.0, 0.0],
-                                                        "origin": {"xyz": [2.0, 0.0, 0.0]}},
-                          "inertial": {"mass": 100.0, "center_of_mass": [0.0, 0.0, 0.0],
-                                       "inertia": {"ixx": 1.0, "iyy": 1.0, "izz": 1.0}}})
-    return yaml.safe_dump(data)
+    return yaml.safe_dump(with_trolley(yaml.safe_load(text)))
 
 
 @pytest.mark.parametrize(("spoil", "reason"), [

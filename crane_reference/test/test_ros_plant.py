@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import pytest
 import rclpy
-from cranes import CONFIG
+from cranes import CONFIG, spinning_crane
 from diagnostic_msgs.msg import DiagnosticArray
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
@@ -324,10 +324,7 @@ def test_configuration_errors_name_the_parameter(tmp_path):
     """A setting that does not fit names the parameter; a crane whose first period cannot be integrated (a column
     torque of 1e6 N m from the start: the step does not converge) names the failure, not only that the node is
     unconfigured."""
-    crane = tmp_path / "crane.yaml"
-    text = (CONFIG / "crane.yaml").read_text()
-    assert "  torque: 4000.0 " in text
-    crane.write_text(text.replace("  torque: 4000.0 ", "  torque: 1.0e6 "))
+    crane = spinning_crane(tmp_path / "crane.yaml")
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
@@ -514,11 +511,7 @@ def test_a_loop_whose_plant_stops_ends_with_why(tmp_path):
     ``STALL_TIMEOUT`` that says so, with the plant's own words, instead of waiting for ever."""
     from crane_reference.ros.loop import STALL_TIMEOUT, LoopError, run_loop
 
-    crane = tmp_path / "crane.yaml"
-    text = (CONFIG / "crane.yaml").read_text()
-    start = "  start: 0.0                        # [s]"
-    assert "  torque: 4000.0 " in text and start in text
-    crane.write_text(text.replace("  torque: 4000.0 ", "  torque: 1.0e6 ").replace(start, start.replace("0.0", "0.2")))
+    crane = spinning_crane(tmp_path / "crane.yaml", start=0.2)
     began = time.monotonic()
     with pytest.raises(LoopError) as error:
         run_loop(2.0, "lockstep", 1000, config_file=str(crane))
