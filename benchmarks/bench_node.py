@@ -112,10 +112,10 @@ from crane_reference.motion.steps import ONLINE_STEP
 from crane_reference.ros.message_types import rclpy_types
 from crane_reference.ros.parameters import SPECS
 from crane_reference.ros.publishing import MARKER_RATE, TRAIL_POINTS
+from crane_reference.stream.ahead import REFILL
 from crane_reference.stream.reference_stream import ReferenceStream
 from crane_reference.stream.sample import ReferenceRows
 from crane_reference.stream.schedule import Counters
-from crane_reference.stream.server import REFILL
 
 NS = 10**9
 NODE = "crane_reference"

@@ -33,10 +33,10 @@ from scipy.spatial.transform import Rotation
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import Task
 from crane_reference.motion.steps import ONLINE_STEP
+from crane_reference.stream.ahead import COMPUTE_SLICE, LOOKAHEAD, REFILL, RELEASE_KEEP
 from crane_reference.stream.reference_stream import ReferenceStream
 from crane_reference.stream.sample import quaternions
 from crane_reference.stream.schedule import FrameSchedule
-from crane_reference.stream.server import COMPUTE_SLICE, LOOKAHEAD, REFILL, RELEASE_KEEP
 from crane_reference.stream.solver import StreamSolver, StreamSpec
 from crane_reference.stream.targets import reach
 

@@ -261,8 +261,9 @@ def closed_loop(monkeypatch, tmp_path, **overrides):
 @pytest.mark.parametrize("namespace", ["", "crane1"])
 def test_the_closed_loop_launch_connects_the_three_nodes(monkeypatch, tmp_path, clock_mode, namespace):
     from crane_reference.ros import controller_node, plant_node
+    from crane_reference.ros.controller_parameters import CONTROLLER_PARAMETERS
     from crane_reference.ros.parameters import SPECS
-    from crane_reference.ros.plant_parameters import PLANT_SPECS
+    from crane_reference.ros.plant_parameters import PLANT_PARAMETERS
 
     nodes, _ = closed_loop(monkeypatch, tmp_path, clock_mode=clock_mode, namespace=namespace, control_rate="1000")
     assert set(nodes) == {messages.NODE_NAME, plant_node.NODE_NAME, controller_node.NODE_NAME}
@@ -273,7 +274,9 @@ def test_the_closed_loop_launch_connects_the_three_nodes(monkeypatch, tmp_path, 
     (reference,), (plant,), (controller,) = (nodes[name].kwargs["parameters"] for name in
                                              ("crane_reference", "crane_plant", "crane_controller"))
     qos = {name for name in (*reference, *plant, *controller) if name.startswith("qos_overrides.")}
-    assert set(reference) - {"use_sim_time"} - qos <= set(SPECS) and set(plant) - qos <= set(PLANT_SPECS)
+    assert set(reference) - {"use_sim_time"} - qos <= set(SPECS)
+    assert set(plant) - qos <= {spec.name for spec in PLANT_PARAMETERS}
+    assert set(controller) - {"use_sim_time"} - qos <= {spec.name for spec in CONTROLLER_PARAMETERS}
     for node, parameters, topic in ((messages.NODE_NAME, reference, messages.JOINT_STATES_TOPIC),
                                     (plant_node.NODE_NAME, plant, messages.JOINT_STATES_TOPIC),
                                     (plant_node.NODE_NAME, plant, messages.END_EFFECTOR_POSE_TOPIC),
@@ -292,7 +295,7 @@ def test_the_closed_loop_launch_connects_the_three_nodes(monkeypatch, tmp_path, 
     # horizon), so that the controller reads computed steps; real time: every 10 ms
     spacing = 1e-3 if clock_mode == "lockstep" else 1e-2
     assert reference["preview.horizon"] / (reference["preview.points"] - 1) == pytest.approx(spacing, rel=1e-12)
-    topics = {spec.name: spec.default for spec in controller_node._TOPICS}
+    topics = {spec.name: spec.default for spec in CONTROLLER_PARAMETERS}
     assert resolve(topics["reference_topic"], namespace, "crane_controller") == resolve(
         messages.REFERENCE_PREVIEW_TOPIC, namespace, messages.NODE_NAME)
     assert resolve(topics["state_topic"], namespace, "crane_controller") == resolve(

@@ -14,7 +14,8 @@ from test_simulation import quintic_z
 
 from crane_reference.stream.retarget_goal import PREEMPTED, REACHED, STOPPED, RetargetGoal
 from crane_reference.stream.sample import ReferenceSample
-from crane_reference.stream.server import Preview, ReferenceServer
+from crane_reference.stream.served import Preview
+from crane_reference.stream.server import ReferenceServer
 from crane_reference.stream.solver import LocalSolver
 
 BLEND = 0.4  # [s] of motion time

@@ -55,8 +55,8 @@ from crane_reference.ros.message_types import rclpy_types
 from crane_reference.ros.node import CraneReferenceNode
 from crane_reference.ros.parameters import PARAMETERS, SPECS, NodeParameters, field_name
 from crane_reference.ros.publishing import NodeTime
+from crane_reference.stream.ahead import LOOKAHEAD
 from crane_reference.stream.reference_stream import ERROR, ReferenceStream
-from crane_reference.stream.server import LOOKAHEAD
 
 NS = 10**9
 NODE = "crane_reference"

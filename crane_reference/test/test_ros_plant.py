@@ -50,7 +50,7 @@ from crane_reference.motion.simulation import Scenario
 from crane_reference.motion.steps import ONLINE_STEP
 from crane_reference.ros.controller_node import CraneControllerNode
 from crane_reference.ros.node import CraneReferenceNode
-from crane_reference.ros.parameters import ParameterError
+from crane_reference.ros.parameter_spec import ParameterError
 from crane_reference.ros.plant_node import NODE_NAME, CranePlantNode
 
 NS = 10**9

@@ -53,9 +53,13 @@ def ns(stamp: Any) -> int:
     return stamp.sec * NS + stamp.nanosec
 
 
-def ellipse_residuals(ros: Harness, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
-    """Stamps [ns] of the received poses of E and their residuals of the ellipse (5.1) with semi-axes a, b."""
-    poses = [m for _, m in list(ros.received["pose"])]
+def received_poses(ros: Harness) -> list:
+    """The poses of E received so far (a snapshot: the list grows while the test reads it)."""
+    return [m for _, m in list(ros.received["pose"])]
+
+
+def ellipse_residuals(poses: list, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
+    """Stamps [ns] of ``poses`` of E and their residuals of the ellipse (5.1) with semi-axes a, b."""
     p = np.array([[m.pose.position.x, m.pose.position.y] for m in poses])
     return np.array([stamp_ns(m) for m in poses]), (p[:, 0] / a) ** 2 + (p[:, 1] / b) ** 2 - 1.0
 
@@ -76,8 +80,9 @@ def test_a_goal_gets_feedback_and_the_stamp_from_which_the_published_path_is_the
     # at speed 1 the blend spans blend_time of stamps, to a period (samples held by a late solver delay it)
     assert blend * NS - NS // RATE <= path_stamp - blend_stamp <= (blend + 0.2) * NS
     ros.wait_until_stamp(path_stamp + NS // 2)
-    stamps, old = ellipse_residuals(ros, 3.0, 2.0)
-    _, new = ellipse_residuals(ros, 3.3, 2.2)
+    poses = received_poses(ros)
+    stamps, old = ellipse_residuals(poses, 3.0, 2.0)
+    _, new = ellipse_residuals(poses, 3.3, 2.2)
     before, after = stamps < blend_stamp, stamps >= path_stamp
     assert before.sum() > 10 and after.sum() > 10
     assert np.abs(old[before]).max() < ON_PATH and np.abs(new[after]).max() < ON_PATH
@@ -112,7 +117,7 @@ def test_a_newer_goal_preempts_and_a_cancel_blends_the_old_targets_back(ros: Har
     assert answer.status == GoalStatus.STATUS_CANCELED and answer.result.error_code == Retarget.Result.CANCELED
     assert node.get_parameter("ellipse.a").value == 3.2  # the targets before the canceled goal
     ros.wait_for(lambda: ros.received["pose"][-1][0] > canceled + 0.5 + 0.3, "the blend back", 10.0)
-    _, back = ellipse_residuals(ros, 3.2, 2.0)
+    _, back = ellipse_residuals(received_poses(ros), 3.2, 2.0)
     assert np.abs(back[-10:]).max() < ON_PATH  # E on the path before the canceled goal again
     # a change of the target parameters pre-empts a goal too
     third = client.send(ellipse_b=2.3, blend_time=3.0)
@@ -133,15 +138,15 @@ def test_a_goal_reached_between_monitor_ticks_succeeds_when_a_newer_goal_comes(r
     assert first.accepted
     def on_new_path() -> bool:  # the last 5 samples on the new ellipse and off the old one (both hold x = 0,
         # where E starts at rest)
-        return (abs(ellipse_residuals(ros, 3.2, 2.0)[1][-5:]).max() < ON_PATH
-                and abs(ellipse_residuals(ros, 3.0, 2.0)[1][-5:]).min() > 1e-6)
+        return (abs(ellipse_residuals(received_poses(ros), 3.2, 2.0)[1][-5:]).max() < ON_PATH
+                and abs(ellipse_residuals(received_poses(ros), 3.0, 2.0)[1][-5:]).min() > 1e-6)
 
     ros.wait_for(on_new_path, "the first goal's new path")
     client.send(ellipse_a=3.4, blend_time=3.0)
     answer = client.result(first)
     assert answer.status == GoalStatus.STATUS_SUCCEEDED, answer.result.error_string
     path_stamp = ns(answer.result.path_stamp)
-    stamps, new = ellipse_residuals(ros, 3.2, 2.0)
+    stamps, new = ellipse_residuals(received_poses(ros), 3.2, 2.0)
     assert path_stamp > ns(answer.result.blend_stamp) > 0
     assert np.abs(new[stamps >= path_stamp][:10]).max() < ON_PATH < np.abs(new[stamps < path_stamp][-1])
 

@@ -20,19 +20,15 @@ from crane_reference.model.config import load_config
 from crane_reference.model.parameters import Task
 from crane_reference.motion.programmed_motion import ConstraintSingularityError
 from crane_reference.motion.simulation import MotionStepper
+from crane_reference.ros.service_replies import pause_reply
 from crane_reference.stream import solver as solver_module
+from crane_reference.stream.ahead import COMPUTE_SLICE, URGENT_REFILL
 from crane_reference.stream.frames import FrameRequest
 from crane_reference.stream.health import serving_health
 from crane_reference.stream.reference_stream import ERROR, PAUSED, RUNNING, ReferenceStream
 from crane_reference.stream.schedule import URGENT_PART, FrameSchedule
-from crane_reference.stream.server import (
-    COMPUTE_SLICE,
-    URGENT_REFILL,
-    CommandRefusedError,
-    Preview,
-    ReferenceServer,
-    ServerStatus,
-)
+from crane_reference.stream.served import CommandRefusedError, Preview, ServerStatus
+from crane_reference.stream.server import ReferenceServer
 from crane_reference.stream.solver import LocalSolver, SolverProcess, StreamSolver, StreamSpec, StreamStatus
 from crane_reference.stream.targets import UnreachableTargetError
 
@@ -367,12 +363,12 @@ def test_closing_a_stopped_solver_process_kills_it_at_once() -> None:
 
 def test_replies_name_a_sample_by_its_stamp_only_once_published(server: ReferenceServer) -> None:
     """Before publishing, a command's sample has no stamp yet: the reply names it by its number."""
-    reply = server.pause(True, accepted_ns=0)
+    reply = pause_reply(server, True, accepted_ns=0)
     assert reply.success and "sample 0 of the stream (stamped once published)" in reply.message, reply.message
-    server.pause(False, accepted_ns=0)
+    pause_reply(server, False, accepted_ns=0)
     server.begin(5 * NS)
     publish(server, 5 * NS, 0.2)
-    reply = server.pause(True, accepted_ns=5 * NS + 20 * PERIOD)
+    reply = pause_reply(server, True, accepted_ns=5 * NS + 20 * PERIOD)
     k = round((float(reply.message.split("stamped ")[1].split(" s")[0]) * NS - 5 * NS) / PERIOD)
     assert reply.success and k >= 20, reply.message  # by its stamp, at or after the acceptance
 

@@ -7,15 +7,13 @@ reference node's ``~/reference_preview`` (trajectory_msgs/JointTrajectory) and t
 :class:`~crane_reference.control.preview_tracking.PreviewTracker`'s (the preview sampled as
 joint_trajectory_controller samples its trajectory, then a PD/PID tick).
 
-Parameters: ``joints``; the gains per joint ``gains.<joint>.p`` [N m/rad], ``.d`` [N m s/rad] and ``.i``
-[N m/(rad s)] (ros2_control's names; defaults: :func:`~crane_reference.control.plant.default_gains` of the
-crane of ``config_file`` and ``model``, as ``crane-reference track``); ``.d`` is the D action the plant's
-drives apply, so it must equal the plant's ``drive_damping.<joint>`` (the defaults agree); ``control_rate``
-[Hz], the plant's, for the integral; ``feedforward``: ``none`` (default) or ``reference``, the preview's efforts
-(the reference node's ``preview.effort:=true``: the constraint forces at these joints, without the drive's
-torque, which the plant applies itself); the three topics.  The preview's subscription takes rclpy's
-``qos_overrides`` (closed_loop.launch.py makes it transient-local on both ends, so that a controller started
-late still gets the last preview).
+Parameters (:mod:`.controller_parameters`): ``joints``; the gains per joint ``gains.<joint>.p``, ``.d`` and
+``.i``; ``.d`` is the D action the plant's drives apply, so it must equal the plant's ``drive_damping.<joint>``
+(the defaults agree); ``control_rate`` [Hz], the plant's, for the integral; ``feedforward``: ``none`` (default)
+or ``reference``, the preview's efforts (the reference node's ``preview.effort:=true``: the constraint forces at
+these joints, without the drive's torque, which the plant applies itself); the three topics.  The preview's
+subscription takes rclpy's ``qos_overrides`` (closed_loop.launch.py makes it transient-local on both ends, so
+that a controller started late still gets the last preview).
 """
 
 from __future__ import annotations
@@ -29,39 +27,15 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
 from ..control.controller import JointGains
-from ..control.plant import default_gains
-from ..control.preview_tracking import PREVIEW_FEEDFORWARDS, Preview, PreviewTracker
+from ..control.preview_tracking import Preview, PreviewTracker
 from ..interface.bringup import CONTROLLER_NODE
-from ..model.chain import VARIANTS
-from ..model.config import load_config
 from ..model.units import NANOSECONDS
-from ..motion.simulation import Scenario
-from .parameters import (
-    DOUBLE,
-    INTEGER,
-    STRING,
-    STRING_ARRAY,
-    ParameterError,
-    ParameterSpec,
-    declare,
-    parameter_names,
-    unknown_overrides,
-)
+from .controller_parameters import declare_controller
 from .publishing import OVERRIDABLE
 from .running import run_node
 
 NODE_NAME = CONTROLLER_NODE
 DEPTH = 10
-
-_TOPICS = (
-    ParameterSpec("reference_topic", STRING, "crane_reference/reference_preview", "The reference node's preview "
-                  "(trajectory_msgs/JointTrajectory; relative names resolve in the node's namespace)", read_only=True),
-    ParameterSpec("state_topic", STRING, "crane_plant/joint_states", "The plant's measured joint states",
-                  read_only=True),
-    ParameterSpec("command_topic", STRING, "crane_plant/commands", "The plant's commands "
-                  "(std_msgs/Float64MultiArray)", read_only=True),
-)
-
 
 def _columns_of(rows, columns: list[int], what: str) -> np.ndarray:
     """The ``columns`` of each of ``rows`` (sequences of numbers); ValueError naming ``what`` if one is short."""
@@ -79,46 +53,16 @@ class CraneControllerNode(Node):
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs) -> None:
         super().__init__(node_name, **{"automatically_declare_parameters_from_overrides": True, **kwargs})
-        config_file = declare(self, ParameterSpec("config_file", STRING, "", "Crane file (docs/description.md); '' "
-                                                  "loads the packaged default", empty_allowed=True, read_only=True))
-        model = declare(self, ParameterSpec("model", STRING, "flexible", "Crane model variant (for the default "
-                                            "gains)", choices=VARIANTS, read_only=True))
-        config = load_config(config_file or None)
-        actuated = config.actuated
-        joints = tuple(declare(self, ParameterSpec("joints", STRING_ARRAY, list(actuated), "The joints of "
-                                                   "the commands, in their order (default the crane's actuated "
-                                                   "joints)", read_only=True)))
-        if sorted(joints) != sorted(actuated):
-            raise ParameterError(f"joints = {list(joints)}: must name each of {', '.join(actuated)} once")
-        rate = declare(self, ParameterSpec("control_rate", INTEGER, 1000, "The plant's control rate (the integral's "
-                                           "period)", "Hz", (1, 1000), read_only=True))
-        feedforward = declare(self, ParameterSpec("feedforward", STRING, "none", "The torque added to the feedback: "
-                                                  "'none', or 'reference': the preview's efforts (the reference "
-                                                  "node's preview.effort:=true)", choices=PREVIEW_FEEDFORWARDS,
-                                                  read_only=True))
-        defaults = default_gains(Scenario(config, model), joints)
-        gains = []
-        for joint, default in zip(joints, defaults, strict=True):
-            p, d, i = (declare(self, ParameterSpec(f"gains.{joint}.{name}", DOUBLE, value, f"{what} of {joint}",
-                                                   unit, (0.0, 1e12), read_only=True))
-                       for name, value, what, unit in (("p", default.kp, "Proportional gain", "N m/rad"),
-                                                       ("d", default.kd, "Derivative gain (in the plant's drive)",
-                                                        "N m s/rad"),
-                                                       ("i", 0.0, "Integral gain", "N m/(rad s)")))
-            gains.append(JointGains(p, d, i))
-        reference, state, command = (declare(self, spec) for spec in _TOPICS)
-        known = ["config_file", "model", "joints", "control_rate", "feedforward", *(spec.name for spec in _TOPICS),
-                 *(f"gains.{joint}.{name}" for joint in joints for name in "pdi")]
-        unknown = unknown_overrides(self, known)
-        if unknown:
-            raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; the node's parameters are "
-                                 f"{parameter_names(self)}")
-        self.tracker = PreviewTracker(joints, gains, 1.0 / rate, feedforward)
+        params = declare_controller(self)
+        gains = [JointGains(params.gains_p[joint], params.gains_d[joint], params.gains_i[joint])
+                 for joint in params.joints]
+        self.tracker = PreviewTracker(params.joints, gains, 1.0 / params.control_rate, params.feedforward)
+        reference, state, command = params.reference_topic, params.state_topic, params.command_topic
         self._commands = self.create_publisher(Float64MultiArray, command, DEPTH)
         self.create_subscription(JointTrajectory, reference, self._on_preview, DEPTH,
                                  qos_overriding_options=OVERRIDABLE)
         self.create_subscription(JointState, state, self._on_state, DEPTH)
-        self.get_logger().info(f"tracking {reference} on {state}, commanding {command} ({', '.join(joints)})")
+        self.get_logger().info(f"tracking {reference} on {state}, commanding {command} ({', '.join(params.joints)})")
 
     def _columns(self, names: list[str], what: str) -> list[int] | None:
         missing = [joint for joint in self.tracker.joints if joint not in names]

@@ -33,21 +33,17 @@ from ..interface import messages
 from ..model.config import ConfigError, load_config
 from ..model.units import NANOSECONDS
 from ..stream.reference_stream import PAUSED, RUNNING
-from ..stream.server import CommandRefusedError, ReferenceServer, Reply
+from ..stream.served import CommandRefusedError
+from ..stream.server import ReferenceServer
 from ..stream.solver import SolverStoppedError
-from . import parameter_policy
+from . import parameter_policy, service_replies
 from .message_types import rclpy_types
-from .parameters import (
-    SPECS,
-    ParameterError,
-    declare_all,
-    declare_from_config,
-    pre_set_callback,
-    reach_descriptor,
-)
+from .parameter_spec import ParameterError, pre_set_callback
+from .parameters import SPECS, declare_all, declare_from_config, reach_descriptor
 from .publishing import DiagnosticsPublisher, SamplePublisher
 from .retarget_action import RetargetActionServer
 from .running import spin_once
+from .sample_encoder import SampleEncoder
 
 NODE_NAME = messages.NODE_NAME
 
@@ -76,7 +72,7 @@ class CraneReferenceNode(LifecycleNode):
         except BaseException:  # KeyboardInterrupt while starting
             self._stop.set()
             raise
-        self.add_pre_set_parameters_callback(pre_set_callback(self))
+        self.add_pre_set_parameters_callback(pre_set_callback(self, SPECS))
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.create_service(Trigger, "~/restart", self._on_restart)
@@ -123,6 +119,7 @@ class CraneReferenceNode(LifecycleNode):
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Load the crane and the task, start the solver (kernels made ready, the start and the first second
         of motion computed), create the publishers; the server computes ahead from here on."""
+        solver = None
         try:
             config = load_config(self._params.config_file or None)
             if self._pending:  # the crane file could not be loaded at construction: its defaults now
@@ -135,9 +132,13 @@ class CraneReferenceNode(LifecycleNode):
             self.get_logger().info(f"starting the solver {where} (with an empty kernel cache it compiles for a minute "
                                    "or two; `crane-reference compile` after installing does it ahead)")
             solver = parameter_policy.start_solver(v, config, self._stopping)
-            server = ReferenceServer(solver, v.publish_rate, v.command_lead, parameter_policy.preview(v))
-            messages_settings = parameter_policy.publish_settings(v, server.info.joint_names)
+            messages_settings = parameter_policy.publish_settings(v, solver.info.joint_names)
+            encode = SampleEncoder(self._types, solver.info.joint_names, messages_settings.frame_id)
+            server = ReferenceServer(solver, v.publish_rate, v.command_lead, parameter_policy.preview(v),
+                                     encode=encode)
         except (StartupError, ConfigError, ParameterError) as error:
+            if solver is not None:  # the preview's joints are not the model's
+                solver.close()
             self._starting = (f"{CANNOT} configure: {error}; unconfigured: set the parameter it names (or mend the "
                               "crane file), then configure")
             self.get_logger().error(self._starting)
@@ -150,7 +151,7 @@ class CraneReferenceNode(LifecycleNode):
         low, high = server.reach(v.ellipse_b, (0.0, v.z_increment))
         for name in ("ellipse.a", "ellipse.b"):  # the ranges narrowed to E's reach (rqt_reconfigure's sliders)
             self.set_descriptor(name, reach_descriptor(SPECS[name], low, high))
-        self._publisher = SamplePublisher(self, self._types, server, messages_settings)
+        self._publisher = SamplePublisher(self, self._types, server, messages_settings, encode)
         self._resume_on_activate = False
         self._starting = "inactive: configured, computing ahead; activate to publish"
         self.get_logger().info(f"configured: the {v.model} crane ({len(server.info.joint_names)} joints, "
@@ -231,12 +232,12 @@ class CraneReferenceNode(LifecycleNode):
         ERROR (refused while active: the reference would jump under a controller that follows it)."""
         state = self._lifecycle_state()
         if state == "inactive":
-            reply = self._server.restart_reply(self._now())
+            reply = service_replies.restart_reply(self._server, self._now())
             if reply.success:
                 self._publisher.trail.clear()
                 self._resume_on_activate = False
         else:
-            reply = Reply(False, f"refused while {state}: " + (
+            reply = service_replies.Reply(False, f"refused while {state}: " + (
                 "a restart makes the reference jump to the start, so it is done while inactive (deactivate, restart, "
                 "activate)" if state == "active" else "configure the node first"))
         response.success, response.message = reply.success, reply.message
@@ -245,8 +246,8 @@ class CraneReferenceNode(LifecycleNode):
 
     def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
         """~/pause: data true holds the reference (zero velocity), data false resumes it."""
-        reply = (self._server.pause(request.data, self._now()) if self._server is not None
-                 else Reply(False, f"refused while {self._lifecycle_state()}: configure first"))
+        reply = (service_replies.pause_reply(self._server, request.data, self._now()) if self._server is not None
+                 else service_replies.Reply(False, f"refused while {self._lifecycle_state()}: configure first"))
         response.success, response.message = reply.success, reply.message
         self.get_logger().info(f"~/pause {request.data}: {reply.message}")
         return response

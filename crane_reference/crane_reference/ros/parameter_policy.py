@@ -12,11 +12,14 @@ from rclpy.parameter import Parameter
 from ..base.health import StartupError
 from ..model.description import CraneDescription
 from ..motion.simulation import SOLVER_FAILURES
-from ..stream.server import CommandRefusedError, Preview, ReferenceServer
+from ..stream.served import CommandRefusedError, Preview
+from ..stream.server import ReferenceServer
 from ..stream.solver import LocalSolver, SolverClient, SolverProcess, StreamSpec
 from ..stream.targets import UnreachableTargetError
-from .parameters import COMMANDING_PARAMETERS, TARGET_PARAMETERS, NodeParameters, ParameterError, check
+from .parameter_spec import ParameterError, check
+from .parameters import COMMANDING_PARAMETERS, SPECS, TARGET_PARAMETERS, NodeParameters
 from .publishing import PublishSettings
+from .service_replies import sample_named
 
 MESSAGE_PARAMETERS = ("frame_id", "frame_prefix", "preview.joints", "preview.effort")
 """The parameters that change the messages' :class:`~.publishing.PublishSettings`."""
@@ -25,7 +28,7 @@ MESSAGE_PARAMETERS = ("frame_id", "frame_prefix", "preview.joints", "preview.eff
 def publish_settings(params: NodeParameters, joint_names: tuple[str, ...],
                      preview_joints: tuple[str, ...] | None = None) -> PublishSettings:
     """The messages' settings of ``params``, with the preview's joints ``preview_joints`` (default: the
-    parameter's); :class:`~.parameters.ParameterError` naming the joints the model lacks."""
+    parameter's); :class:`~.parameter_spec.ParameterError` naming the joints the model lacks."""
     names = params.preview_joints if preview_joints is None else preview_joints
     unknown = [name for name in names if name not in joint_names]
     if unknown:
@@ -66,7 +69,7 @@ def refusal(parameters: list[Parameter], params: NodeParameters, server: Referen
     """Why the change ``parameters`` of the values ``params`` is refused, or None: the table's checks, then
     with a ``server`` (else they are checked at configure) the preview's joints, a solver that stopped for a
     commanding parameter, and the reachability of targets other than those in force."""
-    reason = check(parameters)
+    reason = check(parameters, SPECS)
     if reason is not None or server is None:
         return reason
     joints = next((p.value for p in parameters if p.name == "preview.joints"), None)
@@ -106,10 +109,10 @@ def apply(server: ReferenceServer, params: NodeParameters, names: list[str], acc
         server.preview = preview(params)
     if "speed_scaling" in names:
         k = server.command("speed_scaling", params.speed_scaling, accepted_ns=accepted_ns)
-        done.append(f"speed scaling {params.speed_scaling:g} from {server.sample_named(k)}")
+        done.append(f"speed scaling {params.speed_scaling:g} from {sample_named(server, k)}")
     targets = params.targets()
     if any(name in TARGET_PARAMETERS for name in names) and targets != server.stream.targets:
         k = server.retarget(targets, params.blend_time, accepted_ns).k  # they passed check_targets on set
-        done.append(f"re-targeting to {targets} from {server.sample_named(k)} over "
+        done.append(f"re-targeting to {targets} from {sample_named(server, k)} over "
                     f"{params.blend_time:g} s")
     return done

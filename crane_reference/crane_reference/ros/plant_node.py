@@ -56,7 +56,7 @@ from ..motion.integration import IntegrationError
 from ..motion.programmed_motion import ProjectionError
 from ..motion.simulation import SOLVER_FAILURES
 from .message_types import rclpy_types
-from .parameters import check, pre_set_callback
+from .parameter_spec import check, pre_set_callback
 from .plant_parameters import declare_plant
 from .publishing import OVERRIDABLE, run_until_shutdown
 from .running import run_node

@@ -7,8 +7,9 @@ the node clock and publishes every sample due (normally one), so no sample is sk
 wakes late.  A thread rather than an rclpy timer publishes because rclpy's executor adds its overhead to every
 timer callback and runs the (slow) parameter validation on the same thread.  ~/joint_states and
 ~/end_effector_pose are serialized once, as prototypes; the numbers of each batch of frames are written into
-copies of them at once as the batch comes (:meth:`SamplePublisher.encode`, the server's frame thread), so the
-publisher thread only stamps each message and publishes its bytes (:mod:`crane_reference.interface.serialized`).
+copies of them at once as the batch comes (:class:`~.sample_encoder.SampleEncoder`, in the server's frame
+worker), so the publisher thread only stamps each message and publishes its bytes
+(:mod:`crane_reference.interface.serialized`).
 It reads the node clock through rclpy only while ROS time is active (use_sim_time): otherwise that clock is the
 system clock, read with one system call.
 The reference topics take ``qos_overrides.<topic>.publisher.<policy>`` parameters (rclpy's QoS overriding),
@@ -22,7 +23,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
@@ -40,11 +41,12 @@ from visualization_msgs.msg import MarkerArray
 from ..base.health import Level, startup_health
 from ..base.threads import real_time_switching, start_named
 from ..interface import messages
-from ..interface.serialized import SerializedJointState, SerializedPose, SerializedPreview, SerializedRows
+from ..interface.serialized import SerializedPreview
 from ..model.units import NANOSECONDS
 from ..stream.health import serving_health
-from ..stream.sample import ReferenceRows
-from ..stream.server import Outgoing, ReferenceServer
+from ..stream.served import Outgoing
+from ..stream.server import ReferenceServer
+from .sample_encoder import SampleEncoder
 
 OVERRIDABLE = QoSOverridingOptions([QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH, QoSPolicyKind.RELIABILITY,
                                     QoSPolicyKind.DURABILITY])
@@ -102,14 +104,6 @@ class NodeTime:
         self._handle.unregister()
 
 
-class SampleMessages(NamedTuple):
-    """A batch's ~/joint_states and ~/end_effector_pose (its frame ``frame_id``), serialized, a row a sample."""
-
-    frame_id: str
-    joint_states: SerializedRows
-    poses: SerializedRows
-
-
 @dataclass(frozen=True)
 class PublishSettings:
     """What the parameters choose of the messages: the frame of poses, previews and markers (prefixed), the
@@ -122,16 +116,17 @@ class PublishSettings:
 
 class SamplePublisher:
     """The reference's lifecycle publishers (made at configure), its publisher thread (while active) and
-    the ~/markers timer; ``settings`` may be replaced at any time (parameter changes)."""
+    the ~/markers timer; ``settings`` may be replaced at any time (parameter changes).  ``encode`` is the
+    encoder the server was given."""
 
     def __init__(self, node: LifecycleNode, types: messages.MessageTypes, server: ReferenceServer,
-                 settings: PublishSettings):
-        self.node, self.types, self.server, self.settings = node, types, server, settings
+                 settings: PublishSettings, encode: SampleEncoder):
+        self.node, self.types, self.server, self.encode = node, types, server, encode
+        self.settings = settings
         self.joint_names = list(server.info.joint_names)
         self.trail: deque[Any] = deque(maxlen=TRAIL_POINTS)  # E's positions as Point messages
         self._trail_stride = max(1, round(server.rate / TRAIL_RATE))  # samples between two trail points
         self._ellipse: tuple[tuple[float, ...], list[Any]] = ((), [])  # (a, b, z) and its Point messages
-        self._writers: tuple[str, SerializedJointState, SerializedPose] | None = None  # prototypes, pose's frame
         self._preview_writer: tuple[tuple, SerializedPreview] | None = None  # for (settings, horizon, points)
         depth, overridable = messages.PUBLISHER_DEPTH, OVERRIDABLE
         self._managed = [node.create_lifecycle_publisher(message_type, topic, depth, qos_overriding_options=overridable)
@@ -147,7 +142,15 @@ class SamplePublisher:
         self._thread: threading.Thread | None = None
         self._marker_thread: threading.Thread | None = None
         self.waiting_for_clock = False
-        server.encode = self.encode
+
+    @property
+    def settings(self) -> PublishSettings:
+        return self._settings
+
+    @settings.setter
+    def settings(self, settings: PublishSettings) -> None:
+        self._settings = settings
+        self.encode.frame_id = settings.frame_id
 
     @property
     def active(self) -> bool:
@@ -213,20 +216,9 @@ class SamplePublisher:
                     elif left > 0:  # within a period at 50 Hz or faster: one system call (an Event's wait takes locks)
                         time.sleep(left / NANOSECONDS)
 
-    def encode(self, samples: ReferenceRows) -> SampleMessages:
-        """The joint states and E's poses of stacked ``samples`` (a batch of frames), serialized at once in the
-        frame of the settings, a row a sample (the prototypes serialized once per frame)."""
-        frame_id, writers = self.settings.frame_id, self._writers
-        if writers is None or writers[0] != frame_id:
-            first = samples.row(0)
-            writers = self._writers = (frame_id, SerializedJointState(serialize_message(
-                messages.joint_state(self.types, 0, self.joint_names, first))), SerializedPose(serialize_message(
-                    messages.end_effector_pose(self.types, 0, frame_id, first))))
-        return SampleMessages(frame_id, writers[1].rows(samples), writers[2].rows(samples))
-
     def send(self, outgoing: Outgoing) -> None:
         """Publish one sample, a row of the stacked frames: joint states and E's pose (the frames' rows of
-        :meth:`encode`, stamped; a held sample's, or one made before a change of frame, encoded here alone), the
+        :attr:`encode`, stamped; a held sample's, or one made before a change of frame, encoded here alone), the
         preview if the row has one (serialized once, then filled in place and published as bytes); E's trail."""
         frames, row, stamp, settings = outgoing.frames, outgoing.row, outgoing.stamp_ns, self.settings
         samples, wire, wire_row = frames.samples, frames.wire, row

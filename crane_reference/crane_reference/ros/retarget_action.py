@@ -36,9 +36,12 @@ from ..interface.messages import MessageTypes
 from ..motion.simulation import SOLVER_FAILURES
 from ..stream.reference_stream import ERROR
 from ..stream.retarget_goal import PREEMPTED, REACHED, STOPPED, GoalEnd, RetargetGoal
-from ..stream.server import CommandRefusedError, ReferenceServer
+from ..stream.served import CommandRefusedError
+from ..stream.server import ReferenceServer
 from .parameter_policy import refusal
-from .parameters import TARGET_PARAMETERS, NodeParameters, field_name
+from .parameter_spec import field_name
+from .parameters import TARGET_PARAMETERS, NodeParameters
+from .service_replies import sample_named
 
 OUTCOME_CODES = {REACHED: Retarget.Result.SUCCESSFUL, PREEMPTED: Retarget.Result.PREEMPTED,
                  STOPPED: Retarget.Result.STOPPED}
@@ -126,7 +129,7 @@ class RetargetActionServer:
         self._goal = goal_handle, goal, done
         self._timer.reset()
         self._node.get_logger().info(f"~/retarget: re-targeting to {goal.targets} from "
-                                     f"{server.sample_named(goal.blend.k)} over {goal.blend_time:g} s")
+                                     f"{sample_named(server, goal.blend.k)} over {goal.blend_time:g} s")
         return await done
 
     def _tick(self) -> None:

@@ -23,7 +23,7 @@ from rclpy.signals import SignalHandlerOptions
 from ..base.health import CANNOT, StartupError
 from ..model.config import ConfigError
 from ..motion.simulation import SOLVER_FAILURES
-from .parameters import ParameterError
+from .parameter_spec import ParameterError
 
 try:
     from rclpy.experimental import EventsExecutor as NodeExecutor

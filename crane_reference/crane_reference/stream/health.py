@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from ..base.health import Health, Level
 from .reference_stream import ERROR
-from .server import ServerStatus
+from .served import ServerStatus
 
 
 def serving_health(status: ServerStatus, newly_held: int) -> Health:

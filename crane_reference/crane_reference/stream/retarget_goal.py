@@ -22,7 +22,8 @@ from ..model.parameters import Task
 from ..motion.simulation import paper_task_constraints
 from .reference_stream import ERROR
 from .sample import ReferenceSample
-from .server import ReferenceServer, RetargetBlend
+from .served import RetargetBlend
+from .server import ReferenceServer
 
 REACHED, PREEMPTED, STOPPED = "reached", "preempted", "stopped"
 
