@@ -223,9 +223,8 @@ def long_run(params: CraneDescription, hours: float, chunk: float = 10.0) -> Non
     for a, b in windows:
         while stepper.state.t < a - 1.0 - 1e-9:  # the motion before the window, not kept
             stepper.advance_until(min(stepper.state.t + chunk, a - 1.0))
-        parts = [stepper.advance_until(min(b + 1.0, end))]
-        run = Trajectory.from_arrays("flexible", scenario.model.joint_names, scenario.model.drive_joint,
-                                     {name: np.concatenate([p[name] for p in parts]) for name in parts[0]})
+        run = Trajectory.from_rows("flexible", scenario.model.joint_names, scenario.model.drive_joint,
+                                   stepper.advance_until(min(b + 1.0, end)))
         inside = (run.t > a) & (run.t < b)
         energy = (run.kinetic_energy + run.potential_energy)[inside]
         results.append((filtered(run.t, coordinates(run), "bandpass", VIBRATION_BAND)[inside].std(axis=0),
@@ -325,7 +324,7 @@ def newton_tolerance(params: CraneDescription, duration: float, step: float = 1e
     for tolerance in (1e-8, 1e-9, 1e-10, 1e-12):
         stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), step, tolerance=tolerance)
         start = time.perf_counter()
-        runs[tolerance] = stepper.advance_until(duration)["q"][:, index], duration / (time.perf_counter() - start)
+        runs[tolerance] = stepper.advance_until(duration).q[:, index], duration / (time.perf_counter() - start)
     for tolerance in (1e-8, 1e-9, 1e-10):
         difference = np.abs(runs[tolerance][0] - runs[1e-12][0]).max(axis=0)
         print(f"[newton] h={step * 1e3:.0f} ms, tolerance {tolerance:g} ({runs[tolerance][1]:.1f}x real time) "
@@ -405,8 +404,8 @@ def mechanism(params: CraneDescription, duration: float, cache: Path) -> None:
         for modal, name in ((False, "plain trapezoidal rule"), (True, "exact frequencies")):
             stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), step)
             stepper.integrator.modal = modal
-            run = Trajectory.from_arrays("flexible", scenario.model.joint_names, scenario.model.drive_joint,
-                                         stepper.advance_until(duration))
+            run = Trajectory.from_rows("flexible", scenario.model.joint_names, scenario.model.drive_joint,
+                                       stepper.advance_until(duration))
             shares = np.array([band_rms(run, w)[1] for w in windows]) / luffing
             print(f"[mechanism] h={step * 1e3:.2f} ms, {name}: psi30 40-250 Hz RMS over 1-3/3-5/5-7/7-10 s "
                   f"{_triple(shares, '.0%')} of the converged run's")
@@ -436,8 +435,8 @@ def slow_motion(params: CraneDescription, duration: float, cache: Path) -> None:
         for step, name, modal, refresh in runs:
             stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), step)
             stepper.integrator.modal, stepper.integrator.refresh_interval = modal, refresh
-            run = Trajectory.from_arrays("flexible", scenario.model.joint_names, scenario.model.drive_joint,
-                                         stepper.advance_until(duration))
+            run = Trajectory.from_rows("flexible", scenario.model.joint_names, scenario.model.drive_joint,
+                                       stepper.advance_until(duration))
             _, slow, _, ee_slow = errors(reference, run)
             drift = filtered(t, on_grid(run, coordinates(run), t)[:, 0] - slew, "lowpass", 10.0)
             at = "/".join(f"{drift[np.argmin(np.abs(t - s))]:+.1e}" for s in (3.0, 5.0, duration - 0.1))

@@ -89,7 +89,7 @@ def test_the_slow_motion_does_not_depend_on_the_refresh_cadence(scenario):
         stepper.integrator.refresh_interval = refresh
         rows = stepper.advance_until(2.0)
         columns = [scenario.model.joint_names.index(name) for name in ("column_slew", "boom_luff", "knuckle")]
-        slow.append(sosfiltfilt(butter(4, 10.0, fs=1.0 / step, output="sos"), rows["q"][:, columns], axis=0))
+        slow.append(sosfiltfilt(butter(4, 10.0, fs=1.0 / step, output="sos"), rows.q[:, columns], axis=0))
     inner = slice(round(0.1 / step), -round(0.1 / step))  # away from the filter's end transients
     assert np.abs(slow[0] - slow[1])[inner].max() < 5e-7
 
@@ -181,9 +181,10 @@ def test_a_run_stopped_by_its_flag_from_another_thread_goes_on_bit_for_bit(scena
     timer.cancel()
     stop[0] = 0
     rest = stepper.advance_until(10.0, stop)
-    assert 0 < first["t"].size < whole["t"].size
+    assert 0 < first.t.size < whole.t.size
     for name in ("t", "q", "qd", "qdd"):
-        np.testing.assert_array_equal(np.concatenate((first[name], rest[name])), whole[name])
+        np.testing.assert_array_equal(np.concatenate((getattr(first, name), getattr(rest, name))),
+                                      getattr(whole, name))
 
 
 @pytest.mark.parametrize("servo", [False, True], ids=["ideal", "servo"])

@@ -92,8 +92,8 @@ def test_a_knuckle_boom_crane_mode_rings_at_its_frequency():
     stepper = MotionStepper(motion, 0.0, q, amplitude * omega * phi, 5e-4)
     rows = stepper.advance_until(0.5)
     M = motion.solve(0.0, q, np.zeros_like(q)).dynamics.M
-    y = (rows["q"] - q) @ M @ phi
-    t = rows["t"]
+    y = (rows.q - q) @ M @ phi
+    t = rows.t
     crossings = np.flatnonzero(np.sign(y[:-1]) != np.sign(y[1:]))
     at = t[crossings] - y[crossings] * (t[crossings + 1] - t[crossings]) / (y[crossings + 1] - y[crossings])
     frequency = (at.size - 1) / (2.0 * (at[-1] - at[0]))

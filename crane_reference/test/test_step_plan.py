@@ -34,7 +34,7 @@ def test_a_step_plan_is_the_steps_advance_until_takes(params, drive: str) -> Non
         times, counts = [], [0]
         for end in ends:
             rows = stepped.advance_until(end)
-            times.append(rows.get("t", np.empty(0)))
+            times.append(rows.t)
             counts.append(counts[-1] + times[-1].size)
         assert np.array_equal(plan.times, np.concatenate(times))
         assert np.array_equal(plan.first, counts)

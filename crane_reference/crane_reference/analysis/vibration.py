@@ -53,7 +53,7 @@ from ..model.description import CraneDescription
 from ..motion.integration import CUTOFF
 from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import SOLVER_FAILURES, MotionStepper, Scenario
-from ..motion.trajectory import Trajectory, stack_samples
+from ..motion.trajectory import MotionRows, Trajectory
 from .modal import Modes, linearise, modal_analysis, scenario_motion
 
 MIN_FREQUENCY = 2.0  # [Hz] peaks below are the quasi-static response to the slewing
@@ -213,7 +213,7 @@ def run(params: CraneDescription, variant: str, realisation: str, duration: floa
         return Run(realisation, variant, scenario.motion, None, time.perf_counter() - wall, str(error), None)
     start_modes = modal_analysis(linearise(motion, 0.0, q0))
     stepper = MotionStepper(motion, 0.0, q0, np.zeros_like(q0), step)
-    parts, error = [stack_samples([stepper.sample])], None
+    parts, error = [MotionRows.stacked([stepper.sample])], None
     while error is None and stepper.state.t < duration - 1e-9 * step:
         before = stepper.snapshot()
         try:  # compiled runs of RUN_CHUNK seconds
@@ -222,12 +222,11 @@ def run(params: CraneDescription, variant: str, realisation: str, duration: floa
             stepper.rewind(before)
             try:
                 while stepper.state.t < duration - 1e-9 * step:
-                    parts.append(stack_samples([stepper.advance()]))
+                    parts.append(MotionRows.stacked([stepper.advance()]))
             except SOLVER_FAILURES as failure:
                 error = f"stopped at t = {stepper.state.t:.6g} s: {failure}"
     model = scenario.model
-    arrays = {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
-    trajectory = Trajectory.from_arrays(model.variant, model.joint_names, model.drive_joint, arrays)
+    trajectory = Trajectory.from_rows(model.variant, model.joint_names, model.drive_joint, MotionRows.joined(parts))
     return Run(realisation, variant, motion, trajectory, time.perf_counter() - wall, error, start_modes)
 
 

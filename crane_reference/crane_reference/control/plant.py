@@ -30,7 +30,7 @@ from ..motion.equilibrium import static_equilibrium
 from ..motion.integration import StepState
 from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import SAMPLED_ACCOUNTS, MotionStepper, Scenario
-from ..motion.trajectory import Trajectory, make_sample, stack_samples
+from ..motion.trajectory import MotionRows, Trajectory, make_sample
 from .controller import JointController, JointGains, bandwidth_gains
 
 
@@ -101,7 +101,7 @@ class Plant:
         motion = ProgrammedMotion(self.dynamics, ConstraintSet(()), dependent=())
         self.stepper = MotionStepper(motion, t0, start.q, np.zeros(self.model.dof), step)
         self.keep = keep
-        self._samples = [stack_samples([self.stepper.sample])]
+        self._samples = [MotionRows.stacked([self.stepper.sample])]
         self._torque_rows = [np.zeros((1, self.actuated.size))]
 
     def actuate(self, end: float, torque_start: np.ndarray, torque_end: np.ndarray) -> None:
@@ -111,15 +111,15 @@ class Plant:
         self.drive.command(start, end, self._forces(torque_start), self._forces(torque_end))
         self.stepper.forces_changed()
         if len(self._samples) == 1:  # the start's sample under the first command
-            self._samples[0] = stack_samples([self.stepper.sample])
+            self._samples[0] = MotionRows.stacked([self.stepper.sample])
             self._torque_rows[0] = (np.asarray(torque_start, dtype=float)
                                     - self.joint_damping * self.stepper.state.qd[self.actuated])[None, :]
         rows = self.stepper.advance_until(end)
         if not self.keep:
             return
         self._samples.append(rows)
-        self._torque_rows.append(self.drive.forces(rows["t"])[:, self.actuated]
-                                 - self.joint_damping * rows["qd"][:, self.actuated])
+        self._torque_rows.append(self.drive.forces(rows.t)[:, self.actuated]
+                                 - self.joint_damping * rows.qd[:, self.actuated])
 
     def follow(self, ends: np.ndarray, reference_q: np.ndarray, reference_qd: np.ndarray,
                feedforward_start: np.ndarray, feedforward_end: np.ndarray, controller: JointController) -> None:
@@ -176,15 +176,15 @@ class Plant:
         """Keep the rows of a :meth:`follow` (from its start, at ``times``) for :meth:`trajectory`."""
         accounts = {name: rows.accounts[:, i] for i, name in enumerate(ACCOUNTS) if name in SAMPLED_ACCOUNTS}
         empty = np.zeros((times.size, 0))
-        arrays = dict(t=times, q=rows.q, qd=rows.qd, qdd=rows.qdd, reactions=empty,
-                      constraint_forces=rows.constraint_forces,
-                      ee_position=rows.ee_position, ee_rotation=rows.ee_rotation, ee_velocity=rows.ee_velocity,
-                      residual=empty, residual_distance=empty, **accounts, work_drive=rows.work[:, 0],
-                      work_constraints=rows.work[:, 1], work_damping=rows.work[:, 2])
+        kept = MotionRows(t=times, q=rows.q, qd=rows.qd, qdd=rows.qdd, reactions=empty,
+                          constraint_forces=rows.constraint_forces,
+                          ee_position=rows.ee_position, ee_rotation=rows.ee_rotation, ee_velocity=rows.ee_velocity,
+                          residual=empty, residual_distance=empty, **accounts, work_drive=rows.work[:, 0],
+                          work_constraints=rows.work[:, 1], work_damping=rows.work[:, 2])
         if len(self._samples) == 1:  # the start's sample under the first command
-            self._samples[0] = {name: value[:1] for name, value in arrays.items()}
+            self._samples[0] = kept.take(slice(0, 1))
             self._torque_rows[0] = rows.torques[:1]
-        self._samples.append({name: value[1:] for name, value in arrays.items()})
+        self._samples.append(kept.take(slice(1, None)))
         self._torque_rows.append(rows.torques[1:])
 
     def _forces(self, torques: np.ndarray) -> np.ndarray:
@@ -208,6 +208,5 @@ class Plant:
         """The run so far, one sample per step (work_drive includes the commands' work, work_damping the
         drives' velocity loops'), and the actuator torques at the samples (N, 3) [N m] (at a command's
         start: under the new command)."""
-        arrays = {name: np.concatenate([part[name] for part in self._samples]) for name in self._samples[0]}
-        return (Trajectory.from_arrays(self.model.variant, list(self.model.joint_names), self.model.drive_joint,
-                                       arrays), np.concatenate(self._torque_rows))
+        return (Trajectory.from_rows(self.model.variant, list(self.model.joint_names), self.model.drive_joint,
+                                     MotionRows.joined(self._samples)), np.concatenate(self._torque_rows))

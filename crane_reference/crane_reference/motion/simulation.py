@@ -39,7 +39,7 @@ from .programmed_motion import (
     choose_dependent,
 )
 from .steps import ANALYSIS_STEP, ONLINE_STEP
-from .trajectory import MotionSample, Trajectory, make_sample, stack_samples
+from .trajectory import MotionRows, MotionSample, Trajectory, make_sample
 
 SAMPLED_ACCOUNTS = ("kinetic_energy", "potential_energy", "drive_torque", "kdc_min_singular_value")
 """Accounts a sample carries under their own names."""
@@ -236,16 +236,16 @@ class MotionStepper:
         self._run_block(self._t0 + (self._k + 1) * self.step_size)
         return self.sample
 
-    def advance_until(self, t_end: float, stop: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    def advance_until(self, t_end: float, stop: np.ndarray | None = None) -> MotionRows:
         """Steps through the first grid time >= t_end in compiled runs (cut at drive jumps, restarting
-        there): the samples' fields (:class:`MotionSample`) stacked per step.  A ``stop`` flag set meanwhile
+        there): their rows (none if the state is there already).  A ``stop`` flag set meanwhile
         (:func:`~.integration.stop_flag`) ends it after the step in progress (at least one is taken)."""
         blocks = []
         while self.state.t < t_end - 1e-9 * self.step_size and not (blocks and stop is not None and stop[0]):
             blocks.append(self._run_block(t_end, stop))
-        return {name: np.concatenate([b[name] for b in blocks]) for name in blocks[0]} if blocks else {}
+        return MotionRows.joined(blocks) if blocks else MotionRows.stacked([self.sample]).take(slice(0, 0))
 
-    def _run_block(self, t_end: float, stop: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    def _run_block(self, t_end: float, stop: np.ndarray | None = None) -> MotionRows:
         """One compiled run towards t_end, up to the first drive jump (restarting there) or a ``stop``; the
         trapezoidal work accounts; the samples' fields stacked per step."""
         start = self.state
@@ -267,10 +267,10 @@ class MotionStepper:
             qdd[-1], reactions[-1], forces[-1] = solution.qdd, solution.reactions, solution.constraint_forces
             accounts[-1, DRIVE_TORQUE] = solution.drive_torque
         columns = {name: accounts[:, i] for i, name in enumerate(ACCOUNTS) if name in SAMPLED_ACCOUNTS}
-        return dict(t=times, q=rows.q, qd=rows.qd, qdd=qdd, reactions=reactions, constraint_forces=forces,
-                    ee_position=rows.ee_position, ee_rotation=rows.ee_rotation, ee_velocity=rows.ee_velocity,
-                    residual=rows.residual, residual_distance=rows.residual_distance, **columns,
-                    work_drive=work[:, 0], work_constraints=work[:, 1], work_damping=work[:, 2])
+        return MotionRows(t=times, q=rows.q, qd=rows.qd, qdd=qdd, reactions=reactions, constraint_forces=forces,
+                          ee_position=rows.ee_position, ee_rotation=rows.ee_rotation, ee_velocity=rows.ee_velocity,
+                          residual=rows.residual, residual_distance=rows.residual_distance, **columns,
+                          work_drive=work[:, 0], work_constraints=work[:, 1], work_damping=work[:, 2])
 
     def forces_changed(self) -> None:
         """The forces jumped at the current time (a new command of an :class:`~crane_reference.model.drive.Actuated`
@@ -317,28 +317,27 @@ def simulate(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, step: float
     for part in simulated_runs(motion, q0, t_end, step, t0, qd0, chunk, tolerance, evaluations, every_row):
         parts.append(part)
         if progress is not None and len(parts) > 1:
-            progress(float(part["t"][-1]))
+            progress(float(part.t[-1]))
     return joined(motion, parts)
 
 
 def simulated_runs(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, step: float = ANALYSIS_STEP,
                    t0: float = 0.0, qd0: np.ndarray | None = None, chunk: float = 0.25,
                    tolerance: float = ONLINE_TOLERANCE, evaluations: int = EVALUATIONS,
-                   every_row: bool = True) -> Iterator[dict[str, np.ndarray]]:
+                   every_row: bool = True) -> Iterator[MotionRows]:
     """What :func:`simulate` computes, as it is computed: the start's sample, then the samples of each compiled run
     of ``chunk`` seconds, stacked (:func:`joined` makes them the :class:`Trajectory`)."""
     qd0 = np.zeros_like(q0) if qd0 is None else qd0
     stepper = MotionStepper(motion, t0, q0, qd0, step, tolerance, evaluations, every_row)
-    yield stack_samples([stepper.sample])
+    yield MotionRows.stacked([stepper.sample])
     while stepper.state.t < t_end - 1e-9 * step:
         yield stepper.advance_until(min(stepper.state.t + chunk, t_end))
 
 
-def joined(motion: ProgrammedMotion, parts: list[dict[str, np.ndarray]]) -> Trajectory:
-    """The :class:`Trajectory` of ``motion`` from consecutive stacked samples (:func:`simulated_runs`)."""
+def joined(motion: ProgrammedMotion, parts: list[MotionRows]) -> Trajectory:
+    """The :class:`Trajectory` of ``motion`` from consecutive rows (:func:`simulated_runs`)."""
     model = motion.dynamics.model
-    arrays = {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
-    return Trajectory.from_arrays(model.variant, model.joint_names, model.drive_joint, arrays)
+    return Trajectory.from_rows(model.variant, model.joint_names, model.drive_joint, MotionRows.joined(parts))
 
 
 def simulate_reference(motion: ProgrammedMotion, q0: np.ndarray, t_end: float, sample_times: np.ndarray,

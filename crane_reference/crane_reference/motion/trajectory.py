@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -88,9 +89,42 @@ def generalized_effort(constraint_forces: np.ndarray, drive_torque: float | np.n
     return effort
 
 
-def stack_samples(samples: list[MotionSample]) -> dict[str, np.ndarray]:
-    """The fields of ``samples`` stacked into arrays (first axis: sample)."""
-    return {f.name: np.array([getattr(s, f.name) for s in samples]) for f in fields(MotionSample)}
+class MotionRows(NamedTuple):
+    """Samples of the motion stacked, a row a step (first axis: sample): the fields of :class:`MotionSample`, each
+    an array, as the integrator's runs give them (:meth:`~.simulation.MotionStepper.advance_until`)."""
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    reactions: np.ndarray
+    constraint_forces: np.ndarray
+    drive_torque: np.ndarray
+    ee_position: np.ndarray
+    ee_rotation: np.ndarray
+    ee_velocity: np.ndarray
+    residual: np.ndarray
+    residual_distance: np.ndarray
+    kdc_min_singular_value: np.ndarray
+    kinetic_energy: np.ndarray
+    potential_energy: np.ndarray
+    work_drive: np.ndarray
+    work_constraints: np.ndarray
+    work_damping: np.ndarray
+
+    @classmethod
+    def stacked(cls, samples: list[MotionSample]) -> MotionRows:
+        """The fields of ``samples`` stacked into arrays."""
+        return cls(*(np.array([getattr(s, name) for s in samples]) for name in cls._fields))
+
+    @classmethod
+    def joined(cls, parts: list[MotionRows]) -> MotionRows:
+        """Consecutive rows, in order."""
+        return cls(*(np.concatenate(columns) for columns in zip(*parts, strict=True)))
+
+    def take(self, rows: slice | np.ndarray) -> MotionRows:
+        """The ``rows`` (a slice or indices)."""
+        return MotionRows(*(column[rows] for column in self))
 
 
 @dataclass(frozen=True)
@@ -122,13 +156,12 @@ class Trajectory:
     @classmethod
     def from_samples(cls, variant: str, joint_names: list[str], drive_joint: int,
                      samples: list[MotionSample]) -> Trajectory:
-        return cls.from_arrays(variant, joint_names, drive_joint, stack_samples(samples))
+        return cls.from_rows(variant, joint_names, drive_joint, MotionRows.stacked(samples))
 
     @classmethod
-    def from_arrays(cls, variant: str, joint_names: list[str], drive_joint: int,
-                    arrays: dict[str, np.ndarray]) -> Trajectory:
-        """From the fields of :class:`MotionSample` stacked per sample (:func:`stack_samples`)."""
-        arrays = dict(arrays)
+    def from_rows(cls, variant: str, joint_names: list[str], drive_joint: int, rows: MotionRows) -> Trajectory:
+        """From the rows of a run (E's orientation as a quaternion, scalar last)."""
+        arrays = rows._asdict()
         arrays["ee_quaternion"] = Rotation.from_matrix(arrays.pop("ee_rotation")).as_quat()
         return cls(variant=variant, joint_names=tuple(joint_names), drive_joint=drive_joint, **arrays)
 

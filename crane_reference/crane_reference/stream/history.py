@@ -15,7 +15,7 @@ import numpy as np
 
 from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import StepperSnapshot
-from ..motion.trajectory import generalized_effort
+from ..motion.trajectory import MotionRows, generalized_effort
 from .sample import ReferenceRows, quaternions
 
 TIME_SLACK = 1e-12  # [s], rounding slack when locating a motion time among the computed ones
@@ -48,8 +48,7 @@ class History:
         self._snapshots: dict[int, StepperSnapshot] = {}  # by storage row
         self._begin = self._end = 0
         self.drive_joint = drive_joint
-        self.extend({"t": np.array([s.t]), "q": s.q[None], "qd": s.qd[None], "qdd": s.qdd[None],
-                      "ee_position": s.ee_position[None], "ee_rotation": s.ee_rotation[None]}, start)
+        self.extend(MotionRows.stacked([s]), start)
 
     def __len__(self) -> int:
         return self._end - self._begin
@@ -67,15 +66,15 @@ class History:
     def last_snapshot(self) -> StepperSnapshot:
         return self._snapshots[self._end - 1]
 
-    def extend(self, rows: dict[str, np.ndarray], end: StepperSnapshot) -> None:
+    def extend(self, rows: MotionRows, end: StepperSnapshot) -> None:
         """Append a compiled run, its rows stacked (``MotionStepper.advance_until``; their effort and constraint
         distance are left for :meth:`read`, one formula for every row); the last one restartable from ``end``."""
-        count = rows["t"].size
+        count = rows.t.size
         if self._end + count > self._motion.size:
             self._compact(count)
         new = slice(self._end, self._end + count)
         for name in ("t", "q", "qd", "qdd", "ee_position", "ee_rotation"):
-            self._rows[name][new] = rows[name]
+            self._rows[name][new] = getattr(rows, name)
         for name in ("effort", "feedforward", "residual_distance"):
             self._rows[name][new] = np.nan  # NaN: not evaluated yet
         if not self._motions or self._motions[-1] is not end.motion:

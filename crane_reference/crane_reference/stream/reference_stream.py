@@ -41,6 +41,7 @@ from ..motion.equilibrium import static_equilibrium
 from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import SOLVER_FAILURES, MotionStepper, Scenario, TaskConstraints, paper_task_constraints
 from ..motion.steps import ONLINE_STEP
+from ..motion.trajectory import MotionRows
 from .history import History
 from .sample import ReferenceRows, ReferenceSample, between, warped
 from .targets import blend_constraints, check_task
@@ -206,15 +207,15 @@ class ReferenceStream:
             except SOLVER_FAILURES as failure:
                 self._fail(failure, until)
                 return
-            if rows["t"].size >= PACE_STEPS:  # a shorter run's fixed costs would make the pace too slow
-                self._pace = (time.perf_counter() - started) / rows["t"].size
+            if rows.t.size >= PACE_STEPS:  # a shorter run's fixed costs would make the pace too slow
+                self._pace = (time.perf_counter() - started) / rows.t.size
             history.extend(rows, self._stepper.snapshot())
 
-    def _advance(self, until: float, stop: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    def _advance(self, until: float, stop: np.ndarray | None = None) -> MotionRows:
         """The stepper's rows through motion time ``until`` (FloatingPointError for a non-finite state)."""
         rows = self._stepper.advance_until(until, stop)
-        if not (np.all(np.isfinite(rows["q"])) and np.all(np.isfinite(rows["qd"]))):
-            raise FloatingPointError(f"non-finite state before t = {rows['t'][-1]:.6g} s")
+        if not (np.all(np.isfinite(rows.q)) and np.all(np.isfinite(rows.qd))):
+            raise FloatingPointError(f"non-finite state before t = {rows.t[-1]:.6g} s")
         return rows
 
     def free_forgotten(self) -> None:
