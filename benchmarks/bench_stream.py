@@ -37,7 +37,8 @@ from crane_reference.stream.ahead import COMPUTE_SLICE, LOOKAHEAD, REFILL, RELEA
 from crane_reference.stream.reference_stream import ReferenceStream
 from crane_reference.stream.sample import quaternions
 from crane_reference.stream.schedule import FrameSchedule
-from crane_reference.stream.solver import StreamSolver, StreamSpec
+from crane_reference.stream.solver_messages import StreamSpec
+from crane_reference.stream.stream_solver import StreamSolver
 from crane_reference.stream.targets import reach
 
 STEP = ONLINE_STEP  # [s], the node's default

@@ -562,7 +562,7 @@ def test_integer_values_for_double_parameters(ros: Harness, tmp_path: Path) -> N
     params_file.write_text(f"{NODE}:\n  ros__parameters:\n    ellipse.b: 2\n    blend_time: 1\n")
     node = ros.start(cli_args=["--ros-args", "-p", "ellipse.a:=3", "--params-file", str(params_file)],
                      z__increment=0)
-    assert latest_values(ros)["blend_time_s"] == "1"  # the server's blend time
+    assert latest_values(ros)["blend_time_s"] == "1"  # the node's blend time
     for name, value in {"ellipse.a": 3.0, "ellipse.b": 2.0, "blend_time": 1.0, "z.increment": 0.0}.items():
         parameter = node.get_parameter(name)
         assert parameter.type_ == Parameter.Type.DOUBLE and parameter.value == value, name
@@ -741,7 +741,7 @@ def test_without_autostart_the_node_waits_for_a_manager(ros: Harness) -> None:
 
 
 def solver_processes() -> list[int]:
-    """PIDs of this process's children that run the solver (``python -m crane_reference.stream.solver``)."""
+    """PIDs of this process's children that run the solver (``python -m crane_reference.stream.stream_solver``)."""
     pids = []
     for stat in Path("/proc").glob("[0-9]*/stat"):
         try:
@@ -749,7 +749,7 @@ def solver_processes() -> list[int]:
             command = (stat.parent / "cmdline").read_bytes()
         except (OSError, ValueError, IndexError):
             continue  # ended meanwhile
-        if parent == os.getpid() and b"crane_reference.stream.solver" in command:
+        if parent == os.getpid() and b"crane_reference.stream.stream_solver" in command:
             pids.append(int(stat.parent.name))
     return pids
 

@@ -29,7 +29,9 @@ from crane_reference.stream.reference_stream import ERROR, PAUSED, RUNNING, Refe
 from crane_reference.stream.schedule import URGENT_PART, FrameSchedule
 from crane_reference.stream.served import CommandRefusedError, Preview, ServerStatus
 from crane_reference.stream.server import ReferenceServer
-from crane_reference.stream.solver import LocalSolver, SolverProcess, StreamSolver, StreamSpec, StreamStatus
+from crane_reference.stream.solver import LocalSolver, SolverProcess
+from crane_reference.stream.solver_messages import StreamSpec, StreamStatus
+from crane_reference.stream.stream_solver import StreamSolver
 from crane_reference.stream.targets import UnreachableTargetError
 
 RATE = 100  # [Hz]
@@ -361,6 +363,24 @@ def test_closing_a_stopped_solver_process_kills_it_at_once() -> None:
     assert process.exit_code == -signal.SIGKILL
 
 
+def test_a_new_preview_applies_to_the_frames_made_after_it(server: ReferenceServer) -> None:
+    """A preview changed (the node's preview.* parameters) reaches the frame worker: the frames made after the
+    change (here all, made again after a command at the first frame) carry previews over the new horizon with the
+    new points, each point the stream's sample at its time."""
+    server.preview = Preview(0.5, 6, 10)
+    server.command("speed_scaling", 1.0, accepted_ns=0)  # not publishing: from the next frame to publish on
+    wait_ready(server)
+    server.begin(NS)
+    out = publish(server, NS, 0.5)
+    previews = [(sample(o).t, o.frames.previews[o.row]) for o in out if o.row in o.frames.previews]
+    assert len(previews) == 5 and all(preview.t.size == 6 for _, preview in previews)  # points after the frame's
+    truth = ReferenceStream(load_config(), "rigid", STEP, blend_time=0.5, ramp_time=0.3)
+    truth.compute(1.0)
+    for frame_t, preview in previews:
+        assert preview.t[-1] - frame_t == pytest.approx(0.5, abs=1e-9)
+        np.testing.assert_allclose(preview.q, [truth.sample(t).q for t in preview.t], atol=1e-12)
+
+
 def test_replies_name_a_sample_by_its_stamp_only_once_published(server: ReferenceServer) -> None:
     """Before publishing, a command's sample has no stamp yet: the reply names it by its number."""
     reply = pause_reply(server, True, accepted_ns=0)
@@ -379,7 +399,7 @@ def test_health_ranks_what_is_wrong_worst_first() -> None:
     forward leap over samples held late, else OK with the stream's state."""
     assert startup_health("configuring: starting the solver") == Health(Level.OK, "configuring: starting the solver")
     assert startup_health("cannot configure: bad file").level == Level.ERROR
-    stream = StreamStatus(RUNNING, Task(), 1.0, "", 1.0, 0.0, 2.0)
+    stream = StreamStatus(RUNNING, Task(), 1.0, "", 1.0, 0.0)
     status = ServerStatus(stream=stream, publishing=True, last=None, counters={"held_late": 0}, fault="",
                           frames_ready=100)
     assert serving_health(status, 0) == Health(Level.OK, RUNNING)

@@ -35,7 +35,7 @@ from ..model.units import NANOSECONDS
 from ..stream.reference_stream import PAUSED, RUNNING
 from ..stream.served import CommandRefusedError
 from ..stream.server import ReferenceServer
-from ..stream.solver import SolverStoppedError
+from ..stream.solver_messages import SolverStoppedError
 from . import parameter_policy, service_replies
 from .message_types import rclpy_types
 from .parameter_spec import ParameterError, pre_set_callback

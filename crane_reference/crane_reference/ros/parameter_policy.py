@@ -14,7 +14,8 @@ from ..model.description import CraneDescription
 from ..motion.simulation import SOLVER_FAILURES
 from ..stream.served import CommandRefusedError, Preview
 from ..stream.server import ReferenceServer
-from ..stream.solver import LocalSolver, SolverClient, SolverProcess, StreamSpec
+from ..stream.solver import LocalSolver, SolverClient, SolverProcess
+from ..stream.solver_messages import StreamSpec
 from ..stream.targets import UnreachableTargetError
 from .parameter_spec import ParameterError, check
 from .parameters import COMMANDING_PARAMETERS, SPECS, TARGET_PARAMETERS, NodeParameters
@@ -101,8 +102,6 @@ def apply(server: ReferenceServer, params: NodeParameters, names: list[str], acc
     what was commanded, for the log.  Raises :class:`~crane_reference.stream.server.CommandRefusedError` if the
     solver stopped since the on-set check."""
     done = []
-    if "blend_time" in names:
-        server.set_blend_time(params.blend_time)
     if "command_lead" in names:
         server.set_lead(params.command_lead)
     if any(name.startswith("preview.") for name in names):

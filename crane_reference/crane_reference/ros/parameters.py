@@ -136,7 +136,7 @@ class NodeParameters(NodeParameterValues):
 TARGET_PARAMETERS = {"ellipse.a": "ellipse_a", "ellipse.b": "ellipse_b", "z.increment": "z_increment",
                      "z.rise_time": "rise_time"}
 # parameters whose change is a request to the running solver (refused once it has stopped)
-COMMANDING_PARAMETERS = {*TARGET_PARAMETERS, "speed_scaling", "blend_time"}
+COMMANDING_PARAMETERS = {*TARGET_PARAMETERS, "speed_scaling"}
 
 
 def reach_descriptor(spec: ParameterSpec, low: float, high: float) -> ParameterDescriptor:

@@ -308,7 +308,8 @@ class DiagnosticsPublisher:
         values = messages.diagnostic_values(
             stream.state, status.last, status.real_time_factor, server.rate, status.achieved_rate, counters,
             stream.targets, stream.target_speed, stream.last_error or status.fault,
-            {"frames_ready": status.frames_ready, "blend_time_s": f"{stream.blend_time:g}", **status.commands})
+            {"frames_ready": status.frames_ready, "blend_time_s": f"{node.get_parameter('blend_time').value:g}",
+             **status.commands})
         self._publisher.publish(messages.diagnostics(self.types, node.get_clock().now().nanoseconds, name,
                                                      hardware_id, health.level, health.message, values))
         if health.level == Level.ERROR:

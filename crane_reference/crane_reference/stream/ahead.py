@@ -36,7 +36,8 @@ from .command_log import CommandLog
 from .frames import FrameBatch, FrameRequest, Plan
 from .schedule import FrameSchedule
 from .served import CommandRefusedError, Encoder, Preview
-from .solver import SolverClient, SolverStoppedError
+from .solver import SolverClient
+from .solver_messages import SolverStoppedError
 from .stamps import Stamps
 
 LOOKAHEAD = 2.0  # [s] of frames kept ready ahead of publishing

@@ -74,7 +74,7 @@ class ReferenceStream:
         self.dependent = tuple(self.model.dependent_joints) if dependent is None else tuple(dependent)
         self.step = step
         self.singular_value_margin = singular_value_margin
-        self.set_blend_time(blend_time)
+        self.blend_time = self._checked_blend_time(blend_time)
         self.speed_scaling = check_rate(speed_scaling)
         self._warp = TimeWarp(ramp_time, self.speed_scaling)
         self.restart()
@@ -155,9 +155,6 @@ class ReferenceStream:
         if not (math.isfinite(seconds) and seconds > 0.0):
             raise ValueError(f"blend_time = {seconds}: must be a finite number > 0 s")
         return seconds
-
-    def set_blend_time(self, seconds: float) -> None:
-        self.blend_time = self._checked_blend_time(seconds)
 
     def pause(self, tau: float) -> None:
         """Bring the motion to rest from publish time tau along a speed-scaling ramp (C2: no step in

@@ -12,7 +12,7 @@ from typing import Any, NamedTuple
 
 from .frames import Frames
 from .sample import ReferenceRows, ReferenceSample
-from .solver import StreamStatus
+from .solver_messages import StreamStatus
 
 Encoder = Callable[[ReferenceRows], Any]
 """What a publisher makes of a batch's samples at once (its messages, a row a sample), kept as the frames'

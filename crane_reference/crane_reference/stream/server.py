@@ -63,8 +63,10 @@ from .served import (
     RetargetBlend,
     ServerStatus,
 )
-from .solver import STREAM_COMMANDS, SolverClient, StreamStatus
+from .solver import SolverClient
+from .solver_messages import StreamStatus
 from .stamps import Stamps
+from .stream_solver import STREAM_COMMANDS
 
 MAX_CATCH_UP = 1.0  # [s]: if publishing falls further behind than this, the stamps leap (re-anchored)
 REST_MARGIN = 1.0  # [s] :meth:`ReferenceServer.come_to_rest` waits beyond the ramp and the lead
@@ -83,7 +85,6 @@ class ReferenceServer:
         self.solver = solver
         self.info = solver.info
         self.rate = rate
-        self.preview = preview
         self.schedule = FrameSchedule(rate, max(2, math.ceil(LOOKAHEAD * rate)), lead, MAX_CATCH_UP,
                                       self.info.start)
         self._lock = threading.Condition()  # the schedule, the stamps and the log (never held while solving)
@@ -104,6 +105,16 @@ class ReferenceServer:
         """The log of the commands (:mod:`.command_log`)."""
         with self._lock:
             return self._log.entries()
+
+    @property
+    def preview(self) -> Preview:
+        """The preview the frames carry (a new one applies from the next request of frames)."""
+        return self._worker.preview
+
+    @preview.setter
+    def preview(self, preview: Preview) -> None:
+        with self._lock:
+            self._worker.preview = preview
 
     @property
     def publishing(self) -> bool:
@@ -249,15 +260,12 @@ class ReferenceServer:
         """Raise :class:`~.targets.UnreachableTargetError` unless ``targets`` can be streamed from here."""
         self._worker.request(self.solver.check_targets, targets)
 
-    def set_blend_time(self, seconds: float) -> None:
-        self._worker.request(self.solver.set_blend_time, seconds)
-
     def set_lead(self, seconds: float) -> None:
         with self._lock:
             self.schedule.lead = seconds
 
     def reach(self, radius: float, heights: tuple[float, ...]) -> tuple[float, float]:
-        """The crane's reach [m] at heights above E's static one (:meth:`~.solver.StreamSolver.reach`)."""
+        """The crane's reach [m] at heights above E's static one (:meth:`~.stream_solver.StreamSolver.reach`)."""
         return self._worker.request(self.solver.reach, radius, heights)
 
     def restart(self, accepted_ns: int = 0) -> Restart:

@@ -1,13 +1,14 @@
-"""The stream's solver side, in the caller's thread or in a process of its own.
+"""The caller's side of the stream's solver, in the caller's thread or in a process of its own.
 
-:class:`StreamSolver` owns a :class:`~.reference_stream.ReferenceStream` and answers the requests of a
-reference server (:mod:`.server`): frames to make (:func:`~.frame_maker.make_frames`), commands applied at a
+:class:`~.stream_solver.StreamSolver` owns a :class:`~.reference_stream.ReferenceStream` and answers the requests
+of a reference server (:mod:`.server`): frames to make (:func:`~.frame_maker.make_frames`), commands applied at a
 stream time, target checks, the crane's reach.  Two clients carry the requests to it, with the methods of
-:class:`SolverClient` (each returns the result and keeps the stream's :class:`StreamStatus` of the reply;
-a request names the solver's method itself, which pickles by reference, never a string):
+:class:`SolverClient` (each returns the result and keeps the stream's
+:class:`~.solver_messages.StreamStatus` of the reply; a request names the solver's method itself, which pickles
+by reference, never a string):
 
 * :class:`LocalSolver` calls it in the caller's thread (tests, tools);
-* :class:`SolverProcess` runs it in a child process (``python -m crane_reference.stream.solver``: a fresh
+* :class:`SolverProcess` runs it in a child process (``python -m crane_reference.stream.stream_solver``: a fresh
   interpreter that imports no ROS and not the caller's main module), so the integrator's Python parts never
   wait for, or delay, a publisher's thread behind Python's GIL.  Requests and replies are pickled over two
   pipes; an exception raised by the solver is raised again in the caller.
@@ -37,209 +38,35 @@ at once instead of waiting for it to end.
 
 from __future__ import annotations
 
-import gc
 import math
-import mmap
 import os
-import pickle
-import signal
 import subprocess
 import sys
 import tempfile
 import threading
 import time
-import traceback
 from collections.abc import Callable
-from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
-import numpy as np
-
-from ..model.chain import PRISMATIC
-from ..model.description import CraneDescription
-from ..model.drive import column_drive
 from ..model.parameters import Task
-from ..model.urdf import model_to_urdf
-from ..motion.integration import stop_flag
-from .frame_maker import make_frames
+from . import stream_solver
 from .frames import FrameBatch, FrameRequest
-from .reference_stream import ReferenceStream
-from .sample import ReferenceSample
-from .targets import reach
-from .warmup import warm_up
+from .solver_messages import (
+    HEARTBEAT_PERIOD,
+    HUNG_AFTER,
+    SHARED_BYTES,
+    SolverHungError,
+    SolverStoppedError,
+    StreamInfo,
+    StreamSpec,
+    StreamStatus,
+    shared_memory,
+)
+from .stream_solver import STREAM_COMMANDS, StreamSolver
 
 POLL_PERIOD = 0.1  # [s] between checks of the caller's stop flag while it waits for the solver process
-SOLVER_NICENESS = 5  # added to the solver process's nice value: the caller's threads win a contended core
-HEARTBEAT_PERIOD = 0.05
-"""[s] between the solver process's beats."""
-HUNG_AFTER = 1.0
-"""[s] without a beat after which a solver process that owes a reply is held hung (twenty beats missed)."""
-SHARED_BYTES = 16
-"""The memory the caller and the solver process share: the stop flag (byte 0) and the beat counter (bytes 8-15)."""
-
-
-class SolverStoppedError(RuntimeError):
-    """The caller stopped waiting for the solver (shutting down), or the solver process is gone."""
-
-
-class SolverHungError(SolverStoppedError):
-    """The solver process gave no sign of life for :data:`HUNG_AFTER` while a reply was due: it was killed."""
-
-
-@dataclass(frozen=True)
-class StreamSpec:
-    """Everything that makes a :class:`~.reference_stream.ReferenceStream` (picklable): the crane's
-    configuration, model variant, integrator step [s], blend time [s], targets, the column drive's torque
-    [N m] and duration [s] (None: the configuration's), speed scaling and its ramp time [s]; ``warm_up``:
-    make every kernel ready first (and say how)."""
-
-    config: CraneDescription
-    model: str
-    step: float
-    blend_time: float
-    targets: Task
-    drive_torque: float | None = None
-    drive_duration: float | None = None
-    speed_scaling: float = 1.0
-    ramp_time: float = 1.0
-    warm_up: bool = True
-
-
-@dataclass(frozen=True)
-class StreamInfo:
-    """What a server needs to know of the stream once: joint names and their units ("rad", or "m" for a
-    prismatic joint), the URDF of the model, the sample at the start, E's static height [m], the singular-value
-    margin of target checks, and how the kernels were made ready ("" without warm-up)."""
-
-    joint_names: tuple[str, ...]
-    joint_units: tuple[str, ...]
-    urdf: str
-    start: ReferenceSample
-    z_static: float
-    singular_value_margin: float
-    kernels: str
-
-
-@dataclass(frozen=True)
-class StreamStatus:
-    """The stream's state after a request: RUNNING / PAUSED / ERROR, targets, the speed scaling it is at or
-    moving to, the last error, the ramp time [s], the publish time [s] it settles at, the blend time [s]."""
-
-    state: str
-    targets: Task
-    target_speed: float
-    last_error: str
-    ramp_time: float
-    settled_at: float
-    blend_time: float
-
-
-class Return(NamedTuple):
-    """A return to the start: q [SI units] at the stream time it happens, before, and q at the start."""
-
-    before: np.ndarray
-    start: np.ndarray
-
-
-class StreamSolver:
-    """The stream and the requests it answers (see the module)."""
-
-    def __init__(self, spec: StreamSpec, stop: np.ndarray | None = None):
-        """Build the stream of ``spec`` (after making the kernels ready if ``spec.warm_up``) and check its
-        targets (:class:`~.targets.UnreachableTargetError` or a solver failure if there is no start); the
-        ``stop`` flag (:func:`~crane_reference.motion.integration.stop_flag`, a new one if None), once set,
-        says that a command waits: computing ahead stops at the next step."""
-        self.stop = stop_flag() if stop is None else stop
-        self.kernels = warm_up((spec.model,)).describe() if spec.warm_up else ""
-        config = spec.config
-        self.stream = ReferenceStream(config, spec.model, spec.step, spec.blend_time, spec.targets,
-                                      column_drive(config, spec.drive_torque, spec.drive_duration),
-                                      speed_scaling=spec.speed_scaling, ramp_time=spec.ramp_time)
-        self.stream.check_targets(spec.targets)
-
-    def info(self) -> StreamInfo:
-        stream = self.stream
-        units = tuple("m" if joint.kind == PRISMATIC else "rad" for joint in stream.model.joints)
-        return StreamInfo(tuple(stream.joint_names), units, model_to_urdf(stream.model), stream.sample(0.0),
-                          stream.scenario.z_static, stream.singular_value_margin, self.kernels)
-
-    def status(self) -> StreamStatus:
-        stream = self.stream
-        return StreamStatus(stream.state, stream.targets, stream.target_speed, stream.last_error, stream.ramp_time,
-                            stream.settled_at(), stream.blend_time)
-
-    def frames(self, request: FrameRequest, keep: float) -> FrameBatch:
-        """The frames of ``request`` (:func:`~.frame_maker.make_frames`); then the motion older than ``keep``
-        seconds before the request's first frame is forgotten."""
-        batch = make_frames(self.stream, request, self.stop)
-        self.stream.release(request.plan.tau, keep)
-        return batch
-
-    def command(self, method: Callable[..., Any], tau: float, args: tuple, request: FrameRequest, keep: float
-                ) -> tuple[Any, FrameBatch]:
-        """The stream command ``method(self, tau, *args)`` (one of :data:`STREAM_COMMANDS`), then the frames of
-        ``request`` (:meth:`frames`): one request, so a command's first frames are ready without a second trip."""
-        return method(self, tau, *args), self.frames(request, keep)
-
-    def call(self, method: Callable[..., Any], *args: Any) -> Any:
-        """``method(self, *args)`` with the stop flag cleared as the module says: before any call but one of
-        :meth:`frames` (an interrupt set it for the call that waited), and after a call of :meth:`frames`."""
-        frames = method is StreamSolver.frames
-        if not frames:
-            self.stop[0] = 0
-        try:
-            return method(self, *args)
-        finally:
-            if frames:
-                self.stop[0] = 0
-
-    def after_reply(self) -> None:
-        """Tidy up after a reply is sent (:meth:`~.reference_stream.ReferenceStream.free_forgotten`)."""
-        self.stream.free_forgotten()
-
-    def check_targets(self, targets: Task) -> None:
-        self.stream.check_targets(targets)
-
-    def reach(self, radius: float, heights: tuple[float, ...]) -> tuple[float, float]:
-        """The crane's reach at E's heights ``heights`` [m above its static height] from ``radius``
-        (:func:`~.targets.reach`)."""
-        stream = self.stream
-        return reach(stream.scenario, radius, tuple(stream.scenario.z_static + z for z in heights),
-                     stream.singular_value_margin)
-
-    def set_blend_time(self, seconds: float) -> None:
-        self.stream.set_blend_time(seconds)
-
-    def pause(self, tau: float) -> None:
-        self.stream.pause(tau)
-
-    def resume(self, tau: float) -> None:
-        self.stream.resume(tau)
-
-    def set_speed_scaling(self, tau: float, rate: float) -> None:
-        self.stream.set_speed_scaling(tau, rate)
-
-    def retarget(self, tau: float, targets: Task, blend_time: float) -> float:
-        """Re-target at tau to targets already checked (:meth:`check_targets`) over ``blend_time`` [s]; the motion
-        time [s] the blend begins at."""
-        return self.stream.retarget(tau, targets, checked=True, blend_time=blend_time)
-
-    def restart(self, tau: float) -> Return:
-        """Back to the static-equilibrium start at tau, the shortest way on whole-turn coordinates
-        (:meth:`~.reference_stream.ReferenceStream.restart`)."""
-        stream = self.stream
-        stream.compute(tau)
-        before = stream.sample(tau).q
-        stream.restart(tau, near=before)
-        return Return(before, stream.sample(tau).q)
-
-
-STREAM_COMMANDS: dict[str, Callable[..., Any]] = {
-    "pause": StreamSolver.pause, "resume": StreamSolver.resume, "speed_scaling": StreamSolver.set_speed_scaling,
-    "retarget": StreamSolver.retarget, "restart": StreamSolver.restart}
-"""The commands a server sends at a stream time (:meth:`StreamSolver.command`), by the name it records them under."""
 
 
 class SolverClient:
@@ -265,10 +92,6 @@ class SolverClient:
     def check_targets(self, targets: Task) -> None:
         """:meth:`StreamSolver.check_targets`."""
         self._call(StreamSolver.check_targets, targets)
-
-    def set_blend_time(self, seconds: float) -> None:
-        """:meth:`StreamSolver.set_blend_time`."""
-        self._call(StreamSolver.set_blend_time, seconds)
 
     def reach(self, radius: float, heights: tuple[float, ...]) -> tuple[float, float]:
         """:meth:`StreamSolver.reach`."""
@@ -312,61 +135,6 @@ class LocalSolver(SolverClient):
         pass
 
 
-def shared_memory(fd: int) -> tuple[np.ndarray, np.ndarray]:
-    """The stop flag (:func:`~crane_reference.motion.integration.stop_flag`) and the beat counter over the
-    :data:`SHARED_BYTES` of the file ``fd``, mapped shared: what one process writes there, another that maps the
-    same file reads."""
-    memory = mmap.mmap(fd, SHARED_BYTES)
-    return np.frombuffer(memory, dtype=np.uint8, count=1), np.frombuffer(memory, dtype=np.uint64, count=1, offset=8)
-
-
-def beat(counter: np.ndarray) -> None:
-    """The solver process's heartbeat: count every :data:`HEARTBEAT_PERIOD` for as long as the process lives."""
-    while True:
-        counter[0] += 1
-        time.sleep(HEARTBEAT_PERIOD)
-
-
-def _serve(requests: Connection, replies: Connection, stop: np.ndarray) -> None:
-    """The solver process: read the :class:`StreamSpec`, build the solver with the ``stop`` flag shared with
-    the caller, then answer (method, args) requests (:meth:`StreamSolver.call`) until the pipe closes or None
-    comes.  Replies are (ok, result or exception, status)."""
-    try:
-        spec = requests.recv()
-        solver = StreamSolver(spec, stop)
-    except (EOFError, OSError):
-        return
-    except Exception as error:  # reported to the caller, which raises it
-        replies.send((False, _portable(error), None))
-        return
-    replies.send((True, solver.info(), solver.status()))
-    gc.freeze()  # the start-up's objects out of the collector's full passes (each would stall the replies)
-    while True:
-        try:
-            request = requests.recv()
-        except (EOFError, OSError):
-            return
-        if request is None:
-            return
-        method, args = request
-        try:
-            reply = (True, solver.call(method, *args))
-        except Exception as error:  # reported to the caller, which raises it
-            reply = (False, _portable(error))
-        replies.send((*reply, solver.status()))
-        del reply
-        solver.after_reply()
-
-
-def _portable(error: Exception) -> Exception:
-    """``error`` if it pickles, else a RuntimeError with its type, message and traceback."""
-    try:
-        pickle.loads(pickle.dumps(error))
-        return error
-    except Exception:  # any pickling failure
-        return RuntimeError(f"{type(error).__name__}: {error}\n{traceback.format_exc()}")
-
-
 class SolverProcess(SolverClient):
     """A :class:`StreamSolver` in a child process (see the module)."""
 
@@ -382,7 +150,8 @@ class SolverProcess(SolverClient):
             request_read, request_write = os.pipe()
             reply_read, reply_write = os.pipe()
             self._process = subprocess.Popen(
-                [sys.executable, "-m", __name__, str(request_read), str(reply_write), str(shared.fileno())],
+                [sys.executable, "-m", stream_solver.__name__, str(request_read), str(reply_write),
+                 str(shared.fileno())],
                 pass_fds=(request_read, reply_write, shared.fileno()), env={**os.environ, "PYTHONPATH": path},
                 start_new_session=True)
         for fd in (request_read, reply_write):
@@ -483,16 +252,3 @@ class SolverProcess(SolverClient):
             self._process.kill()
             self._process.wait()
         self._replies.close()
-
-
-if __name__ == "__main__":
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the caller decides when the solver ends (see the module)
-    os.nice(SOLVER_NICENESS)
-    from crane_reference.base.threads import name_this_thread
-    from crane_reference.stream import solver  # the classes under their importable names (pickled replies)
-
-    name_this_thread("ref_solver")
-    stop_flag, beats = solver.shared_memory(int(sys.argv[3]))
-    threading.Thread(target=solver.beat, args=(beats,), name="ref_heartbeat", daemon=True).start()
-
-    solver._serve(Connection(int(sys.argv[1]), writable=False), Connection(int(sys.argv[2]), readable=False), stop_flag)
