@@ -17,10 +17,10 @@ from .structures import (
     SINGULAR_VALUE,
     ChainData,
     Coefficients,
+    EvaluatedStep,
     Evaluation,
     Partition,
     Run,
-    Step,
     StepRows,
     StepSettings,
     StepStart,
@@ -73,8 +73,8 @@ def integration_run(start: StepStart, times, k: Coefficients, drives, partition:
         _evaluated_row(rows, i, last)
     else:  # the evaluation at the failed step's start
         last = evaluate(step.q, step.qd, _at_step(k, completed), drives[completed], partition, chain)
-    return Run(completed, step.status, rows, Step(step.q, step.qd, last, step.earlier, step.correction, step.status,
-                                                  step.iterations))
+    return Run(completed, step.status, rows, EvaluatedStep(step.q, step.qd, last, step.earlier, step.correction,
+                                                           step.status, step.iterations))
 
 
 @njit(cache=True, nogil=True)

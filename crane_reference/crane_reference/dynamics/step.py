@@ -18,15 +18,15 @@ from .structures import (
     CONVERGED,
     NON_FINITE,
     NOT_CONVERGED,
-    Advance,
     ChainData,
     Coefficients,
-    Iterate,
     ModalCorrection,
     Partition,
     Projection,
+    StepEnd,
     StepSettings,
     StepStart,
+    TrialState,
 )
 
 GUESSED, PROJECTED, PROJECTED_EXACT = 0, 1, 2
@@ -41,7 +41,7 @@ def _state_at(a1, x0, v0, a0, q_guess, qd_size, h, k: Coefficients, partition: P
     """The trapezoidal state for the accelerations a1 of the integrated coordinates,
     x1 = x0 + h v0 + h^2/4 (a0 + a1), v1 = v0 + h/2 (a0 + a1): q = ``q_guess`` with x1 and q_hd as ``dependent``
     says (:data:`GUESSED`, :data:`PROJECTED`, :data:`PROJECTED_EXACT`), qd with qd_dc from the velocity
-    constraints (:class:`Iterate`)."""
+    constraints (:class:`TrialState`)."""
     integrated = partition.integrated
     q1 = q_guess.copy()
     qd1 = np.zeros(qd_size)
@@ -58,7 +58,7 @@ def _state_at(a1, x0, v0, a0, q_guess, qd_size, h, k: Coefficients, partition: P
     solved = at.solved
     if solved:
         qd1, solved = dependent_velocities(qd1, at.ee_position, at.ee_jacobian, k, partition.dependent)
-    return Iterate(at.q, qd1, at.T, at.S, at.ee_position, at.ee_jacobian, solved)
+    return TrialState(at.q, qd1, at.T, at.S, at.ee_position, at.ee_jacobian, solved)
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -91,7 +91,7 @@ def newton_residual(q, qd, a1, T, S, Hw, p, C, k: Coefficients, drive, partition
 
 
 @njit(cache=True, nogil=True, inline='always')
-def _end_accelerations(end: Iterate, a1, k: Coefficients, partition: Partition, chain: ChainData):
+def _end_accelerations(end: TrialState, a1, k: Coefficients, partition: Partition, chain: ChainData):
     """qdd = B a1_ic + e at the step's end state (the acceleration constraints of (7) there: E's velocity
     terms, A, c and B; no mass matrix), B and sigma_min(K_dc)."""
     d = point_bias(velocity_terms(end.qd, end.S), chain.ee_joint, end.ee_position)
@@ -108,21 +108,21 @@ def _end_accelerations(end: Iterate, a1, k: Coefficients, partition: Partition, 
 
 @njit(cache=True, nogil=True)
 def _failed(q0, qd0, qdd0, B0, earlier, correction: ModalCorrection, status, iterations):
-    """The :class:`Advance` of a step that failed with ``status``: its start, unsolved."""
+    """The :class:`StepEnd` of a step that failed with ``status``: its start, unsolved."""
     nan = np.full(3, np.nan)
-    return Advance(q0, qd0, qdd0, B0, earlier, nan, np.full((3, 3), np.nan), nan, np.nan, correction, status,
+    return StepEnd(q0, qd0, qdd0, B0, earlier, nan, np.full((3, 3), np.nan), nan, np.nan, correction, status,
                    iterations)
 
 
 @njit(cache=True, nogil=True)
-def _unsolved(it: Iterate, a1):
+def _unsolved(it: TrialState, a1):
     """Why the constraints could not be met at the iterate ``it`` with accelerations a1: NON_FINITE when it
     overflowed, else CONSTRAINTS_UNSOLVABLE."""
     return CONSTRAINTS_UNSOLVABLE if np.isfinite(it.q.sum() + it.qd.sum() + a1.sum()) else NON_FINITE
 
 
 @njit(cache=True, nogil=True, inline='always')
-def _step_residual_at(it: Iterate, a1, correction: ModalCorrection, k: Coefficients, drive, partition: Partition,
+def _step_residual_at(it: TrialState, a1, correction: ModalCorrection, k: Coefficients, drive, partition: Partition,
                       chain: ChainData):
     """The residual of the step's equation, P^T (M qdd + h - Q) - Delta M_r a1_ic + D_u v_ic, at an iterate for
     the accelerations a1 (:func:`newton_residual` plus the modal terms); also qdd, B and the world
@@ -200,7 +200,7 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
     (:func:`iteration_factor`); q_hd predicted to second order in the change of x at the later iterates,
     qd_dc from the velocity-level constraints at every iterate.  At least ``settings.evaluations``
     evaluations, then until the last correction is below the tolerance; the step ends at the state of the
-    corrected accelerations, on the position constraints, with qdd = B a_ic + e there (:class:`Advance`; no
+    corrected accelerations, on the position constraints, with qdd = B a_ic + e there (:class:`StepEnd`; no
     M).
 
     The modal correction is computed again from M at q0 and B0 (:func:`modal_correction`) at the step nearest
@@ -263,5 +263,5 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
     qdd, B, singular_value = _end_accelerations(end, a1, k, partition, chain)
     later = np.empty_like(earlier)
     later[0], later[1] = a0, earlier[0]
-    return Advance(end.q, end.qd, qdd, B, later, end.ee_position, end.T[chain.ee_joint, :3, :3].copy(),
+    return StepEnd(end.q, end.qd, qdd, B, later, end.ee_position, end.T[chain.ee_joint, :3, :3].copy(),
                    matvec(end.ee_jacobian, end.qd), singular_value, correction, status, iteration + 1)

@@ -3,7 +3,7 @@
 In the spirit of Pinocchio's Model / Data: :class:`ChainData` is the immutable description of the
 chain (built once per model by :class:`~crane_reference.dynamics.chain_dynamics.CraneDynamics`),
 :class:`Partition` and :class:`StepSettings` fix the problem and the method, :class:`ModalCorrection` is the
-method's own state, and the kernels return :class:`Evaluation`, :class:`Step` and :class:`StepRows` by name.
+method's own state, and the kernels return :class:`Evaluation`, :class:`EvaluatedStep` and :class:`StepRows` by name.
 Every field is documented here once.
 """
 
@@ -121,7 +121,7 @@ class Projection(NamedTuple):
     solved: bool
 
 
-class Iterate(NamedTuple):
+class TrialState(NamedTuple):
     """A state the integrator tries: q (on the position constraints, or with q_hd as predicted), qd with
     qd_dc from the velocity constraints, the frames T and twists S, E's position and Jacobian, and whether
     the constraints were met."""
@@ -202,7 +202,7 @@ POWERS = np.array([ACCOUNTS.index(name) for name in ("drive_power", "constraint_
 
 
 
-class Step(NamedTuple):
+class EvaluatedStep(NamedTuple):
     """One integration step: q, qd at its end, the evaluation there, the integrated coordinates' accelerations
     at its start and the one before (the next step's ``earlier``), the modal correction it used, ``status``
     (:data:`STATUS_MESSAGES`) and the Newton iterations."""
@@ -242,7 +242,7 @@ class StepStart(NamedTuple):
     correction: ModalCorrection
 
 
-class Advance(NamedTuple):
+class StepEnd(NamedTuple):
     """One integration step's end: q, qd and the integrator's qdd, the velocity map B, the integrated
     coordinates' accelerations at the step's start and the one before (the next step's ``earlier``), E's
     position, the rotation of its frame and its velocity, sigma_min(K_dc), the modal correction used, ``status``
@@ -285,12 +285,12 @@ class StepRows(NamedTuple):
 
 class Run(NamedTuple):
     """A compiled run of steps: how many completed, the status of the last one (0 when all
-    converged), the per-step rows and the last :class:`Step`."""
+    converged), the per-step rows and the last :class:`EvaluatedStep`."""
 
     completed: int
     status: int
     rows: StepRows
-    last: Step
+    last: EvaluatedStep
 
 
 class PlantModel(NamedTuple):

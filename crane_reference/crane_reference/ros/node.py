@@ -62,8 +62,9 @@ class CraneReferenceNode(LifecycleNode):
         self._server: ReferenceServer | None = None
         self._publisher: SamplePublisher | None = None
         self._stop = threading.Event()  # the node is being destroyed
-        self._starting = "unconfigured"  # the diagnostics' message while not publishing
-        self._diagnostics = DiagnosticsPublisher(self, self._types, self._doing, lambda: self._server, self._stop)
+        self._activity = "unconfigured"  # the diagnostics' message while not publishing
+        self._diagnostics = DiagnosticsPublisher(self, self._types, self._current_activity, lambda: self._server,
+                                                 self._stop)
         try:
             self._params, self._pending = declare_all(self)
         except Exception as error:
@@ -91,16 +92,16 @@ class CraneReferenceNode(LifecycleNode):
 
     def _fail_start(self, error: Exception) -> None:
         """Report in /diagnostics (ERROR) and stop the diagnostics thread: the node cannot start."""
-        self._starting = f"{CANNOT} start: {error}"
+        self._activity = f"{CANNOT} start: {error}"
         with suppress(Exception):  # the context may be shutting down already
             self._diagnostics.publish()
         self._stop.set()
 
-    def _doing(self) -> str:
+    def _current_activity(self) -> str:
         """What the node is doing, for the diagnostics while it does not publish."""
         if self._publisher is not None and self._publisher.waiting_for_clock:
             return "activating: waiting for /clock (use_sim_time is true and ROS time is 0)"
-        return self._starting
+        return self._activity
 
     def _clock_jumped(self, jump: TimeJump) -> None:
         """rclpy's jump callback: a jump back goes to the server, which re-anchors beyond its catch-up limit."""
@@ -127,7 +128,7 @@ class CraneReferenceNode(LifecycleNode):
                 self._pending = ()
             v = self._params
             where = "in its own process" if v.solver_process else "in this process"
-            self._starting = (f"configuring: starting the solver {where}; it makes its kernels ready (compiled on a "
+            self._activity = (f"configuring: starting the solver {where}; it makes its kernels ready (compiled on a "
                               "first start, else loaded) and computes the start")
             self.get_logger().info(f"starting the solver {where} (with an empty kernel cache it compiles for a minute "
                                    "or two; `crane-reference compile` after installing does it ahead)")
@@ -139,12 +140,12 @@ class CraneReferenceNode(LifecycleNode):
         except (StartupError, ConfigError, ParameterError) as error:
             if solver is not None:  # the preview's joints are not the model's
                 solver.close()
-            self._starting = (f"{CANNOT} configure: {error}; unconfigured: set the parameter it names (or mend the "
+            self._activity = (f"{CANNOT} configure: {error}; unconfigured: set the parameter it names (or mend the "
                               "crane file), then configure")
-            self.get_logger().error(self._starting)
+            self.get_logger().error(self._activity)
             return TransitionCallbackReturn.FAILURE
         except SolverStoppedError as error:  # shutting down while the solver started
-            self._starting = f"{CANNOT} configure: {error}"
+            self._activity = f"{CANNOT} configure: {error}"
             return TransitionCallbackReturn.FAILURE
         self._server = server
         self.get_logger().info(f"solver {server.info.kernels}")
@@ -153,7 +154,7 @@ class CraneReferenceNode(LifecycleNode):
             self.set_descriptor(name, reach_descriptor(SPECS[name], low, high))
         self._publisher = SamplePublisher(self, self._types, server, messages_settings, encode)
         self._resume_on_activate = False
-        self._starting = "inactive: configured, computing ahead; activate to publish"
+        self._activity = "inactive: configured, computing ahead; activate to publish"
         self.get_logger().info(f"configured: the {v.model} crane ({len(server.info.joint_names)} joints, "
                                f"config {v.config_file or 'packaged default'})")
         return TransitionCallbackReturn.SUCCESS
@@ -161,7 +162,7 @@ class CraneReferenceNode(LifecycleNode):
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Publish from the next sample on (stamps continue from the clock's present time); a reference
         stopped by a deactivation resumes along a speed ramp."""
-        self._starting = "activating: waiting for the first second of motion"
+        self._activity = "activating: waiting for the first second of motion"
         if self._server.stream.state == PAUSED and self._resume_on_activate and self._server.computing:
             self._server.command("resume", accepted_ns=self._now())
         self._resume_on_activate = False
@@ -178,7 +179,7 @@ class CraneReferenceNode(LifecycleNode):
         self._resume_on_activate = stream.state == RUNNING and stream.target_speed > 0.0
         at_rest = self._server.come_to_rest(self._now(), self._stop)
         self._stop_publishing()
-        self._starting = "inactive: publishing stopped; activate to publish again"
+        self._activity = "inactive: publishing stopped; activate to publish again"
         if at_rest:
             self.get_logger().info("deactivated: the reference is at rest and no longer published")
         else:
@@ -190,7 +191,7 @@ class CraneReferenceNode(LifecycleNode):
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         """End the solver and release the server and the publishers."""
         self._release()
-        self._starting = "unconfigured"
+        self._activity = "unconfigured"
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -202,7 +203,7 @@ class CraneReferenceNode(LifecycleNode):
     def _finish(self, doing: str) -> TransitionCallbackReturn:
         self._stop_publishing()
         self._release()
-        self._starting = doing
+        self._activity = doing
         return TransitionCallbackReturn.SUCCESS
 
     def _stop_publishing(self) -> None:

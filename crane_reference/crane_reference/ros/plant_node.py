@@ -83,7 +83,7 @@ class CranePlantNode(LifecycleNode):
         self._thread: threading.Thread | None = None
         self._outputs: dict[str, object] = {}
         self._made: dict[str, object] = {}  # the serialized messages' writers
-        self._doing = "unconfigured"
+        self._activity = "unconfigured"
         self._failure = ""
         self._missed = 0  # real-time periods missed (control/pacing.py) since configured
         self._missed_reported = 0
@@ -96,7 +96,7 @@ class CranePlantNode(LifecycleNode):
         self.create_timer(HEARTBEAT, self._heartbeat, clock=self._steady)
         if self._params.autostart:
             if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
-                raise StartupError(self._doing.removeprefix(f"{CANNOT} configure: "))
+                raise StartupError(self._activity.removeprefix(f"{CANNOT} configure: "))
             self.trigger_activate()
 
     # -- lifecycle --------------------------------------------------------------------------------------
@@ -107,8 +107,8 @@ class CranePlantNode(LifecycleNode):
         try:
             self._server = PlantServer(load_config(v.config_file or None), v.settings())
         except (ConfigError, ValueError, *SOLVER_FAILURES) as error:  # a start that cannot run: say why
-            self._doing = f"{CANNOT} configure: {error}"
-            self.get_logger().error(self._doing)
+            self._activity = f"{CANNOT} configure: {error}"
+            self.get_logger().error(self._activity)
             return TransitionCallbackReturn.FAILURE
         types = self._types
         depth = messages.PUBLISHER_DEPTH
@@ -122,7 +122,7 @@ class CranePlantNode(LifecycleNode):
         self._made = {}
         self._failure = ""
         self._missed = self._missed_reported = 0
-        self._doing = "inactive: configured; activate to run"
+        self._activity = "inactive: configured; activate to run"
         self.get_logger().info(f"configured: the {v.model} crane as a plant, {v.control_rate} Hz {v.clock_mode}, "
                                f"commands for {', '.join(v.joints)}")
         return TransitionCallbackReturn.SUCCESS
@@ -134,7 +134,7 @@ class CranePlantNode(LifecycleNode):
             self.get_logger().error(f"not activated: the plant stopped ({self._failure}); cleanup and configure")
             return TransitionCallbackReturn.FAILURE
         result = super().on_activate(state)
-        self._doing = f"active ({self._params.clock_mode})"
+        self._activity = f"active ({self._params.clock_mode})"
         self._publish(self._server.state())
         if self._params.clock_mode == "realtime":
             self._running.set()
@@ -143,17 +143,17 @@ class CranePlantNode(LifecycleNode):
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._stop_periods()
-        self._doing = "inactive: the plant's time stands still; activate to run"
+        self._activity = "inactive: the plant's time stands still; activate to run"
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._release()
-        self._doing = "unconfigured"
+        self._activity = "unconfigured"
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._release()
-        self._doing = "finalized"
+        self._activity = "finalized"
         return TransitionCallbackReturn.SUCCESS
 
     def _stop_periods(self) -> None:
@@ -204,7 +204,7 @@ class CranePlantNode(LifecycleNode):
         """~/commands: accepted or refused (counted, WARN); in lock-step a period follows either way (under the
         last accepted command), so that the loop never stalls."""
         if not self._active():
-            self.get_logger().warn(f"command ignored: the plant is {self._doing}", throttle_duration_sec=1.0)
+            self.get_logger().warn(f"command ignored: the plant is {self._activity}", throttle_duration_sec=1.0)
             return
         lockstep = self._params.clock_mode == "lockstep"
         self._heard = True
@@ -272,11 +272,11 @@ class CranePlantNode(LifecycleNode):
 
     def _publish_diagnostics(self) -> None:
         if self._server is None:
-            health = startup_health(self._doing)
+            health = startup_health(self._activity)
             level, message, values = health.level, health.message, {}
         else:
             missed = self._missed
-            health = plant_health(self._server, self._doing, self._failure, missed, missed - self._missed_reported)
+            health = plant_health(self._server, self._activity, self._failure, missed, missed - self._missed_reported)
             self._missed_reported = missed
             level, message, values = health.level, health.message, health.values
         self._diagnostics.publish(messages.diagnostics(self._types, self.get_clock().now().nanoseconds,

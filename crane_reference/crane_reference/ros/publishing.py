@@ -255,12 +255,12 @@ class SamplePublisher:
 
 class DiagnosticsPublisher:
     """/diagnostics every DIAGNOSTICS_PERIOD of wall time from the node's creation on, in every state: before
-    publishing, what ``doing()`` says the node does (or why it cannot start); then the server's status
+    publishing, what ``activity()`` says the node does (or why it cannot start); then the server's status
     (:mod:`crane_reference.stream.health`).  ``server()`` is the node's server (None unconfigured)."""
 
-    def __init__(self, node: LifecycleNode, types: messages.MessageTypes, doing: Callable[[], str],
+    def __init__(self, node: LifecycleNode, types: messages.MessageTypes, activity: Callable[[], str],
                  server: Callable[[], ReferenceServer | None], stopped: threading.Event):
-        self.node, self.types, self._doing, self._server, self._stopped = node, types, doing, server, stopped
+        self.node, self.types, self._activity, self._server, self._stopped = node, types, activity, server, stopped
         self._publisher = node.create_publisher(DiagnosticArray, messages.DIAGNOSTICS_TOPIC, messages.PUBLISHER_DEPTH)
         self._held_reported = 0
         self.achieved_rate = 0.0
@@ -294,7 +294,7 @@ class DiagnosticsPublisher:
         now = node.get_clock().now().nanoseconds
         name, hardware_id = f"{node.get_name()}: reference", node.get_fully_qualified_name()
         if server is None:
-            health = startup_health(self._doing())
+            health = startup_health(self._activity())
             self._publisher.publish(messages.diagnostics(self.types, now, name, hardware_id, health.level,
                                                          health.message, {}))
             return
@@ -302,7 +302,7 @@ class DiagnosticsPublisher:
         stream, counters = status.stream, status.counters
         health = serving_health(status, counters["held_late"] - self._held_reported)
         if not server.publishing and health.level != Level.ERROR:
-            health = startup_health(self._doing())
+            health = startup_health(self._activity())
         self._held_reported = counters["held_late"]
         self.achieved_rate = status.achieved_rate
         values = messages.diagnostic_values(
