@@ -49,7 +49,7 @@ def test_typed_values_have_a_field_per_row(table) -> None:
     fields = dataclasses.fields(VALUES[table.values_class])
     assert [f.name for f in fields] == [spec.name.replace(".<joint>", "").replace(".", "_") for spec in table.table]
     for f, spec in zip(fields, table.table, strict=True):
-        scalar = python_types[spec.type.name]
+        scalar = python_types[spec.ros_type.name]
         assert f.type == (f"dict[str, {scalar}]" if "<joint>" in spec.name else scalar), spec.name
 
 
@@ -68,7 +68,7 @@ def test_docs_row_per_parameter(table) -> None:
     assert [row[0] for row in rows] == [f"`{spec.name}`" for spec in table.table]
     for row, spec in zip(rows, table.table, strict=True):
         spec: ParameterSpec
-        assert row[1].replace(" ", "_").upper() == spec.type.name, spec.name
+        assert row[1].replace(" ", "_").upper() == spec.ros_type.name, spec.name
         assert row[3] == spec.unit.replace("|", "\\|") and row[5] == ("yes" if spec.read_only else "no"), spec.name
         if spec.bounds is not None:
             low, high = (float(x) for x in row[4].strip("[]").split(","))

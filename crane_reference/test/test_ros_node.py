@@ -452,7 +452,7 @@ def test_parameters_are_declared_from_one_table(ros: Harness) -> None:
     node = ros.start()
     for spec in PARAMETERS:
         descriptor = node.describe_parameter(spec.name)
-        assert descriptor.type == spec.type.value and descriptor.read_only == spec.read_only
+        assert descriptor.type == spec.ros_type.value and descriptor.read_only == spec.read_only
         assert descriptor.description
         assert bool(descriptor.floating_point_range or descriptor.integer_range) == (spec.bounds is not None)
 
@@ -464,7 +464,7 @@ def test_typed_parameters_have_one_field_per_declared_parameter() -> None:
                     Parameter.Type.STRING: "str", Parameter.Type.STRING_ARRAY: "tuple[str, ...]"}
     fields = dataclasses.fields(NodeParameters)
     assert [f.name for f in fields] == [field_name(spec.name) for spec in PARAMETERS]
-    assert [f.type for f in fields] == [python_types[spec.type] for spec in PARAMETERS]
+    assert [f.type for f in fields] == [python_types[spec.ros_type] for spec in PARAMETERS]
     defaults = NodeParameters.from_values({spec.name: spec.default for spec in PARAMETERS})
     changed = defaults.changed([Parameter("ellipse.a", Parameter.Type.INTEGER, 3),
                                 Parameter("preview.joints", Parameter.Type.STRING_ARRAY, ["knuckle"])])

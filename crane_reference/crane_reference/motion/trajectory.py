@@ -89,28 +89,11 @@ def generalized_effort(constraint_forces: np.ndarray, drive_torque: float | np.n
     return effort
 
 
-class MotionRows(NamedTuple):
+class MotionRows(NamedTuple("MotionRowFields", [(f.name, np.ndarray) for f in fields(MotionSample)])):
     """Samples of the motion stacked, a row a step (first axis: sample): the fields of :class:`MotionSample`, each
     an array, as the integrator's runs give them (:meth:`~.simulation.MotionStepper.advance_until`)."""
 
-    t: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    qdd: np.ndarray
-    reactions: np.ndarray
-    constraint_forces: np.ndarray
-    drive_torque: np.ndarray
-    ee_position: np.ndarray
-    ee_rotation: np.ndarray
-    ee_velocity: np.ndarray
-    residual: np.ndarray
-    residual_distance: np.ndarray
-    kdc_min_singular_value: np.ndarray
-    kinetic_energy: np.ndarray
-    potential_energy: np.ndarray
-    work_drive: np.ndarray
-    work_constraints: np.ndarray
-    work_damping: np.ndarray
+    __slots__ = ()
 
     @classmethod
     def stacked(cls, samples: list[MotionSample]) -> MotionRows:

@@ -20,7 +20,7 @@ from typing import NamedTuple
 from ..interface.bringup import CONTROLLER_NODE, PLANT_NODE
 from ..interface.messages import NODE_NAME as REFERENCE_NODE
 from .controller_parameters import CONTROLLER_PARAMETERS
-from .parameter_spec import BOOL, DOUBLE, INTEGER, STRING, STRING_ARRAY, ParameterSpec, Value
+from .parameter_spec import ParameterSpec, Value
 from .parameters import PARAMETERS
 from .plant_parameters import PLANT_PARAMETERS
 
@@ -50,8 +50,8 @@ TABLES = (
               "ControllerParameterValues", "controller.yaml"),
 )
 COMMAND = "python -m crane_reference.ros.parameter_generation"
-_PYTHON_TYPES = {BOOL: "bool", INTEGER: "int", DOUBLE: "float", STRING: "str", STRING_ARRAY: "tuple[str, ...]"}
-_TYPE_WORDS = {BOOL: "bool", INTEGER: "integer", DOUBLE: "double", STRING: "string", STRING_ARRAY: "string array"}
+_PYTHON_TYPES = {"bool": "bool", "integer": "int", "double": "float", "string": "str",
+                 "string_array": "tuple[str, ...]"}
 
 
 def python_type(spec: ParameterSpec) -> str:
@@ -116,9 +116,9 @@ def parameters_file(table: NodeTable) -> str:
              "/**:", "  ros__parameters:"]
     for spec in table.table:
         lines += ["    # " + line for line in textwrap.wrap(explained(spec), WIDTH - 6, break_on_hyphens=False)]
-        if spec.per_joint:
+        if spec.from_crane:
             lines.append(f"    # {spec.name}: <one per joint; default from the crane>")
-        elif spec.from_config is not None:
+        elif spec.from_config is not None or spec.per_joint:
             lines.append(f"    # {spec.name}: {yaml_value(spec.default)}")
         else:
             lines.append(f"    {spec.name}: {yaml_value(spec.default)}")
@@ -134,15 +134,15 @@ def _allowed(spec: ParameterSpec) -> str:
         return ", ".join(f"`{choice}`" for choice in spec.choices)
     if spec.bounds is not None:
         return f"[{spec.bounds[0]:g}, {spec.bounds[1]:g}]"
-    if spec.type is STRING_ARRAY:
+    if spec.type == "string_array":
         return "distinct, non-empty"
-    if spec.type is STRING:
+    if spec.type == "string":
         return "any" if spec.empty_allowed else "non-empty"
     return ""
 
 
 def _default(spec: ParameterSpec) -> str:
-    if spec.per_joint:
+    if spec.from_crane:
         return "from the crane"
     value = f"`{yaml_value(spec.default)}`"
     return f"{value} (the crane file's)" if spec.from_config is not None else value
@@ -161,7 +161,7 @@ def parameters_doc() -> str:
                   f"Table: `{table.source}`; parameters file: `config/{table.config}`.", "",
                   "| Parameter | Type | Default | Unit | Allowed | Read-only | Description |",
                   "|---|---|---|---|---|---|---|"]
-        lines += [f"| `{spec.name}` | {_TYPE_WORDS[spec.type]} | {_cell(_default(spec))} | {_cell(spec.unit)} | "
+        lines += [f"| `{spec.name}` | {spec.type.replace('_', ' ')} | {_cell(_default(spec))} | {_cell(spec.unit)} | "
                   f"{_cell(_allowed(spec))} | {'yes' if spec.read_only else 'no'} | {_cell(spec.description)} |"
                   for spec in table.table]
     return "\n".join(lines) + "\n"

@@ -99,7 +99,7 @@ def refusal(parameters: list[Parameter], params: NodeParameters, server: Referen
 def apply(server: ReferenceServer, params: NodeParameters, names: list[str], accepted_ns: int) -> list[str]:
     """Send ``server`` the changes of the parameters ``names`` (their values in ``params``) accepted at
     ``accepted_ns``: one re-target for all target parameters, none if the targets are those in force.  Returns
-    what was commanded, for the log.  Raises :class:`~crane_reference.stream.server.CommandRefusedError` if the
+    what was commanded, for the log.  Raises :class:`~crane_reference.stream.served.CommandRefusedError` if the
     solver stopped since the on-set check."""
     done = []
     if "command_lead" in names:

@@ -34,10 +34,11 @@ JOINT = "<joint>"
 """The place of the joint's name in a per-joint row's name (``drive_damping.<joint>``)."""
 
 Value = bool | int | float | str | list[str]
-BOOL, INTEGER, DOUBLE, STRING, STRING_ARRAY = (Parameter.Type.BOOL, Parameter.Type.INTEGER, Parameter.Type.DOUBLE,
-                                               Parameter.Type.STRING, Parameter.Type.STRING_ARRAY)
-_TYPE_NAMES = {BOOL: "a boolean", INTEGER: "an integer", DOUBLE: "a number", STRING: "a string",
-               STRING_ARRAY: "a list of distinct, non-empty strings"}
+ROS_TYPES = {"bool": Parameter.Type.BOOL, "integer": Parameter.Type.INTEGER, "double": Parameter.Type.DOUBLE,
+             "string": Parameter.Type.STRING, "string_array": Parameter.Type.STRING_ARRAY}
+"""A row's ``type`` (generate_parameter_library's names) and the ROS parameter type it declares."""
+_TYPE_NAMES = {"bool": "a boolean", "integer": "an integer", "double": "a number", "string": "a string",
+               "string_array": "a list of distinct, non-empty strings"}
 
 
 class ParameterError(ValueError):
@@ -51,7 +52,7 @@ class ParameterSpec:
     ``from_config`` gives the default from the crane description instead of ``default``."""
 
     name: str
-    type: Parameter.Type
+    type: str
     default: Value
     description: str
     unit: str = ""
@@ -60,6 +61,12 @@ class ParameterSpec:
     empty_allowed: bool = False
     read_only: bool = False
     from_config: Callable[[CraneDescription], Value] | None = None
+    from_crane: bool = False
+    """A per-joint row whose defaults the node computes from the crane (its model) when it starts."""
+
+    @property
+    def ros_type(self) -> Parameter.Type:
+        return ROS_TYPES[self.type]
 
     @property
     def per_joint(self) -> bool:
@@ -73,9 +80,13 @@ class ParameterSpec:
         per-joint row's without its joint (a dict by joint name)."""
         return field_name(self.name.replace(f".{JOINT}", ""))
 
-    def for_joint(self, joint: str, default: float) -> ParameterSpec:
-        """The parameter of a per-joint row for ``joint``, with the crane's ``default``."""
-        return replace(self, name=self.name.replace(JOINT, joint), default=default,
+    def name_for(self, joint: str) -> str:
+        """The name of a per-joint row's parameter for ``joint``."""
+        return self.name.replace(JOINT, joint)
+
+    def for_joint(self, joint: str, default: Value | None = None) -> ParameterSpec:
+        """The parameter of a per-joint row for ``joint``, with the crane's ``default`` (None: the row's)."""
+        return replace(self, name=self.name_for(joint), default=self.default if default is None else default,
                        description=self.description.replace(JOINT, joint))
 
     def default_for(self, config: CraneDescription | None) -> Value:
@@ -91,19 +102,19 @@ class ParameterSpec:
             return f"must be one of {', '.join(map(repr, self.choices))}"
         if self.bounds is not None:
             low, high = self.bounds
-            integers = " (integers accepted)" if self.type is DOUBLE else ""
+            integers = " (integers accepted)" if self.type == "double" else ""
             return f"must be {_TYPE_NAMES[self.type]} in [{low:g}, {high:g}]{unit}{integers}"
-        if self.type is STRING and not self.empty_allowed:
+        if self.type == "string" and not self.empty_allowed:
             return "must be a non-empty string"
         return f"must be {_TYPE_NAMES[self.type]}"
 
     def descriptor(self) -> ParameterDescriptor:
         """Statically typed ParameterDescriptor with description, range and read-only flag."""
         descriptor = ParameterDescriptor(
-            name=self.name, type=self.type.value, read_only=self.read_only,
+            name=self.name, type=self.ros_type.value, read_only=self.read_only,
             description=f"{self.description}{f' [{self.unit}]' if self.unit else ''}",
             additional_constraints=self.allowed())
-        if self.bounds is not None and self.type is DOUBLE:
+        if self.bounds is not None and self.type == "double":
             descriptor.floating_point_range = [FloatingPointRange(
                 from_value=float(self.bounds[0]), to_value=float(self.bounds[1]), step=0.0)]
         elif self.bounds is not None:
@@ -113,23 +124,23 @@ class ParameterSpec:
 
     def coerce(self, value: Any) -> Any:
         """An integer for a double parameter as a float; every other value unchanged."""
-        if self.type is DOUBLE and isinstance(value, int) and not isinstance(value, bool):
+        if self.type == "double" and isinstance(value, int) and not isinstance(value, bool):
             return float(value)
         return value
 
     def check(self, value: Any) -> str | None:
         """``None`` if ``value`` (already coerced) is allowed, else the reason, naming the parameter."""
-        if self.type is STRING_ARRAY:
+        if self.type == "string_array":
             strings = isinstance(value, list | tuple) and all(isinstance(v, str) and v for v in value)
             invalid = not strings or not value or len(set(value)) != len(value)
             return f"{self.name} = {value!r}: {self.allowed()}" if invalid else None
-        python_type = {BOOL: bool, INTEGER: int, DOUBLE: float, STRING: str}[self.type]
+        python_type = {"bool": bool, "integer": int, "double": float, "string": str}[self.type]
         wrong_type = not isinstance(value, python_type) or (python_type is int and isinstance(value, bool))
         invalid = (wrong_type
-                   or (self.type is DOUBLE and not math.isfinite(value))
+                   or (self.type == "double" and not math.isfinite(value))
                    or (self.bounds is not None and not self.bounds[0] <= value <= self.bounds[1])
                    or (self.choices and value not in self.choices)
-                   or (self.type is STRING and not self.empty_allowed and not value))
+                   or (self.type == "string" and not self.empty_allowed and not value))
         return f"{self.name} = {value!r}: {self.allowed()}" if invalid else None
 
 
@@ -140,8 +151,8 @@ def field_name(name: str) -> str:
 
 def coerce_parameters(parameters: list[Parameter], specs: dict[str, ParameterSpec]) -> list[Parameter]:
     """Pre-set callback: integer values of the table's double parameters become doubles (all else unchanged)."""
-    return [Parameter(p.name, DOUBLE, float(p.value))
-            if p.name in specs and specs[p.name].type is DOUBLE and p.type_ is INTEGER else p
+    return [Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
+            if p.name in specs and specs[p.name].type == "double" and p.type_ is Parameter.Type.INTEGER else p
             for p in parameters]
 
 
@@ -235,7 +246,7 @@ def typed_fields(table: Iterable[ParameterSpec], values: dict[str, Value],
     fields: dict[str, Any] = {}
     for spec in table:
         if spec.per_joint:
-            fields[spec.field] = {joint: values[spec.name.replace(JOINT, joint)] for joint in joints}
+            fields[spec.field] = {joint: values[spec.name_for(joint)] for joint in joints}
         elif spec.name in values:
             value = values[spec.name]
             fields[spec.field] = tuple(value) if isinstance(value, list | tuple) else value

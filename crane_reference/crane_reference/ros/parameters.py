@@ -26,11 +26,6 @@ from ..model.paper_layout import ACTUATED as PAPER_ACTUATED
 from ..model.parameters import Task, TorqueDrive
 from ..motion.steps import ONLINE_STEP
 from .parameter_spec import (
-    BOOL,
-    DOUBLE,
-    INTEGER,
-    STRING,
-    STRING_ARRAY,
     ParameterSpec,
     declare,
     field_name,
@@ -46,68 +41,68 @@ def _torque_drive(config: CraneDescription) -> TorqueDrive:
 
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
-    ParameterSpec("config_file", STRING, "", "Crane file (docs/description.md; a bare name is looked up in the "
+    ParameterSpec("config_file", "string", "", "Crane file (docs/description.md; a bare name is looked up in the "
                   "package's config/, e.g. loader_crane.yaml); "
                   "'' loads the packaged default", empty_allowed=True, read_only=True),
-    ParameterSpec("model", STRING, "flexible", "Crane model variant: 'flexible' (each flexible link cut into its "
+    ParameterSpec("model", "string", "flexible", "Crane model variant: 'flexible' (each flexible link cut into its "
                   "rigid finite elements) or 'rigid' (one element each)", choices=VARIANTS, read_only=True),
-    ParameterSpec("integrator.step", DOUBLE, ONLINE_STEP, "Step of the integrator", "s",
+    ParameterSpec("integrator.step", "double", ONLINE_STEP, "Step of the integrator", "s",
                   (1e-5, 1e-2), read_only=True),
-    ParameterSpec("publish_rate", INTEGER, 100, "Rate of joint_states and ~/end_effector_pose; sample k is "
+    ParameterSpec("publish_rate", "integer", 100, "Rate of joint_states and ~/end_effector_pose; sample k is "
                   "stamped start + k / publish_rate", "Hz", (1, MAX_PUBLISH_RATE), read_only=True),
-    ParameterSpec("frame_id", STRING, "world", "Frame of ~/end_effector_pose, ~/reference_preview and ~/markers "
+    ParameterSpec("frame_id", "string", "world", "Frame of ~/end_effector_pose, ~/reference_preview and ~/markers "
                   "(the world frame {0} of the crane)"),
-    ParameterSpec("frame_prefix", STRING, "", "Prefix of the frames the node names (frame_prefix + frame_id), as "
+    ParameterSpec("frame_prefix", "string", "", "Prefix of the frames the node names (frame_prefix + frame_id), as "
                   "robot_state_publisher's frame_prefix prefixes the URDF's links: the same prefix on both lets "
                   "several cranes share /tf (e.g. 'crane1/')", empty_allowed=True),
-    ParameterSpec("ellipse.a", DOUBLE, 3.0, "Semi-axis of E's ellipse along world x (constraint (5.1)); "
+    ParameterSpec("ellipse.a", "double", 3.0, "Semi-axis of E's ellipse along world x (constraint (5.1)); "
                   "default: task.ellipse_a of the config file", "m", (0.1, 20.0),
                   from_config=lambda c: c.task.ellipse_a),
-    ParameterSpec("ellipse.b", DOUBLE, 2.0, "Semi-axis of E's ellipse along world y (constraint (5.1)); "
+    ParameterSpec("ellipse.b", "double", 2.0, "Semi-axis of E's ellipse along world y (constraint (5.1)); "
                   "default: task.ellipse_b of the config file", "m", (0.1, 20.0),
                   from_config=lambda c: c.task.ellipse_b),
-    ParameterSpec("z.increment", DOUBLE, 0.2, "Rise of E's height above its static value z_E,s (constraint "
+    ParameterSpec("z.increment", "double", 0.2, "Rise of E's height above its static value z_E,s (constraint "
                   "(5.2)); default: task.z_increment of the config file", "m", (-10.0, 10.0),
                   from_config=lambda c: c.task.z_increment),
-    ParameterSpec("z.rise_time", DOUBLE, 5.0, "Duration t_c of the quintic height rise (5.2); default: "
+    ParameterSpec("z.rise_time", "double", 5.0, "Duration t_c of the quintic height rise (5.2); default: "
                   "task.rise_time of the config file", "s", (0.01, 3600.0),
                   from_config=lambda c: c.task.rise_time),
-    ParameterSpec("drive.torque", DOUBLE, 4000.0, "Column drive torque of the torque profile (from drive.start "
+    ParameterSpec("drive.torque", "double", 4000.0, "Column drive torque of the torque profile (from drive.start "
                   "of the config file for drive.duration); default: the config file's torque drive; unused "
                   "if the config file has a flexible drive", "N m", (-1e6, 1e6), read_only=True,
                   from_config=lambda c: _torque_drive(c).torque),
-    ParameterSpec("drive.duration", DOUBLE, 1.0, "Duration of the column drive torque; default: end - start of "
+    ParameterSpec("drive.duration", "double", 1.0, "Duration of the column drive torque; default: end - start of "
                   "the config file's torque drive; unused if the config file has a flexible drive", "s",
                   (1e-3, 3600.0), read_only=True,
                   from_config=lambda c: _torque_drive(c).end - _torque_drive(c).start),
-    ParameterSpec("blend_time", DOUBLE, 2.0, "Duration of the C2 blend of the constraint parameters after a "
+    ParameterSpec("blend_time", "double", 2.0, "Duration of the C2 blend of the constraint parameters after a "
                   "change of ellipse.* or z.*", "s", (0.01, 600.0)),
-    ParameterSpec("command_lead", DOUBLE, 0.03, "A change of ellipse.*, z.* or speed_scaling and ~/pause "
+    ParameterSpec("command_lead", "double", 0.03, "A change of ellipse.*, z.* or speed_scaling and ~/pause "
                   "take effect at the last sample stamped within this time of their acceptance, at least the "
                   "one after the next to publish (the frames made beyond it are made again); a longer lead "
                   "tolerates a more loaded machine (diagnostics: {command}_margin_s)", "s", (0.001, 1.0)),
-    ParameterSpec("preview.horizon", DOUBLE, 1.0, "Time span of ~/reference_preview", "s", (0.01, 10.0)),
-    ParameterSpec("preview.points", INTEGER, 11, "Points of ~/reference_preview: the first at the sample's "
+    ParameterSpec("preview.horizon", "double", 1.0, "Time span of ~/reference_preview", "s", (0.01, 10.0)),
+    ParameterSpec("preview.points", "integer", 11, "Points of ~/reference_preview: the first at the sample's "
                   "stamp (header.stamp, time_from_start 0), then evenly spaced to the horizon", "", (2, 1000)),
-    ParameterSpec("preview.rate", DOUBLE, 10.0, "Rate of ~/reference_preview (every round(publish_rate / "
+    ParameterSpec("preview.rate", "double", 10.0, "Rate of ~/reference_preview (every round(publish_rate / "
                   "preview.rate)-th sample, at least every sample)", "Hz", (0.1, 1000.0)),
-    ParameterSpec("preview.joints", STRING_ARRAY, list(PAPER_ACTUATED), "Joints of ~/reference_preview (names "
+    ParameterSpec("preview.joints", "string_array", list(PAPER_ACTUATED), "Joints of ~/reference_preview (names "
                   "of the model's coordinates, see `crane-reference urdf`); default the crane's actuated joints",
                   from_config=lambda c: list(c.actuated)),
-    ParameterSpec("preview.effort", BOOL, False, "Fill the efforts of ~/reference_preview with the feedforward "
+    ParameterSpec("preview.effort", "bool", False, "Fill the efforts of ~/reference_preview with the feedforward "
                   "a controller adds at each of its joints: the constraint forces of the motion at its own speed, "
                   "without the drive's torque, which the plant applies itself (~/joint_states' efforts include it)"),
-    ParameterSpec("speed_scaling", DOUBLE, 1.0, "Speed of the reference relative to the programmed motion "
+    ParameterSpec("speed_scaling", "double", 1.0, "Speed of the reference relative to the programmed motion "
                   "(0: at rest); changes are C2 ramps over speed_scaling.ramp_time", "", (0.0, 1.0)),
-    ParameterSpec("speed_scaling.ramp_time", DOUBLE, 1.0, "Duration of a speed-scaling ramp (also of "
+    ParameterSpec("speed_scaling.ramp_time", "double", 1.0, "Duration of a speed-scaling ramp (also of "
                   "~/pause, resume and the stop before ~/restart)", "s", (0.01, 60.0), read_only=True),
-    ParameterSpec("autostart", BOOL, True, "Configure and activate the (lifecycle) node at once; if false, it "
+    ParameterSpec("autostart", "bool", True, "Configure and activate the (lifecycle) node at once; if false, it "
                   "waits unconfigured for a lifecycle manager or `ros2 lifecycle set`", read_only=True),
-    ParameterSpec("action_monitor_rate", DOUBLE, 10.0, "Rate at which an active ~/retarget goal is checked and its "
+    ParameterSpec("action_monitor_rate", "double", 10.0, "Rate at which an active ~/retarget goal is checked and its "
                   "feedback published (joint_trajectory_controller's parameter of that name)", "Hz", (0.1, 1000.0),
                   read_only=True),
-    ParameterSpec("status_period", DOUBLE, 5.0, "Period of the one-line status log", "s", (0.1, 3600.0)),
-    ParameterSpec("solver_process", BOOL, True, "Compute the reference in a process of its own (its own Python "
+    ParameterSpec("status_period", "double", 5.0, "Period of the one-line status log", "s", (0.1, 3600.0)),
+    ParameterSpec("solver_process", "bool", True, "Compute the reference in a process of its own (its own Python "
                   "interpreter, so the solver and the publisher never wait for each other); false: in a thread of "
                   "the node's process", read_only=True),
 )

@@ -18,11 +18,6 @@ from ..model.paper_layout import ACTUATED as PAPER_ACTUATED
 from ..motion.simulation import Scenario
 from ..motion.steps import PLANT_STEP
 from .parameter_spec import (
-    BOOL,
-    DOUBLE,
-    INTEGER,
-    STRING,
-    STRING_ARRAY,
     ParameterSpec,
     declare,
     refuse_unknown_overrides,
@@ -34,35 +29,35 @@ CLOCK_MODES = ("realtime", "lockstep")
 MAX_CONTROL_RATE = 1000  # [Hz]
 
 PLANT_PARAMETERS: tuple[ParameterSpec, ...] = (
-    ParameterSpec("config_file", STRING, "", "Crane file (docs/description.md; a bare name is looked up in the "
+    ParameterSpec("config_file", "string", "", "Crane file (docs/description.md; a bare name is looked up in the "
                   "package's config/); '' loads the packaged default", empty_allowed=True, read_only=True),
-    ParameterSpec("model", STRING, "flexible", "Crane model variant: 'flexible' (each flexible link cut into its "
+    ParameterSpec("model", "string", "flexible", "Crane model variant: 'flexible' (each flexible link cut into its "
                   "rigid finite elements) or 'rigid' (one element each)", choices=VARIANTS, read_only=True),
-    ParameterSpec("integrator.step", DOUBLE, PLANT_STEP, "Step of the plant's integrator (a control period is a "
+    ParameterSpec("integrator.step", "double", PLANT_STEP, "Step of the plant's integrator (a control period is a "
                   "whole number of steps)", "s", (1e-5, 1e-2), read_only=True),
-    ParameterSpec("control_rate", INTEGER, 1000, "Rate of the control periods: a command holds over one, and the "
+    ParameterSpec("control_rate", "integer", 1000, "Rate of the control periods: a command holds over one, and the "
                   "state is published after each", "Hz", (1, MAX_CONTROL_RATE), read_only=True),
-    ParameterSpec("joints", STRING_ARRAY, list(PAPER_ACTUATED), "The joints of ~/commands, in their order (a "
+    ParameterSpec("joints", "string_array", list(PAPER_ACTUATED), "The joints of ~/commands, in their order (a "
                   "permutation of the crane's actuated joints, by default those), as a forward command controller's "
                   "joints", read_only=True, from_config=lambda c: list(c.actuated)),
-    ParameterSpec("drive_damping.<joint>", DOUBLE, 0.0, "Damping kd of the <joint> drive's velocity loop: the drive "
+    ParameterSpec("drive_damping.<joint>", "double", 0.0, "Damping kd of the <joint> drive's velocity loop: the drive "
                   "applies the commanded effort minus kd times the joint's velocity; one per actuated joint, default: "
                   f"the D gain of a {BANDWIDTH:g} Hz, {DAMPING_RATIO:g}-damped joint loop on the crane (as "
-                  "`crane-reference track`)", "N m s/rad or N s/m", (0.0, 1e9), read_only=True),
-    ParameterSpec("command_timeout", DOUBLE, 0.1, "With no command accepted for this long (real time), the plant "
+                  "`crane-reference track`)", "N m s/rad or N s/m", (0.0, 1e9), read_only=True, from_crane=True),
+    ParameterSpec("command_timeout", "double", 0.1, "With no command accepted for this long (real time), the plant "
                   "applies the hold command (the efforts that hold the configuration where the timeout began) and "
                   "WARNs", "s", (0.001, 3600.0)),
-    ParameterSpec("clock_mode", STRING, "realtime", "'realtime': a control period every period of the wall "
+    ParameterSpec("clock_mode", "string", "realtime", "'realtime': a control period every period of the wall "
                   "clock, like a robot; 'lockstep': the plant publishes /clock and advances one period per command "
                   "received (deterministic, as fast as the loop runs)", choices=CLOCK_MODES, read_only=True),
-    ParameterSpec("clock_start", DOUBLE, 1.0, "lockstep: the /clock time of the plant's start (ROS time 0 means "
+    ParameterSpec("clock_start", "double", 1.0, "lockstep: the /clock time of the plant's start (ROS time 0 means "
                   "'no clock yet' to nodes with use_sim_time)", "s", (1e-9, 1e9), read_only=True),
-    ParameterSpec("all_coordinates", BOOL, False, "~/joint_states gives every coordinate of the model (supports, "
+    ParameterSpec("all_coordinates", "bool", False, "~/joint_states gives every coordinate of the model (supports, "
                   "boom springs), not only the joints", read_only=True),
-    ParameterSpec("frame_id", STRING, "world", "Frame of ~/end_effector_pose (the world frame {0} of the crane)"),
-    ParameterSpec("frame_prefix", STRING, "", "Prefix of the frames the node names, as robot_state_publisher's "
+    ParameterSpec("frame_id", "string", "world", "Frame of ~/end_effector_pose (the world frame {0} of the crane)"),
+    ParameterSpec("frame_prefix", "string", "", "Prefix of the frames the node names, as robot_state_publisher's "
                   "frame_prefix", empty_allowed=True),
-    ParameterSpec("autostart", BOOL, True, "Configure and activate the (lifecycle) node at once", read_only=True),
+    ParameterSpec("autostart", "bool", True, "Configure and activate the (lifecycle) node at once", read_only=True),
 )
 
 

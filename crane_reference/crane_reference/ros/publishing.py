@@ -149,8 +149,8 @@ class SamplePublisher:
 
     @settings.setter
     def settings(self, settings: PublishSettings) -> None:
+        self.encode.frame_id = settings.frame_id  # first: a sample re-encoded for the new frame gets it
         self._settings = settings
-        self.encode.frame_id = settings.frame_id
 
     @property
     def active(self) -> bool:

@@ -35,7 +35,7 @@ class CommandLog:
     def record(self, name: str, k: int, tau: float, accepted_ns: int, stamps: Stamps) -> None:
         """Command ``name``, accepted at ``accepted_ns``, takes effect at frame k, stream time tau [s]."""
         if stamps.publishing:
-            self._entries[f"{name}_stamp_s"] = f"{stamps.stamp_ns(k) / NANOSECONDS:.6f}"
+            self._entries[f"{name}_stamp_s"] = f"{stamps.stamp_of(k):.6f}"
         else:  # stamped when publishing begins (:meth:`stamp_pending`)
             self._entries.pop(f"{name}_stamp_s", None)
             self._unstamped[name] = k
@@ -55,7 +55,7 @@ class CommandLog:
     def stamp_pending(self, stamps: Stamps) -> None:
         """Publishing began: the commands made before it get their stamps."""
         for name, k in self._unstamped.items():
-            self._entries[f"{name}_stamp_s"] = f"{stamps.stamp_ns(k) / NANOSECONDS:.6f}"
+            self._entries[f"{name}_stamp_s"] = f"{stamps.stamp_of(k):.6f}"
         self._unstamped.clear()
 
     def restarted(self, restart: Restart) -> None:

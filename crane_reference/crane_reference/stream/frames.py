@@ -19,7 +19,7 @@ class Frames:
     (:class:`~.sample.ReferenceRows`, a row each) and the previews of some of them (row -> the preview's samples) over
     ``horizon`` seconds.  The solver makes them, the pipe carries them and the publisher reads them in this form:
     a few arrays a batch, no object a sample.  ``wire``: what the publisher made of the samples at once when the
-    batch came (its messages, a row a sample: :attr:`~.server.ReferenceServer.encode`), or None."""
+    batch came (its messages, a row a sample: :data:`~.served.Encoder`), or None."""
 
     k: int
     tau: np.ndarray

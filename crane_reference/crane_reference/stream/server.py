@@ -194,7 +194,7 @@ class ReferenceServer:
 
     def stamp_of(self, k: int) -> float:
         """Stamp [s] of sample k (relative to the start while not publishing)."""
-        return self._stamps.stamp_ns(k) / NANOSECONDS
+        return self._stamps.stamp_of(k)
 
     # -- commands -------------------------------------------------------------------------------------
 

@@ -24,7 +24,8 @@ while another request waits, so that one comes next).
 
 The child runs in a session of its own and ignores SIGINT (a Ctrl-C is the caller's to handle), and exits when
 its request pipe closes, also if the caller dies.  It runs at a lower scheduling priority
-(:data:`SOLVER_NICENESS`): it computes seconds of frames ahead and can wait, the caller's publisher cannot.
+(:data:`~.stream_solver.SOLVER_NICENESS`): it computes seconds of frames ahead and can wait, the caller's publisher
+cannot.
 
 A hung solver.  The child beats a counter in the shared memory every :data:`HEARTBEAT_PERIOD` from a thread of
 its own, beside the kernels (which run without Python's lock).  A live solver always answers: each Newton

@@ -41,6 +41,10 @@ class Stamps:
         """Stamp [ns] of sample k (relative to the start while not publishing)."""
         return stamp_at(self.start_ns or 0, k, self.rate)
 
+    def stamp_of(self, k: int) -> float:
+        """Stamp [s] of sample k (relative to the start while not publishing)."""
+        return self.stamp_ns(k) / NANOSECONDS
+
     def now_ns(self) -> int:
         """The publisher's clock now, from its last reading, as if it ran at the rate of ``clock``."""
         seen_ns, seen_at = self._seen

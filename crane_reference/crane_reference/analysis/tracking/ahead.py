@@ -16,7 +16,7 @@ import numpy as np
 from ...base.threads import start_named
 from ...motion.programmed_motion import ProgrammedMotion
 from ...motion.simulation import joined
-from ...motion.trajectory import Trajectory
+from ...motion.trajectory import MotionRows, Trajectory
 
 
 class ComputedAhead:
@@ -24,7 +24,7 @@ class ComputedAhead:
     thread in turn, one run of each at a time; :meth:`through` waits for them, :meth:`close` stops the thread
     after the run in progress."""
 
-    def __init__(self, motions: Sequence[ProgrammedMotion], runs: Sequence[Iterator[dict[str, np.ndarray]]]):
+    def __init__(self, motions: Sequence[ProgrammedMotion], runs: Sequence[Iterator[MotionRows]]):
         self._motions = tuple(motions)
         self._parts: list[list[Trajectory]] = [[] for _ in motions]
         self._computed = [-np.inf] * len(motions)  # motion time [s] each is computed through
@@ -34,7 +34,7 @@ class ComputedAhead:
         self._closed = False
         self._thread = start_named(lambda runs=list(runs): self._compute(runs), "references")
 
-    def _compute(self, runs: list[Iterator[dict[str, np.ndarray]]]) -> None:
+    def _compute(self, runs: list[Iterator[MotionRows]]) -> None:
         try:
             active = list(range(len(runs)))
             while active and not self._closed:
