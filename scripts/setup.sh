@@ -26,5 +26,8 @@ AMENT_PREFIX_PATH="$VENV" cmake -S crane_reference_interfaces -B .venv/build/cra
 cmake --build .venv/build/crane_reference_interfaces -j "$(nproc)" >/dev/null
 cmake --install .venv/build/crane_reference_interfaces >/dev/null
 
-# Compile the numba kernels now (fills the cache), so that the first simulate or node start does not wait.
-"$VENV/bin/crane-reference" compile
+# Compile the numba kernels now (fills the cache), so that the first simulate or node start does not wait; unless
+# the caller compiles them itself (CRANE_REFERENCE_SETUP_COMPILE=0: scripts/test.sh, beside the colcon build).
+if [ "${CRANE_REFERENCE_SETUP_COMPILE:-1}" != 0 ]; then
+  "$VENV/bin/crane-reference" compile
+fi
