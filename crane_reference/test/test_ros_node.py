@@ -355,8 +355,14 @@ def test_preview_markers_diagnostics_and_robot_description(ros: Harness) -> None
     np.testing.assert_allclose((xy[:, 0] / 3.0) ** 2 + (xy[:, 1] / 2.0) ** 2, 1.0, atol=1e-12)
     assert len(trail.points) > 1
 
-    ros.wait_for(lambda: any(d.status[0].values for _, d in list(ros.received["diagnostics"])), "diagnostics values")
-    diagnostics = [d for _, d in list(ros.received["diagnostics"]) if d.status[0].values][-1]
+    # a status made while publishing (one made before the first sample has no last sample to report)
+    publishing_since = ros.received["joint_states"][0][0]
+
+    def while_publishing() -> list:
+        return [d for at, d in list(ros.received["diagnostics"]) if d.status[0].values and at > publishing_since]
+
+    ros.wait_for(while_publishing, "diagnostics values while publishing")
+    diagnostics = while_publishing()[-1]
     status = diagnostics.status[0]
     values = {kv.key: kv.value for kv in status.values}
     assert status.level == rclpy_types().byte(Level.OK), status.message
