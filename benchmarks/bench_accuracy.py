@@ -3,7 +3,7 @@
     python benchmarks/bench_accuracy.py [--duration 10] [--cache results/bench_accuracy] [--hours 1]
                                         [--rfe 6 3 12]
                                         [--only vibration growth long damped iterations matrix newton first-order
-                                                mechanism sensitivity slow reference]
+                                                mechanism sensitivity slow reference drift]
 
 The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simulate_reference``), sampled every
 0.1 ms and cached as NPZ in ``--cache`` (the first run of a section takes minutes per crane).
@@ -41,6 +41,10 @@ The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simula
 10. [sensitivity] The conditioning of the 40-250 Hz RMS: the model with its payload mass changed by +-0.5 and
    +-1 % and its boom's Young's modulus by +-1 % (h = 0.25 ms) against the nominal converged run, beside the
    nominal crane at h = 1, 0.5, 1/3 and 0.25 ms (converged Newton).
+12. [drift] (not by default) 60 s of the default crane at h = 0.5, 0.4, 0.3, 0.25 and 0.2 ms: E's largest distance
+    over 10, 30 and 60 s from a run at 0.125 ms (compared every 6 ms, a multiple of every step), for the integrator
+    as it is, with its modal correction computed every step, and with the cutoff of the modes it resolves
+    (``integration.CUTOFF``, 0.8 pi) lowered to 0.5 pi and 0.3 pi.
 11. [slow] The controller-band error at the node's 0.5 ms (ONLINE_STEP) and at 1 ms, undamped
     and damped crane: the integrator with its modal correction computed every step, every REFRESH_INTERVAL
     (the default) and every 20 ms, and the plain trapezoidal rule; psi2's drift at 3, 5 and 10 s.  A stiff
@@ -67,6 +71,7 @@ from crane_reference.model.config import load_config
 from crane_reference.model.description import CraneDescription
 from crane_reference.model.parameters import Damping, FlexibleDrive
 from crane_reference.model.profiles import Constant, QuinticRise
+from crane_reference.motion import integration
 from crane_reference.motion.constraints import ArealRate, ConstraintSet, EllipseXY, HeightZ
 from crane_reference.motion.integration import EVALUATIONS, ONLINE_TOLERANCE, REFRESH_INTERVAL
 from crane_reference.motion.programmed_motion import ProgrammedMotion
@@ -454,9 +459,52 @@ def slow_motion(params: CraneDescription, duration: float, cache: Path) -> None:
           f"{np.abs(run.q - converged.q).max():.1e} rad")
 
 
+DRIFT_GRID = 6e-3  # [s]: a multiple of every step [drift] compares (0.125, 0.2, 0.25, 0.3, 0.4 and 0.5 ms)
+
+
+def drift_run(scenario: Scenario, h: float, duration: float, refresh: float | None = None,
+              cutoff: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """E's positions every DRIFT_GRID over ``duration`` at step h (and their grid indices), the modal correction
+    refreshed every ``refresh`` [s] and resolving modes below omega h = ``cutoff`` if given."""
+    default_cutoff = integration.CUTOFF
+    integration.CUTOFF = default_cutoff if cutoff is None else cutoff  # read when the step's settings are made
+    try:
+        q0 = scenario.equilibrium.q
+        stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), h, every_row=False)
+        if refresh is not None:
+            stepper.integrator.refresh_interval = refresh
+        grid, positions = [], []
+        while stepper.state.t < duration - 1e-9:
+            rows = stepper.advance_until(min(stepper.state.t + 1.0, duration))
+            k = np.round(rows.t / DRIFT_GRID)
+            on_grid = np.abs(rows.t - k * DRIFT_GRID) < 1e-9
+            grid.append(k[on_grid].astype(int))
+            positions.append(rows.ee_position[on_grid])
+        return np.concatenate(grid), np.concatenate(positions)
+    finally:
+        integration.CUTOFF = default_cutoff
+
+
+def step_drift(params: CraneDescription, duration: float = 60.0) -> None:
+    scenario = Scenario(params, "flexible")
+    reference_grid, reference = drift_run(scenario, 0.125e-3, duration)
+    variants = (("as it is", {}), ("refreshed every step", {"refresh": 0.0}),
+                ("cutoff 0.5 pi", {"cutoff": 0.5 * math.pi}), ("cutoff 0.3 pi", {"cutoff": 0.3 * math.pi}))
+    for h in (0.5e-3, 0.4e-3, 0.3e-3, 0.25e-3, 0.2e-3):
+        for name, variant in variants:
+            start = time.perf_counter()
+            grid, positions = drift_run(scenario, h, duration, **variant)
+            common, here, there = np.intersect1d(grid, reference_grid, return_indices=True)
+            distance = np.linalg.norm(positions[here] - reference[there], axis=1)
+            t = common * DRIFT_GRID
+            worst = " / ".join(f"{distance[t <= span].max():.1e}" for span in (10.0, 30.0, 60.0) if span <= duration)
+            print(f"[drift] h={h * 1e3:.3f} ms, {name}: E's largest distance from the 0.125 ms run over 10 / 30 / 60 s "
+                  f"{worst} m ({time.perf_counter() - start:.0f} s wall)", flush=True)
+
+
 SECTIONS = ("vibration", "growth", "long", "damped", "iterations", "matrix", "newton", "first-order", "mechanism",
-            "sensitivity", "slow", "reference")
-DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s not in ("long", "reference"))
+            "sensitivity", "slow", "reference", "drift")
+DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s not in ("long", "reference", "drift"))
 
 
 def main() -> None:
@@ -481,7 +529,8 @@ def main() -> None:
                          ("mechanism", lambda: mechanism(params, args.duration, args.cache)),
                          ("sensitivity", lambda: sensitivity(params, args.duration, args.cache)),
                          ("slow", lambda: slow_motion(params, args.duration, args.cache)),
-                         ("reference", lambda: reference_check(params, args.duration, args.cache))):
+                         ("reference", lambda: reference_check(params, args.duration, args.cache)),
+                         ("drift", lambda: step_drift(params))):
         if section in args.only:
             run()
 
