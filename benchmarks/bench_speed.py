@@ -18,6 +18,8 @@ the same run.
    0.25 s, best of ``--repeats``), as a multiple of one ABA call and as a real-time factor, and with every
    row's full evaluation (what simulate records); single steps (one compiled call each, from 1 s on):
    median, worst and 99.9 % quantile; the mean Newton evaluations per step and the largest constraint residual.
+4. [scaling] (not by default) The step at ONLINE_STEP in ABA of its own chain at n_rfe = 6, 12, 24 and 48, its
+   growth from n_rfe = 12, and the parts of a step in ABA with their growth (where the cost is not O(n)).
 """
 
 from __future__ import annotations
@@ -205,13 +207,22 @@ def _repeat_read_row(q, qd, qdd, k, drives, partition, chain, n):
     return total
 
 
-def component_times(params: CraneDescription, rfe_count: int, repeat: int = 3000) -> None:
-    """[profile] Compiled cost of the parts of a step (flexible, ``rfe_count`` RFEs), each timed in a compiled
-    loop (no Python call overhead), best of 5, also as a multiple of one Pinocchio ABA call on the same chain
-    in this run: a step is a factor, per Newton evaluation a projection and a residual, and at its end a
-    projection and a full evaluation with the integrator's qdd; every REFRESH_INTERVAL of motion the modal
-    correction."""
-    scenario = Scenario(params.with_rfe_count(rfe_count), "flexible")
+PART_NAMES = {
+    "position_terms": "M, gravity, E's Jacobian (position_terms)",
+    "kinematics": "E's position and Jacobian (kinematics only)",
+    "projection": "projection on the position constraints",
+    "residual": "Newton residual of (8) by inverse dynamics",
+    "correction": f"modal correction (eigenproblem, every {REFRESH_INTERVAL * 1e3:g} ms)",
+    "factor": "iteration matrix and its Cholesky factor",
+    "accelerations": "qdd from (8) solved (accelerations_at)",
+    "evaluation": "full evaluation (+ residuals, reactions, accounts)",
+    "read_row": "a read row's effort and distance (evaluated_rows)",
+}
+
+
+def part_times(scenario: Scenario, repeat: int) -> dict[str, float]:
+    """The compiled cost [s] of each part of :data:`PART_NAMES` on the flexible ``scenario``, each timed in a
+    compiled loop of ``repeat`` calls (no Python call overhead), best of 5."""
     motion = scenario.motion
     q, chain, partition = scenario.equilibrium.q, motion.dynamics.chain, motion.partition
     qd = np.full_like(q, 0.01)
@@ -223,40 +234,82 @@ def component_times(params: CraneDescription, rfe_count: int, repeat: int = 3000
     B = acc.velocity_map
     reduced_mass = B.T @ acc.M @ B
     correction = modal_correction(reduced_mass, 1e-3, 0.0, drive, partition, chain, settings)
-    parts = (("M, gravity, E's Jacobian (position_terms)", _repeat_position_terms, (q, chain)),
-             ("E's position and Jacobian (kinematics only)", _repeat_end_effector, (q, chain)),
-             ("projection on the position constraints", _repeat_projection,
-              (off, k, motion.holonomic_dependent, chain)),
-             ("Newton residual of (8) by inverse dynamics", _repeat_residual,
-              (q, qd, acc.qdd[partition.integrated], k, drive, partition, chain)),
-             (f"modal correction (eigenproblem, every {REFRESH_INTERVAL * 1e3:g} ms)", _repeat_correction,
-              (reduced_mass, drive, partition, chain, settings)),
-             ("iteration matrix and its Cholesky factor", _repeat_factor,
-              (acc.M, acc.velocity_map, correction, drive, partition, chain)),
-             ("qdd from (8) solved (accelerations_at)", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
-             ("full evaluation (+ residuals, reactions, accounts)", _repeat_evaluation,
-              (q, qd, k, drive, partition, chain)),
-             ("a read row's effort and distance (evaluated_rows)", _repeat_read_row,
+    parts = (("position_terms", _repeat_position_terms, (q, chain)),
+             ("kinematics", _repeat_end_effector, (q, chain)),
+             ("projection", _repeat_projection, (off, k, motion.holonomic_dependent, chain)),
+             ("residual", _repeat_residual, (q, qd, acc.qdd[partition.integrated], k, drive, partition, chain)),
+             ("correction", _repeat_correction, (reduced_mass, drive, partition, chain, settings)),
+             ("factor", _repeat_factor, (acc.M, acc.velocity_map, correction, drive, partition, chain)),
+             ("accelerations", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
+             ("evaluation", _repeat_evaluation, (q, qd, k, drive, partition, chain)),
+             ("read_row", _repeat_read_row,
               (q[None], qd[None], acc.qdd[None], Coefficients(k.Q[None], k.g[None], k.c[None], k.order),
                drive[None], partition, chain)))
-    aba = aba_time(scenario)
-    print(f"[profile] n_rfe={rfe_count:2d} dof={scenario.model.dof:2d} n_ic={partition.independent.size:2d}: "
-          f"Pinocchio ABA {aba * 1e6:.2f} us/call")
+    times = {}
     for name, function, arguments in parts:
         function(*arguments, 10)
         timed = lambda f=function, a=arguments: f(*a, repeat)  # noqa: E731 (one compiled loop of repeat calls)
-        best = min(call_seconds(timed, 1, median=True) for _ in range(5)) / repeat
-        print(f"[profile] n_rfe={rfe_count:2d} {name:<52} {best * 1e6:7.2f} us = {best / aba:5.1f} ABA")
+        times[name] = min(call_seconds(timed, 1, median=True) for _ in range(5)) / repeat
+    return times
 
 
-SECTIONS = ("eval", "profile", "speed")
+def component_times(params: CraneDescription, rfe_count: int, repeat: int = 3000) -> None:
+    """[profile] Compiled cost of the parts of a step (flexible, ``rfe_count`` RFEs; :func:`part_times`), also as
+    a multiple of one Pinocchio ABA call on the same chain in this run: a step is a factor, per Newton
+    evaluation a projection and a residual, and at its end a projection and a full evaluation with the
+    integrator's qdd; every REFRESH_INTERVAL of motion the modal correction."""
+    scenario = Scenario(params.with_rfe_count(rfe_count), "flexible")
+    partition = scenario.motion.partition
+    aba = aba_time(scenario)
+    print(f"[profile] n_rfe={rfe_count:2d} dof={scenario.model.dof:2d} n_ic={partition.independent.size:2d}: "
+          f"Pinocchio ABA {aba * 1e6:.2f} us/call")
+    for name, seconds in part_times(scenario, repeat).items():
+        print(f"[profile] n_rfe={rfe_count:2d} {PART_NAMES[name]:<52} {seconds * 1e6:7.2f} us = "
+              f"{seconds / aba:5.1f} ABA")
+
+
+SCALING_RFE = (6, 12, 24, 48)
+"""[scaling]: the boom's RFE counts of the table."""
+
+
+def scaling(params: CraneDescription, duration: float, repeats: int) -> None:
+    """[scaling] Per n_rfe of :data:`SCALING_RFE` (every flexible link): the step at the node's ONLINE_STEP (the
+    steps alone, compiled runs of 0.25 s from rest, best of ``repeats``) in ABA of its own chain (Pinocchio, this
+    run) and its growth from n_rfe = 12 (O(n) keeps it within 1.5x from 12 to 48); beside it the parts of a
+    step (:func:`part_times`) in ABA, with the modal correction per step (its cost times ONLINE_STEP /
+    REFRESH_INTERVAL), and how each part grows from 12 to the row's n_rfe."""
+    rows = []
+    for n_rfe in SCALING_RFE:
+        scenario = Scenario(params.with_rfe_count(n_rfe), "flexible")
+        simulate(scenario.motion, scenario.equilibrium.q, 0.01, step=1e-3)  # compile / load the kernels
+        aba = aba_time(scenario)
+        steps = round(duration / ONLINE_STEP)
+        step = min(run_times(scenario, ONLINE_STEP, duration, False) for _ in range(repeats)) / steps
+        parts = part_times(scenario, 3000 if n_rfe <= 12 else 300)
+        parts["correction"] *= ONLINE_STEP / REFRESH_INTERVAL
+        rows.append((n_rfe, scenario.model.dof, scenario.motion.partition.independent.size, aba, step,
+                     {name: parts[name] / aba for name in ("factor", "position_terms", "residual", "projection",
+                                                           "correction")}))
+    base = next((row for row in rows if row[0] == 12), rows[0])
+    print(f"[scaling] h = {ONLINE_STEP * 1e3:g} ms; each cost in ABA of its own chain (x: growth from "
+          f"n_rfe = {base[0]}); parts: iteration factor / M (position_terms) / a Newton residual / a projection / "
+          f"modal correction per step")
+    for n_rfe, dof, n_ic, aba, step, parts in rows:
+        growth = " / ".join(f"{value:.2f} ({value / base[5][name]:.1f}x)" for name, value in parts.items())
+        print(f"[scaling] n_rfe={n_rfe:2d} dof={dof:3d} n_ic={n_ic:3d}: ABA {aba * 1e6:6.2f} us, step "
+              f"{step * 1e6:7.1f} us = {step / aba:4.1f} ABA ({step / aba / (base[4] / base[3]):.2f}x), real-time "
+              f"factor {ONLINE_STEP / step:5.1f}; parts {growth}")
+
+
+SECTIONS = ("eval", "profile", "speed", "scaling")
+DEFAULT_SECTIONS = ("eval", "profile", "speed")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--duration", type=float, default=10.0)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--only", nargs="+", choices=SECTIONS, default=SECTIONS, help="sections to run")
+    parser.add_argument("--only", nargs="+", choices=SECTIONS, default=DEFAULT_SECTIONS, help="sections to run")
     parser.add_argument("--rfe", nargs="+", type=int, default=[6], help="[profile]: the cranes' RFE counts")
     parser.add_argument("--config", help="crane file (default: the packaged crane, the paper's); a crane's step is "
                         "stated in ABA of its own chain")
@@ -269,6 +322,8 @@ def main() -> None:
             component_times(params, rfe_count, repeat=3000 if rfe_count <= 12 else 300)
     if "speed" in args.only:
         speed(params, args.duration, args.repeats)
+    if "scaling" in args.only:
+        scaling(params, min(args.duration, 2.0), args.repeats)
 
 
 if __name__ == "__main__":
