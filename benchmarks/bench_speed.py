@@ -25,11 +25,13 @@ the same run.
 from __future__ import annotations
 
 import argparse
+import math
 import time
 
 import numpy as np
 from common import aba_time, call_seconds, newton_iterations, run_times
 from numba import njit
+from scipy.linalg import eigh
 
 from crane_reference.dynamics.evaluation import accelerations_at, evaluate
 from crane_reference.dynamics.inertia import world_pseudo_inertias
@@ -41,7 +43,7 @@ from crane_reference.dynamics.structures import Coefficients, StepStart
 from crane_reference.dynamics.terms import chain_terms, end_effector_jacobian, position_terms
 from crane_reference.model.config import load_config
 from crane_reference.model.description import CraneDescription
-from crane_reference.motion.integration import REFRESH_INTERVAL, ExactFrequencyTrapezoidal, stop_flag
+from crane_reference.motion.integration import CUTOFF, REFRESH_INTERVAL, ExactFrequencyTrapezoidal, stop_flag
 from crane_reference.motion.simulation import MotionStepper, Scenario, simulate
 from crane_reference.motion.steps import ONLINE_STEP
 
@@ -272,6 +274,23 @@ SCALING_RFE = (6, 12, 24, 48)
 """[scaling]: the boom's RFE counts of the table."""
 
 
+def resolved_modes(scenario: Scenario, step: float) -> int:
+    """How many modes of the reduced pencil (K_r, M_r) at the equilibrium have omega h below the cutoff: the rank of
+    the modal inertia correction Delta M_r; the others make up the unresolved damping D_u."""
+    motion = scenario.motion
+    q, chain, partition = scenario.equilibrium.q, motion.dynamics.chain, motion.partition
+    acc = accelerations_at(q, np.zeros_like(q), motion.constraints.coefficients(0.0),
+                           motion.dynamics.drive.kernel_parameters(0.0), partition, chain)
+    independent = list(partition.independent)
+    stiffness = chain.stiffness[np.ix_(independent, independent)].copy()
+    if chain.drive_joint in independent:
+        stiffness[independent.index(chain.drive_joint), independent.index(chain.drive_joint)] += \
+            motion.dynamics.drive.kernel_parameters(0.0)[1]
+    B = acc.velocity_map
+    omega_squared = eigh(stiffness, B.T @ acc.M @ B, eigvals_only=True)
+    return int(np.count_nonzero(np.sqrt(np.maximum(omega_squared, 0.0)) * step < CUTOFF))
+
+
 def scaling(params: CraneDescription, duration: float, repeats: int) -> None:
     """[scaling] Per n_rfe of :data:`SCALING_RFE` (every flexible link): the step at the node's ONLINE_STEP (the
     steps alone, compiled runs of 0.25 s from rest, best of ``repeats``) in ABA of its own chain (Pinocchio, this
@@ -287,18 +306,19 @@ def scaling(params: CraneDescription, duration: float, repeats: int) -> None:
         step = min(run_times(scenario, ONLINE_STEP, duration, False) for _ in range(repeats)) / steps
         parts = part_times(scenario, 3000 if n_rfe <= 12 else 300)
         parts["correction"] *= ONLINE_STEP / REFRESH_INTERVAL
-        rows.append((n_rfe, scenario.model.dof, scenario.motion.partition.independent.size, aba, step,
+        rows.append((n_rfe, scenario.model.dof, scenario.motion.partition.independent.size,
+                     resolved_modes(scenario, ONLINE_STEP), aba, step,
                      {name: parts[name] / aba for name in ("factor", "position_terms", "residual", "projection",
                                                            "correction")}))
     base = next((row for row in rows if row[0] == 12), rows[0])
     print(f"[scaling] h = {ONLINE_STEP * 1e3:g} ms; each cost in ABA of its own chain (x: growth from "
           f"n_rfe = {base[0]}); parts: iteration factor / M (position_terms) / a Newton residual / a projection / "
-          f"modal correction per step")
-    for n_rfe, dof, n_ic, aba, step, parts in rows:
-        growth = " / ".join(f"{value:.2f} ({value / base[5][name]:.1f}x)" for name, value in parts.items())
-        print(f"[scaling] n_rfe={n_rfe:2d} dof={dof:3d} n_ic={n_ic:3d}: ABA {aba * 1e6:6.2f} us, step "
-              f"{step * 1e6:7.1f} us = {step / aba:4.1f} ABA ({step / aba / (base[4] / base[3]):.2f}x), real-time "
-              f"factor {ONLINE_STEP / step:5.1f}; parts {growth}")
+          f"modal correction per step; modes resolved (omega h < {CUTOFF / math.pi:g} pi) of n_ic")
+    for n_rfe, dof, n_ic, resolved, aba, step, parts in rows:
+        growth = " / ".join(f"{value:.2f} ({value / base[6][name]:.1f}x)" for name, value in parts.items())
+        print(f"[scaling] n_rfe={n_rfe:2d} dof={dof:3d} n_ic={n_ic:3d} resolved={resolved:2d}: ABA "
+              f"{aba * 1e6:6.2f} us, step {step * 1e6:7.1f} us = {step / aba:4.1f} ABA "
+              f"({step / aba / (base[5] / base[4]):.2f}x), real-time factor {ONLINE_STEP / step:5.1f}; parts {growth}")
 
 
 SECTIONS = ("eval", "profile", "speed", "scaling")

@@ -35,14 +35,14 @@ for lambda_hat = (2 / h) tanh(lambda h / 2), and a mass and a damping correction
 roots (:func:`crane_reference.dynamics.modal_correction.modal_correction`): each damped mode turns and decays per
 step as the model's does.
 
-Modes with omega h at or above the cutoff (0.3 pi: at h = 0.5 ms those above 300 Hz, at 1 ms above 150 Hz)
-are not resolved.  Such a mode cannot be turned exactly near omega h = pi (tan has a pole there, and samples one
-step apart cannot show it), and below that its velocities, larger than the exact ones by
-tan(omega h / 2) / (omega h / 2) (1.08 at 0.3 pi, 2.4 at 0.8 pi), enter the velocity terms of (8) with them:
-resolving modes up to 0.8 pi made the slow motion's phase along the task drift by an amount erratic in h
-(docs/performance.md, "Over a minute").  The unresolved modes get
-D_u = M_r Phi_u diag(2 zeta omega) Phi_u^T M_r, which damps them with zeta = 1 (they keep their static
-deflection), so that no such mode rings at a frequency it does not have.  M_r moves with the
+Modes with omega h at or above the cutoff (0.8 pi: the output sampled every step cannot show them;
+at h = 1 ms those above 400 Hz) cannot be turned exactly (tan has a pole at pi) and are not resolved.  The
+velocities of a resolved mode come out larger than the exact ones by tan(omega h / 2) / (omega h / 2) (2.4 at
+0.8 pi, 1.08 at 0.3 pi); resolving modes that close to pi makes the slow motion's phase along the task drift over
+a minute by an amount erratic in h, while a lower cutoff damps more modes and, the correction being stale between
+refreshes, takes more of the resolved vibration over an hour (docs/performance.md, "Over a minute").
+The unresolved modes get D_u = M_r Phi_u diag(2 zeta omega) Phi_u^T M_r, which damps them with zeta = 1 (they
+keep their static deflection), so that no such mode rings at a frequency it does not have.  M_r moves with the
 configuration, so Delta M_r and D_u are computed again every :data:`REFRESH_INTERVAL` of motion (an
 eigenproblem of the n_ic x n_ic reduced matrices); stale ones leak damping into resolved modes.  They are
 coefficients of the equation, like M itself: a refresh changes them from the next step's end on, and the
@@ -114,7 +114,7 @@ velocities and (8) are then evaluated at the projected q itself."""
 REFRESH_INTERVAL = 0.01
 """[s] of motion after which the modal correction is computed again at the current configuration."""
 
-CUTOFF = 0.3 * math.pi
+CUTOFF = 0.8 * math.pi
 """omega h [rad] from which a mode counts as not resolved by the step (damped, not turned exactly)."""
 
 UNRESOLVED_DAMPING = 1.0
@@ -168,6 +168,8 @@ class ExactFrequencyTrapezoidal:
         """False: the plain trapezoidal rule (no modal correction), for comparison."""
         self.refresh_interval = REFRESH_INTERVAL
         """[s] of motion after which the modal correction is computed again."""
+        self.cutoff = CUTOFF
+        """omega h [rad] from which a mode is not resolved (damped, not turned exactly)."""
         self.evaluations = evaluations
         self.tolerance = tolerance
         self.max_iterations = max_iterations
@@ -178,7 +180,7 @@ class ExactFrequencyTrapezoidal:
     def settings(self) -> StepSettings:
         """The method and its stopping rules in the layout of the compiled kernels."""
         return StepSettings(self.evaluations, self.tolerance, self.max_iterations, PROJECTION_TOLERANCE,
-                            self.refresh_interval, CUTOFF, UNRESOLVED_DAMPING, self.modal)
+                            self.refresh_interval, self.cutoff, UNRESOLVED_DAMPING, self.modal)
 
     def _fresh(self) -> ModalCorrection:
         """No modal correction yet: the first step computes it."""
