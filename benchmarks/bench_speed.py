@@ -294,7 +294,7 @@ def resolved_modes(scenario: Scenario, step: float) -> int:
 def scaling(params: CraneDescription, duration: float, repeats: int) -> None:
     """[scaling] Per n_rfe of :data:`SCALING_RFE` (every flexible link): the step at the node's ONLINE_STEP (the
     steps alone, compiled runs of 0.25 s from rest, best of ``repeats``) in ABA of its own chain (Pinocchio, this
-    run) and its growth from n_rfe = 12 (O(n) keeps it within 1.5x from 12 to 48); beside it the parts of a
+    run) and its growth from n_rfe = 12 (a step of O(n) cost would not grow); beside it the parts of a
     step (:func:`part_times`) in ABA, with the modal correction per step (its cost times ONLINE_STEP /
     REFRESH_INTERVAL), and how each part grows from 12 to the row's n_rfe."""
     rows = []
