@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 from common import aba_time, call_seconds, newton_iterations, run_times
@@ -274,6 +275,18 @@ SCALING_RFE = (6, 12, 24, 48)
 """[scaling]: the boom's RFE counts of the table."""
 
 
+class ScalingRow(NamedTuple):
+    """[scaling]: one crane's row: its size, Pinocchio's ABA and the step [s], and the parts in ABA."""
+
+    n_rfe: int
+    dof: int
+    n_ic: int
+    resolved: int
+    aba: float
+    step: float
+    parts: dict[str, float]
+
+
 def resolved_modes(scenario: Scenario, step: float) -> int:
     """How many modes of the reduced pencil (K_r, M_r) at the equilibrium have omega h below the cutoff: the rank of
     the modal inertia correction Delta M_r; the others make up the unresolved damping D_u."""
@@ -306,19 +319,20 @@ def scaling(params: CraneDescription, duration: float, repeats: int) -> None:
         step = min(run_times(scenario, ONLINE_STEP, duration, False) for _ in range(repeats)) / steps
         parts = part_times(scenario, 3000 if n_rfe <= 12 else 300)
         parts["correction"] *= ONLINE_STEP / REFRESH_INTERVAL
-        rows.append((n_rfe, scenario.model.dof, scenario.motion.partition.independent.size,
-                     resolved_modes(scenario, ONLINE_STEP), aba, step,
-                     {name: parts[name] / aba for name in ("factor", "position_terms", "residual", "projection",
-                                                           "correction")}))
-    base = next((row for row in rows if row[0] == 12), rows[0])
+        rows.append(ScalingRow(n_rfe, scenario.model.dof, scenario.motion.partition.independent.size,
+                               resolved_modes(scenario, ONLINE_STEP), aba, step,
+                               {name: parts[name] / aba for name in ("factor", "position_terms", "residual",
+                                                                     "projection", "correction")}))
+    base = next((row for row in rows if row.n_rfe == 12), rows[0])
     print(f"[scaling] h = {ONLINE_STEP * 1e3:g} ms; each cost in ABA of its own chain (x: growth from "
-          f"n_rfe = {base[0]}); parts: iteration factor / M (position_terms) / a Newton residual / a projection / "
+          f"n_rfe = {base.n_rfe}); parts: iteration factor / M (position_terms) / a Newton residual / a projection / "
           f"modal correction per step; modes resolved (omega h < {CUTOFF / math.pi:g} pi) of n_ic")
     for n_rfe, dof, n_ic, resolved, aba, step, parts in rows:
-        growth = " / ".join(f"{value:.2f} ({value / base[6][name]:.1f}x)" for name, value in parts.items())
+        growth = " / ".join(f"{value:.2f} ({value / base.parts[name]:.1f}x)" for name, value in parts.items())
         print(f"[scaling] n_rfe={n_rfe:2d} dof={dof:3d} n_ic={n_ic:3d} resolved={resolved:2d}: ABA "
               f"{aba * 1e6:6.2f} us, step {step * 1e6:7.1f} us = {step / aba:4.1f} ABA "
-              f"({step / aba / (base[5] / base[4]):.2f}x), real-time factor {ONLINE_STEP / step:5.1f}; parts {growth}")
+              f"({step / aba / (base.step / base.aba):.2f}x), real-time factor {ONLINE_STEP / step:5.1f}; "
+              f"parts {growth}")
 
 
 SECTIONS = ("eval", "profile", "speed", "scaling")
