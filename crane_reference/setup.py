@@ -74,7 +74,7 @@ setup(
             "ros-jazzy-common-interfaces",
             "ros-jazzy-std-srvs",
         ],
-        "test": ["pytest>=7", "pin>=3", "mcap>=1.1", "ruff>=0.5", "import-linter>=2.1"],
+        "test": ["pytest>=7", "pytest-xdist>=3", "pin>=3", "mcap>=1.1", "ruff>=0.5", "import-linter>=2.1"],
     },
     zip_safe=True,
     maintainer="crane_reference maintainers",

@@ -3,6 +3,9 @@
 # checks that colcon builds both packages (crane_reference_interfaces, ament_cmake; crane_reference, ament_python)
 # and that `ros2 run crane_reference node` would start, and runs the test suite of crane_reference.  The kernels of
 # .venv compile beside the colcon build (each mostly on one core of the two), and both are done before the tests.
+# The tests run in two parts: those that compute (most of the CPU time) on a worker per core (pytest-xdist, a
+# module's tests on one worker, which computes its fixtures once), then those that wait on the wall clock for
+# processes or threads (the `wall_clock` marker: ROS discovery, deadlines, heartbeats) alone, as on a quiet machine.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 CRANE_REFERENCE_SETUP_COMPILE=0 bash scripts/setup.sh
@@ -13,4 +16,5 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 COMPILE_PID=$!
 bash scripts/check_colcon.sh
 wait "$COMPILE_PID"
-.venv/bin/python -m pytest -q crane_reference
+.venv/bin/python -m pytest -q -n auto --dist loadscope -m "not wall_clock" crane_reference
+.venv/bin/python -m pytest -q -m wall_clock crane_reference

@@ -2,8 +2,11 @@
 
 Markers (``setup.cfg``): ``ros`` for tests that need rclpy and the ROS message packages (every test in a
 ``test_ros_*.py`` module gets it), ``slow`` for tests that integrate seconds of motion or start
-processes.  ``pytest -m "not ros"`` runs the rest on a machine without ROS: the ``test_ros_*`` modules
-are then not even imported.  CI runs everything.
+processes, ``wall_clock`` for tests that wait on the wall clock for processes or threads (every test in a
+``test_ros_*.py`` module or in :data:`WALL_CLOCK_MODULES`).  ``pytest -m "not ros"`` runs the rest on a machine
+without ROS: the ``test_ros_*`` modules are then not even imported.  CI runs everything: the tests without
+``wall_clock`` on a worker per core (pytest-xdist), then those with it alone, so that no deadline shares the
+cores with a computation of another test (``scripts/test.sh``).
 
 Every ROS test of one pytest process uses its own ROS domain (from the process id), discovery on
 localhost only.
@@ -29,6 +32,8 @@ from crane_reference.model.parameters import CraneParameters
 from crane_reference.motion.simulation import Scenario
 
 ROS_MODULE_PREFIX = "test_ros_"
+WALL_CLOCK_MODULES = frozenset({"test_server.py"})
+"""Modules without ROS whose tests wait on the wall clock (the solver process's heartbeats and deadlines)."""
 os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 
@@ -48,6 +53,9 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         if item.path.name.startswith(ROS_MODULE_PREFIX):
             item.add_marker(pytest.mark.ros)
+            item.add_marker(pytest.mark.wall_clock)
+        elif item.path.name in WALL_CLOCK_MODULES:
+            item.add_marker(pytest.mark.wall_clock)
 
 
 @pytest.fixture(scope="session")
