@@ -29,7 +29,7 @@ from crane_reference.dynamics.modal_correction import iteration_factor, modal_co
 from crane_reference.dynamics.runs import integration_run
 from crane_reference.dynamics.step import first_iterate, predicted_accelerations, step_residual
 from crane_reference.dynamics.structures import ACCOUNTS, ModalCorrection, Partition
-from crane_reference.motion.integration import CUTOFF, ExactFrequencyTrapezoidal, stop_flag
+from crane_reference.motion.integration import CUTOFF, UNRESOLVED_DAMPING, ExactFrequencyTrapezoidal, stop_flag
 from crane_reference.motion.simulation import MotionStepper, Scenario
 
 STEP = 1e-3  # [s]
@@ -54,27 +54,38 @@ def _terms(scenario, q, t):
                                     motion.partition, motion.dynamics.chain, settings)
 
 
-def test_modal_inertia_is_the_exact_frequency_correction_of_scipys_modes(scenario):
-    """Undamped crane: with K_r phi = omega^2 M_r phi (scipy.linalg.eigh, Phi^T M_r Phi = I) and
-    c = 1 - ((omega h / 2) / tan(omega h / 2))^2 below the cutoff, Delta M_r = M_r Phi diag(c) Phi^T M_r."""
+def _scipy_modes(scenario, q):
+    """M_r at q and scipy.linalg.eigh's modes of the pencil (K_r, M_r), K_r = K[ic, ic] plus the drive's spring
+    s_dr on psi2: omega^2 and Phi (Phi^T M_r Phi = I)."""
     motion = scenario.motion
-    q = scenario.equilibrium.q
     reduced_mass = _reduced_mass(scenario, q)
     independent = list(motion.partition.independent)
     stiffness = motion.dynamics.chain.stiffness[np.ix_(independent, independent)].copy()
     j = independent.index(motion.dynamics.chain.drive_joint)
     stiffness[j, j] += motion.dynamics.drive.kernel_parameters(0.0)[1]  # the drive's spring s_dr
     omega_squared, phi = eigh(stiffness, reduced_mass)
-    omega_h = np.sqrt(np.maximum(omega_squared, 0.0)) * STEP
-    resolved = omega_h < CUTOFF
-    c = np.zeros_like(omega_h)
-    half = 0.5 * omega_h[resolved]
+    return reduced_mass, np.maximum(omega_squared, 0.0), phi
+
+
+def test_modal_terms_are_the_exact_frequency_correction_of_scipys_modes(scenario):
+    """Undamped crane: with K_r phi = omega^2 M_r phi (scipy.linalg.eigh) and u = omega h, Delta M_r =
+    M_r Phi diag(c) Phi^T M_r and D_u = M_r Phi diag(e) Phi^T M_r with c = 1 - ((u / 2) / tan(u / 2))^2, e = 0
+    below the cutoff, and c = 0, e = 2 zeta omega (zeta the unresolved modes' damping ratio) at or above it."""
+    q = scenario.equilibrium.q
+    reduced_mass, omega_squared, phi = _scipy_modes(scenario, q)
+    omega = np.sqrt(omega_squared)
+    resolved = omega * STEP < CUTOFF
+    assert 0 < (~resolved).sum() < omega.size
+    c, e = np.zeros_like(omega), np.zeros_like(omega)
+    half = 0.5 * omega[resolved] * STEP
     ratio = np.ones_like(half)  # (omega h / 2) / tan(omega h / 2) -> 1 for a mode no spring resists (omega = 0)
     ratio[half > 0.0] = half[half > 0.0] / np.tan(half[half > 0.0])
     c[resolved] = 1.0 - ratio**2
-    expected = reduced_mass @ phi @ np.diag(c) @ phi.T @ reduced_mass
+    e[~resolved] = 2.0 * UNRESOLVED_DAMPING * omega[~resolved]
     terms = _terms(scenario, q, 0.0)
-    assert np.max(np.abs(terms.inertia - expected)) <= 1e-9 * np.max(np.abs(expected))
+    for computed, per_mode in ((terms.inertia, c), (terms.damping, e)):
+        expected = reduced_mass @ phi @ np.diag(per_mode) @ phi.T @ reduced_mass
+        assert np.max(np.abs(computed - expected)) <= 1e-9 * np.max(np.abs(expected))
 
 
 def test_the_slow_motion_does_not_depend_on_the_refresh_cadence(scenario):
