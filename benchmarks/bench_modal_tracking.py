@@ -6,21 +6,24 @@ REFRESH_INTERVAL.  Prints the figures the closing notes and docs/performance.md 
 
 The undamped default crane at the node's 0.5 ms, ``--minutes`` of the paper's task, with the modes resolved below
 omega h = ``--cutoff`` pi: the 40-250 Hz RMS of psi2, psi(3,0), psi4 over the last 10 s as a share of that over
-5-15 s, and the mean energy over both windows (no drive, no dampers, fixed constraints after 5 s: it must stay).
+5-15 s (each window filtered with 1 s of motion on both sides), and the mean energy over both windows (no drive, no
+dampers, fixed constraints after 5 s: it must stay).
 
-Variants (each full eigenproblem of the pencil (K_r, M_r) every REFRESH_INTERVAL of motion, as the package does):
+In every variant the full eigenproblem of the pencil (K_r, M_r) is solved every REFRESH_INTERVAL of motion, as the
+package does; the variants differ in what happens between:
 
 - ``refresh``: the package's integrator as it is (compiled throughout).  Between refreshes the damping of the
   unresolved modes, D_u = M_r Phi_u diag(2 zeta omega_u) Phi_u^T M_r, comes from an earlier configuration.
 - ``tracked``: at every step from 1.5 s the resolved modes Phi_r follow the configuration by one shift-inverted
-  subspace iteration from the last ones, X = (K_r + M_r)^-1 M_r Phi_r, and a Rayleigh-Ritz step on X (both matrices at
-  the step's start); Delta M_r = M_r Phi_r diag(c) Phi_r^T M_r from them, and the last refresh's D_u projected off
-  them, P^T D_u P with P = I - Phi_r Phi_r^T M_r, so that no resolved mode is damped.
+  subspace iteration from the last ones, X = (K_r + s M_r)^-1 M_r Phi_r (s = SHIFT), and a Rayleigh-Ritz step on X
+  (both matrices at the step's start; as many modes as the last refresh resolved); Delta M_r = M_r Phi_r diag(c)
+  Phi_r^T M_r from them, and the last refresh's D_u projected off them, P^T D_u P with P = I - Phi_r Phi_r^T M_r, so
+  that no resolved mode is damped.
 - ``tracked-spring``: as ``tracked`` with D_u = alpha h P^T K_r P, alpha = 2 zeta / cutoff: the unresolved modes'
   damping ratio grows as zeta omega h / cutoff from zeta at the cutoff; the spring matrix less its part on the
   resolved modes needs none of the unresolved modes (an O(n) step's form: sparse plus rank r).
 
-The tracked variants step in Python (one compiled step per call), about 1.4 s of wall time per second of motion.
+The tracked variants step in Python (one compiled step per call), which is slow: their wall time is printed.
 """
 
 from __future__ import annotations
@@ -56,25 +59,27 @@ class Tracker:
         drive_row = list(independent).index(chain.drive_joint)
         self.stiffness[drive_row, drive_row] += motion.dynamics.drive.kernel_parameters(TRACKING_FROM)[1]
         self.h, self.cutoff, self.spring = h, cutoff, spring
-        self.refreshed, self.modes, self.unresolved = -math.inf, np.empty((0, 0)), np.empty((0, 0))
+        self.refreshed, self.modes, self.unresolved_damping = -math.inf, np.empty((0, 0)), np.empty((0, 0))
 
     def refresh(self, reduced_mass: np.ndarray, t: float) -> None:
-        """The full eigenproblem: the resolved modes and the unresolved modes' damping D_u."""
+        """The full eigenproblem: the resolved modes and (``tracked``) the unresolved modes' damping D_u."""
         omega_squared, modes = eigh(self.stiffness, reduced_mass)
         omega = np.sqrt(np.maximum(omega_squared, 0.0))
         resolved = omega * self.h < self.cutoff
-        on_unresolved = reduced_mass @ modes[:, ~resolved]
         self.modes = modes[:, resolved]
-        self.unresolved = on_unresolved @ np.diag(2.0 * UNRESOLVED_DAMPING * omega[~resolved]) @ on_unresolved.T
+        if not self.spring:
+            on_unresolved = reduced_mass @ modes[:, ~resolved]
+            self.unresolved_damping = on_unresolved @ np.diag(2.0 * UNRESOLVED_DAMPING * omega[~resolved]) \
+                @ on_unresolved.T
         self.refreshed = t
 
     def correction(self, reduced_mass: np.ndarray, t: float) -> ModalCorrection:
         """Delta M_r and D_u at the configuration of ``reduced_mass``, the resolved modes tracked from the last."""
         if t - self.refreshed >= REFRESH_INTERVAL - 0.5 * self.h:
             self.refresh(reduced_mass, t)
-        inverse = cho_solve(cho_factor(self.stiffness + SHIFT * reduced_mass), reduced_mass @ self.modes)
-        omega_squared, ritz = eigh(inverse.T @ self.stiffness @ inverse, inverse.T @ reduced_mass @ inverse)
-        self.modes = inverse @ ritz
+        iterate = cho_solve(cho_factor(self.stiffness + SHIFT * reduced_mass), reduced_mass @ self.modes)
+        omega_squared, ritz = eigh(iterate.T @ self.stiffness @ iterate, iterate.T @ reduced_mass @ iterate)
+        self.modes = iterate @ ritz
         on_resolved = reduced_mass @ self.modes
         half = 0.5 * np.sqrt(np.maximum(omega_squared, 0.0)) * self.h
         ratio = np.ones_like(half)
@@ -85,7 +90,7 @@ class Tracker:
             alpha = 2.0 * UNRESOLVED_DAMPING / self.cutoff
             damping = alpha * self.h * projector.T @ self.stiffness @ projector
         else:
-            damping = projector.T @ self.unresolved @ projector
+            damping = projector.T @ self.unresolved_damping @ projector
         return ModalCorrection(0.5 * (inertia + inertia.T), 0.5 * (damping + damping.T), t, self.h)
 
 
@@ -99,7 +104,7 @@ def run(variant: str, minutes: float, cutoff: float) -> None:
     """One variant over ``minutes`` of motion: the RMS and energy of its two windows, printed."""
     scenario = Scenario(load_config(), "flexible")
     q0, h = scenario.equilibrium.q, ONLINE_STEP
-    stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), h, every_row=False)
+    stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), h)  # every row: its energy
     stepper.integrator.cutoff = cutoff
     end = minutes * 60.0
     windows = ((5.0, 15.0), (end - 10.0, end))
@@ -117,7 +122,7 @@ def run(variant: str, minutes: float, cutoff: float) -> None:
         state, integrator = stepper.state, stepper.integrator
         tracker = Tracker(scenario, h, cutoff, spring=variant == "tracked-spring")
         samples: list[list[tuple[float, np.ndarray, float]]] = [[], []]
-        for k in range(1, round((end - TRACKING_FROM) / h) + 1):
+        for k in range(1, round((end + 1.0 - TRACKING_FROM) / h) + 1):
             state = dataclasses.replace(state, correction=tracker.correction(reduced_mass_at(state), state.t))
             state = integrator.step(state, TRACKING_FROM + k * h)
             for window, (a, b) in zip(samples, windows, strict=True):

@@ -16,5 +16,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 COMPILE_PID=$!
 bash scripts/check_colcon.sh
 wait "$COMPILE_PID"
-.venv/bin/python -m pytest -q -n auto --dist loadscope -m "not wall_clock" crane_reference
-.venv/bin/python -m pytest -q -m wall_clock crane_reference
+STATUS=0  # both parts run whatever the first's outcome
+.venv/bin/python -m pytest -q -n auto --dist loadscope -m "not wall_clock" crane_reference || STATUS=$?
+.venv/bin/python -m pytest -q -m wall_clock crane_reference || STATUS=$?
+exit "$STATUS"
