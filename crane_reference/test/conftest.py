@@ -96,8 +96,19 @@ def kernel_signatures() -> Callable[[], int]:
     return count
 
 
+@pytest.fixture(scope="session")
+def loaded_kernels() -> None:
+    """Every kernel the stream and the node use, loaded into this process once (``crane-reference compile``'s
+    warm-up on the cached code): loading one takes the GIL for a while, which the first test to compute a stream
+    beside a publishing node of the same process would otherwise do while the node must publish (the ROS tests
+    run in a fresh process of their own, see ``scripts/test.sh``)."""
+    from crane_reference.stream.warmup import warm_up
+
+    warm_up()
+
+
 @pytest.fixture
-def ros() -> Iterator:
+def ros(loaded_kernels: None) -> Iterator:
     """test_ros_node's Harness: the node under test and a probe node in one rclpy Context (ROS tests only)."""
     from test_ros_node import Harness
 

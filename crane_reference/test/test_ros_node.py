@@ -592,6 +592,8 @@ def test_atomic_ellipse_change_is_smooth_and_converges(ros: Harness) -> None:
     assert (report["target_ellipse_a_m"], report["target_ellipse_b_m"]) == ("3.3", "2.2")
     ros.wait_until_stamp(round(float(report["retarget_stamp_s"]) * NS) + round((blend + 0.3) * NS))
     data = ros.samples()
+    ros.wait_for(lambda: stamp_ns(ros.received["pose"][-1][1]) >= data["stamp"][-1],
+                 "the pose of the last joint states")  # published after them
     poses = {stamp_ns(m): m.pose.position for _, m in list(ros.received["pose"])}
 
     # The published motion is the stream's, re-targeted once at tau_change to both a and b (an independent
