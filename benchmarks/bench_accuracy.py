@@ -1,7 +1,7 @@
 """Accuracy of the integrator against converged runs; prints the figures the README and the closing notes quote.
 
     python benchmarks/bench_accuracy.py [--duration 10] [--cache results/bench_accuracy] [--hours 1]
-                                        [--rfe 6 3 12] [--cutoff 0.8] [--refresh 0.01]
+                                        [--rfe 6 3 12] [--cutoff 0.8] [--refresh 0.01] [--mode-tracking 0]
                                         [--only vibration growth long damped iterations matrix newton first-order
                                                 mechanism sensitivity slow reference drift]
 
@@ -44,8 +44,8 @@ The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simula
 12. [drift] (not by default) 60 s of the default crane at h = 0.5, 0.4, 0.3125, 0.3, 1/3500 s, 0.25 and 0.2 ms: E's
     largest distance over 10, 30 and 60 s from a converged run at 0.125 ms that resolves every mode (compared every
     6 ms, on the times both reach: every 30 ms at 0.3125 ms; its own distance from the cached DOP853 run over 10 s
-    printed first), for the integrator as it is, with the cutoff of the modes it resolves (``integration.CUTOFF``,
-    0.8 pi) lowered to 0.3 pi, and so with the converged Newton iteration.  0.3 ms is the one step whose grid misses
+    printed first), for the integrator as it is, so with the converged Newton iteration, and with the modes resolved
+    up to 0.8 pi and not tracked (the integrator before it tracked them).  0.3 ms is the one step whose grid misses
     the drive torque's end at t = 1 s (a cut step there, and a new step size twice).
 11. [slow] The controller-band error at the node's 0.5 ms (ONLINE_STEP) and at 1 ms, undamped
     and damped crane: the integrator with its modal correction computed every step, every 5 ms, every
@@ -469,14 +469,17 @@ DRIFT_STEPS = (0.5e-3, 0.4e-3, 0.3125e-3, 0.3e-3, 1 / 3500, 0.25e-3, 0.2e-3)
 
 
 def drift_run(scenario: Scenario, h: float, duration: float, cutoff: float | None = None,
-              converged: bool = False) -> tuple[np.ndarray, np.ndarray]:
+              converged: bool = False, mode_tracking: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """E's positions on the DRIFT_GRID times the steps reach over ``duration`` at step h (and their grid indices),
-    resolving modes below omega h = ``cutoff`` if given, with the converged Newton iteration if ``converged``."""
+    resolving modes below omega h = ``cutoff`` and tracking them every ``mode_tracking`` [s] if given, with the
+    converged Newton iteration if ``converged``."""
     q0 = scenario.equilibrium.q
     stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), h, every_row=False,
                             **({"tolerance": 1e-10} if converged else {}))
     if cutoff is not None:
         stepper.integrator.cutoff = cutoff
+    if mode_tracking is not None:
+        stepper.integrator.mode_tracking_interval = mode_tracking
     grid, positions = [], []
     while stepper.state.t < duration - 1e-9:
         rows = stepper.advance_until(min(stepper.state.t + 1.0, duration))
@@ -488,7 +491,8 @@ def drift_run(scenario: Scenario, h: float, duration: float, cutoff: float | Non
 
 
 DRIFT_REFERENCE_CUTOFF = 0.8 * math.pi
-"""[drift]: the 0.125 ms run resolves every mode of the default crane below 3.2 kHz, as DOP853 resolves every mode."""
+"""[drift]: the 0.125 ms run resolves every mode of the default crane below 3.2 kHz, as DOP853 resolves every mode (not
+tracked: its modal correction is computed afresh every REFRESH_INTERVAL)."""
 
 
 def drift_reference(scenario: Scenario, duration: float, cache: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -496,24 +500,28 @@ def drift_reference(scenario: Scenario, duration: float, cache: Path) -> tuple[n
     cached DOP853 run over that run's 10 s (errors(): raw and controller band)."""
     q0 = scenario.equilibrium.q
     stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), 0.125e-3, tolerance=1e-10)
-    stepper.integrator.cutoff = DRIFT_REFERENCE_CUTOFF
+    stepper.integrator.cutoff, stepper.integrator.mode_tracking_interval = DRIFT_REFERENCE_CUTOFF, math.inf
     check = Trajectory.from_rows("flexible", scenario.model.joint_names, scenario.model.drive_joint,
                                  stepper.advance_until(10.0))
     _, _, ee, ee_slow = errors(reference_run(scenario.params, 10.0, cache, "undamped"), check)
     print(f"[drift] the 0.125 ms run against DOP853 (rtol 1e-10) over 10 s: E {ee:.1e} m raw, {ee_slow:.1e} m in the "
           f"controller band", flush=True)
-    return drift_run(scenario, 0.125e-3, duration, cutoff=DRIFT_REFERENCE_CUTOFF, converged=True)
+    return drift_run(scenario, 0.125e-3, duration, cutoff=DRIFT_REFERENCE_CUTOFF, converged=True,
+                     mode_tracking=math.inf)
 
 
 def step_drift(params: CraneDescription, cache: Path, duration: float = 60.0) -> None:
     """[drift] E's largest distance over 10 / 30 / 60 s from the converged 0.125 ms run (:func:`drift_reference`), per
-    step of DRIFT_STEPS: the integrator as it is (online iteration), with the cutoff lowered to 0.3 pi, and so with
-    the converged iteration."""
+    step of DRIFT_STEPS: the integrator as it is (online iteration), so with the converged iteration, and with the
+    modes resolved up to DRIFT_REFERENCE_CUTOFF and not tracked (the integrator before it tracked them)."""
     scenario = Scenario(params, "flexible")
     reference_grid, reference = drift_reference(scenario, duration, cache)
-    variants = ((f"as it is (cutoff {integration.CUTOFF / math.pi:g} pi)", {}),
-                ("cutoff 0.3 pi", {"cutoff": 0.3 * math.pi}),
-                ("cutoff 0.3 pi, converged Newton", {"cutoff": 0.3 * math.pi, "converged": True}))
+    interval = integration.MODE_TRACKING_INTERVAL
+    tracked = f"tracked every {interval * 1e3:g} ms" if interval < math.inf else "not tracked"
+    variants = ((f"as it is (cutoff {integration.CUTOFF / math.pi:g} pi, modes {tracked})", {}),
+                ("as it is, converged Newton", {"converged": True}),
+                (f"cutoff {DRIFT_REFERENCE_CUTOFF / math.pi:g} pi, modes not tracked",
+                 {"cutoff": DRIFT_REFERENCE_CUTOFF, "mode_tracking": math.inf}))
     for h in DRIFT_STEPS:
         for name, variant in variants:
             start = time.perf_counter()
@@ -542,6 +550,8 @@ def main() -> None:
                         "instead of resolving it (default: integration.CUTOFF, 0.8)")
     parser.add_argument("--refresh", type=float, help="[s] of motion after which every integrator made computes its "
                         "modal correction again (default: integration.REFRESH_INTERVAL, 0.01)")
+    parser.add_argument("--mode-tracking", type=float, help="[s] of motion after which every integrator made tracks "
+                        "its resolved modes (0: every step; default: integration.MODE_TRACKING_INTERVAL)")
     parser.add_argument("--rfe", nargs="+", type=int, default=[6, 3, 12],
                         help="[vibration], [iterations]: the cranes' n_rfe")
     args = parser.parse_args()
@@ -549,6 +559,8 @@ def main() -> None:
         integration.CUTOFF = args.cutoff * math.pi  # what every integrator made from now on resolves below
     if args.refresh is not None:
         integration.REFRESH_INTERVAL = args.refresh
+    if args.mode_tracking is not None:
+        integration.MODE_TRACKING_INTERVAL = args.mode_tracking
     params = load_config()
     for section, run in (("vibration", lambda: vibration(params, args.duration, args.cache, tuple(args.rfe))),
                          ("growth", lambda: growth(params)),

@@ -2,6 +2,8 @@
 
 * The modal terms of a step: Delta M_r = M_r Phi diag(c) Phi^T M_r with the modes from scipy's generalized
   symmetric eigensolver and c from the exact-frequency formula, at the crane's reduced mass.
+* The modal terms tracked from one configuration to another (the resolved modes by subspace iteration and
+  Rayleigh-Ritz) against scipy's modes at the second, across a near-degenerate pair that turns.
 * The Newton iteration matrix at the step's first iterate against the Jacobian of the step's residual by
   central differences.
 * The modal correction's refresh: a change of the equation's coefficient, not a kick: the slow motion of
@@ -25,7 +27,7 @@ from scipy.linalg import eigh
 from scipy.signal import butter, sosfiltfilt
 from velocity_map import random_velocity_map
 
-from crane_reference.dynamics.modal_correction import iteration_factor, modal_correction
+from crane_reference.dynamics.modal_correction import iteration_factor, modal_correction, tracked_correction
 from crane_reference.dynamics.runs import integration_run
 from crane_reference.dynamics.step import first_iterate, predicted_accelerations, step_residual
 from crane_reference.dynamics.structures import ACCOUNTS, ModalCorrection, Partition
@@ -86,6 +88,57 @@ def test_modal_terms_are_the_exact_frequency_correction_of_scipys_modes(scenario
     for computed, per_mode in ((terms.inertia, c), (terms.damping, e)):
         expected = reduced_mass @ phi @ np.diag(per_mode) @ phi.T @ reduced_mass
         assert np.max(np.abs(computed - expected)) <= 1e-9 * np.max(np.abs(expected))
+
+
+def test_tracked_modes_follow_scipys_across_a_rotating_near_degenerate_pair(scenario):
+    """The default crane at h = 0.5 ms with the modes below omega h = 0.8 pi resolved, at t = 2.405 s and 5 ms
+    later (configurations a and b), where the 448.5 / 449.2 Hz pair turns within its plane by 0.3 rad (scipy's
+    modes).  The resolved modes of the modal terms at a tracked to b (``tracked_correction`` at b's M_r, repeated:
+    a subspace iteration) reach scipy's modes at b: Delta M_r = M_r Phi_r diag(c) Phi_r^T M_r to 1e-9, with c
+    of each mode of the pair its own (the Rayleigh-Ritz step turns the pair); the damping is a's unresolved
+    modes' D_u (scipy's modes at a) projected off b's resolved ones, P^T D_u P with P = I - Phi_r Phi_r^T M_r, so
+    it damps none of them; and a single tracking from a to b brings Delta M_r 10 times closer to scipy's at b
+    than a's was."""
+    motion, q0, h = scenario.motion, scenario.equilibrium.q, 5e-4
+    stepper = MotionStepper(motion, 0.0, q0, np.zeros_like(q0), h)
+    states = []
+    for t in (2.405, 2.41):
+        stepper.advance_until(t)
+        states.append(stepper.state)
+    settings = stepper.integrator.settings._replace(cutoff=0.8 * np.pi)
+    drive, partition, chain = motion.dynamics.drive.kernel_parameters(2.4), motion.partition, motion.dynamics.chain
+    independent = list(partition.independent)
+    stiffness = chain.stiffness[np.ix_(independent, independent)].copy()
+    stiffness[independent.index(chain.drive_joint), independent.index(chain.drive_joint)] += drive[1]
+    scipy_modes, masses = [], []
+    for state in states:
+        B = state.solution.velocity_map
+        masses.append(B.T @ state.solution.dynamics.M @ B)
+        omega_squared, phi = eigh(stiffness, masses[-1])
+        scipy_modes.append((np.sqrt(np.maximum(omega_squared, 0.0)), phi))
+    (omega_a, phi_a), (omega_b, phi_b) = scipy_modes
+    resolved = int(np.sum(omega_b * h < settings.cutoff))
+    pair = int(np.argmin(np.abs(omega_b / (2.0 * np.pi) - 448.9)))
+    assert resolved == int(np.sum(omega_a * h < settings.cutoff)) and pair + 1 < resolved
+    assert np.arccos(abs(phi_a[:, pair] @ masses[1] @ phi_b[:, pair])) > 0.25  # the pair turns
+    half = 0.5 * omega_b[:resolved] * h
+    ratio = np.ones_like(half)
+    ratio[half > 0.0] = half[half > 0.0] / np.tan(half[half > 0.0])
+    on_b = masses[1] @ phi_b[:, :resolved]
+    expected_inertia = on_b @ np.diag(1.0 - ratio**2) @ on_b.T
+    on_unresolved_a = masses[0] @ phi_a[:, resolved:]
+    projector = np.eye(len(independent)) - phi_b[:, :resolved] @ on_b.T
+    expected_damping = projector.T @ on_unresolved_a @ np.diag(2.0 * UNRESOLVED_DAMPING * omega_a[resolved:]) \
+        @ on_unresolved_a.T @ projector
+    at_a = modal_correction(masses[0], h, 0.0, drive, partition, chain, settings)
+    assert at_a.resolved == resolved
+    tracked = tracked_correction(masses[1], at_a, states[1].t, drive, partition, chain)
+    scale = np.abs(expected_inertia).max()
+    assert np.abs(tracked.inertia - expected_inertia).max() <= 0.1 * np.abs(at_a.inertia - expected_inertia).max()
+    for _ in range(40):
+        tracked = tracked_correction(masses[1], tracked, states[1].t, drive, partition, chain)
+    assert np.abs(tracked.inertia - expected_inertia).max() <= 1e-9 * scale
+    assert np.abs(tracked.damping - expected_damping).max() <= 1e-9 * np.abs(expected_damping).max()
 
 
 def test_the_slow_motion_does_not_depend_on_the_refresh_cadence(scenario):
@@ -219,7 +272,8 @@ def test_the_iteration_matrix_is_the_dense_formula(scenario, servo):
         P = np.eye(n)[:, independent] if servo else B
         expected = P.T @ (M + 0.25 * STEP**2 * stiffness + 0.5 * STEP * chain.damping) @ B - inertia \
             + 0.5 * STEP * damping
-        factor = iteration_factor(M, B, STEP, ModalCorrection(inertia, damping, 0.0, STEP), drive,
+        factor = iteration_factor(M, B, STEP, ModalCorrection(inertia, damping, np.zeros((n_ic, n_ic)), 0,
+                                                                  np.zeros((n_ic, n_ic)), 0.0, STEP, 0.0), drive,
                                           Partition(independent, dependent, independent, dependent, servo), chain)
         matrix = np.linalg.inv(factor) if servo else factor @ factor.T
         np.testing.assert_allclose(matrix, expected, rtol=1e-11, atol=1e-11 * np.abs(expected).max())

@@ -19,7 +19,7 @@ from numba import njit
 from .deflection import deflection_at
 from .evaluation import forces_jumped, step_evaluation
 from .kinematics import quaternion
-from .modal_correction import corrected_accelerations
+from .modal_correction import corrected_accelerations, no_correction
 from .step import integration_step
 from .structures import (
     ACCOUNTS,
@@ -94,7 +94,7 @@ def closed_loop_run(q, qd, start_terms: Accelerations, correction: ModalCorrecti
     rows = LoopRows(np.empty((S + 1, n)), np.empty((S + 1, n)), np.empty((S + 1, n)), np.empty((S + 1, n)),
                     np.empty((S + 1, len(ACCOUNTS))), np.empty((S + 1, 3)), np.empty((S + 1, 3)),
                     np.empty((S + 1, 3, 3)), np.empty((S + 1, 3)), np.empty((S + 1, na)))
-    fresh = ModalCorrection(np.zeros_like(correction.inertia), np.zeros_like(correction.damping), -np.inf, 0.0)
+    fresh = no_correction(correction.inertia.shape[0])
     work, t, done = work.copy(), t0, 0
     earlier = np.full((2, partition.integrated.size), np.nan)
     command = np.zeros((2, na))
@@ -171,7 +171,8 @@ def held_period(carry: PlantCarry, end, start_step, end_step, steps: PlannedStep
     na, s0, s1 = plant.actuated.size, start_step, end_step
     zeros, held = np.zeros(na), np.empty((2, na))
     held[0], held[1] = efforts, efforts  # the feedforward at the period's start and at the next one's
-    correction = ModalCorrection(carry.inertia, carry.damping, carry.modal[0], carry.modal[1])
+    correction = ModalCorrection(carry.inertia, carry.damping, carry.modes, int(carry.modal[2]), carry.unresolved,
+                                 carry.modal[0], carry.modal[1], carry.modal[3])
     empty = np.empty(0)  # Q and qdd: not read
     terms = Accelerations(carry.M, carry.h, empty, carry.gravity_forces, carry.gravity_potential[0],
                           carry.ee_position, carry.ee_rotation, carry.ee_jacobian, carry.ee_bias, carry.A, carry.c,
@@ -189,7 +190,9 @@ def held_period(carry: PlantCarry, end, start_step, end_step, steps: PlannedStep
     carry.clock[0] = run.t
     carry.q[:], carry.qd[:], carry.work[:] = rows.q[-1], rows.qd[-1], rows.work[-1]
     carry.inertia[:], carry.damping[:] = run.correction.inertia, run.correction.damping
+    carry.modes[:], carry.unresolved[:] = run.correction.modes, run.correction.unresolved
     carry.modal[0], carry.modal[1] = run.correction.time, run.correction.step
+    carry.modal[2], carry.modal[3] = run.correction.resolved, run.correction.tracked
     carry.M[:], carry.h[:], carry.gravity_forces[:] = terms.M, terms.h, terms.gravity_forces
     carry.gravity_potential[0] = terms.gravity_potential
     carry.ee_position[:], carry.ee_rotation[:] = terms.ee_position, terms.ee_rotation
@@ -219,7 +222,9 @@ def plant_carry(t, q, qd, work, correction: ModalCorrection, terms: Acceleration
     ``correction``, the evaluation's ``terms`` there and the actuator ``torques`` (n_a,) [N m or N] (copies of
     them all)."""
     return PlantCarry(np.array([t]), q.copy(), qd.copy(), work.copy(), correction.inertia.copy(),
-                      correction.damping.copy(), np.array([correction.time, correction.step]), terms.M.copy(),
+                      correction.damping.copy(), correction.modes.copy(), correction.unresolved.copy(),
+                      np.array([correction.time, correction.step, correction.resolved, correction.tracked]),
+                      terms.M.copy(),
                       terms.h.copy(), terms.gravity_forces.copy(), np.array([terms.gravity_potential]),
                       np.array(terms.ee_position, dtype=float), np.array(terms.ee_rotation, dtype=float),
                       terms.ee_jacobian.copy(), terms.ee_bias.copy(), terms.A.copy(), terms.c.copy(),

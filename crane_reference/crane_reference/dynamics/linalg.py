@@ -131,6 +131,44 @@ def cholesky_solve(L, b):
 
 
 @njit(cache=True, nogil=True)
+def lower_inverse(L):
+    """L^-1 of a lower-triangular L (forward substitution on the identity's columns)."""
+    n = L.shape[0]
+    out = np.zeros((n, n))
+    for j in range(n):
+        out[j, j] = 1.0 / L[j, j]
+        for i in range(j + 1, n):
+            total = 0.0
+            for k in range(j, i):
+                total -= L[i, k] * out[k, j]
+            out[i, j] = total / L[i, i]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def cholesky_solve_columns(L, B):
+    """X with L L^T X = B for the columns of B (n, k) (L lower triangular; rows at a time, so the columns vectorize)."""
+    n, k = B.shape
+    Y = np.empty((n, k))
+    for i in range(n):
+        row = B[i].copy()
+        for j in range(i):
+            weight = L[i, j]
+            for m in range(k):
+                row[m] -= weight * Y[j, m]
+        Y[i] = row / L[i, i]
+    X = np.empty((n, k))
+    for i in range(n - 1, -1, -1):
+        row = Y[i].copy()
+        for j in range(i + 1, n):
+            weight = L[j, i]
+            for m in range(k):
+                row[m] -= weight * X[j, m]
+        X[i] = row / L[i, i]
+    return X
+
+
+@njit(cache=True, nogil=True)
 def smallest_singular_value(K):
     """Smallest singular value of a square matrix (closed form for 2 x 2, the paper's K_dc; inf for an empty
     one: no constraints, nothing that could become singular)."""
@@ -201,3 +239,52 @@ def map_columns(Y, B, independent, dependent):
                 total += Y[i, dependent[r]] * B[dependent[r], j]
             out[i, j] = total
     return out
+
+
+@njit(cache=True, nogil=True)
+def jacobi_eigh(A, tolerance=1e-15, max_sweeps=30):
+    """Eigenvalues (ascending) and orthonormal eigenvectors (columns) of a small symmetric A by cyclic Jacobi
+    rotations (Golub and Van Loan, Algorithm 8.5.3): quadratically convergent, and from a nearly diagonal A one or
+    two sweeps; without LAPACK's call overhead, which dominates for the r x r problems of a tracked basis.  Sweeps
+    until the off-diagonal norm is at most ``tolerance`` times the Frobenius norm."""
+    n = A.shape[0]
+    a = A.copy()
+    V = np.eye(n)
+    total = 0.0
+    for i in range(n):
+        for j in range(n):
+            total += a[i, j] * a[i, j]
+    bound = tolerance * tolerance * total
+    for _ in range(max_sweeps):
+        off = 0.0
+        for i in range(n):
+            for j in range(i + 1, n):
+                off += 2.0 * a[i, j] * a[i, j]
+        if off <= bound:
+            break
+        for p in range(n - 1):
+            for q in range(p + 1, n):
+                apq = a[p, q]
+                if abs(apq) <= 1e-18 * (abs(a[p, p]) + abs(a[q, q])):  # below round-off of both diagonals
+                    continue
+                tau = (a[q, q] - a[p, p]) / (2.0 * apq)
+                t = (1.0 if tau >= 0.0 else -1.0) / (abs(tau) + np.sqrt(1.0 + tau * tau))
+                c = 1.0 / np.sqrt(1.0 + t * t)
+                s = t * c
+                for k in range(n):  # A <- A J (columns p, q)
+                    akp, akq = a[k, p], a[k, q]
+                    a[k, p], a[k, q] = c * akp - s * akq, s * akp + c * akq
+                for k in range(n):  # A <- J^T A (rows p, q)
+                    apk, aqk = a[p, k], a[q, k]
+                    a[p, k], a[q, k] = c * apk - s * aqk, s * apk + c * aqk
+                for k in range(n):
+                    vkp, vkq = V[k, p], V[k, q]
+                    V[k, p], V[k, q] = c * vkp - s * vkq, s * vkp + c * vkq
+    values = np.empty(n)
+    for i in range(n):
+        values[i] = a[i, i]
+    order = np.argsort(values)
+    vectors = np.empty((n, n))
+    for j in range(n):
+        vectors[:, j] = V[:, order[j]]
+    return values[order], vectors

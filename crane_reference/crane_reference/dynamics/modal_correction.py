@@ -6,7 +6,17 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .linalg import cholesky, cholesky_solve, congruent, map_columns, matvec, project_rows
+from .linalg import (
+    cholesky,
+    cholesky_solve,
+    cholesky_solve_columns,
+    congruent,
+    jacobi_eigh,
+    lower_inverse,
+    map_columns,
+    matvec,
+    project_rows,
+)
 from .structures import ChainData, ModalCorrection, Partition, StepSettings
 
 
@@ -27,51 +37,59 @@ def _congruence(X, weights):
 
 
 @njit(cache=True, nogil=True)
-def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: ChainData, settings: StepSettings):
-    """The modal terms of the step h at a configuration of reduced mass M_r = B^T M B (see
-    :mod:`crane_reference.motion.integration`).  The springs act on independent coordinates only, so the
-    reduced stiffness K_r = K[ic, ic] (plus the drive's spring on psi2) is constant; with M_r = L L^T the
-    modes K_r phi = omega^2 M_r phi, Phi^T M_r Phi = I, are Phi = L^-T V with the
-    eigenvectors V of L^-1 K_r L^-T.  A mode with omega h below ``settings.cutoff`` gets the inertia and
-    damping corrections c and e that map its roots lambda of lambda^2 + d lambda + omega^2 (d = phi^T D_r phi,
-    the physical modal damping) exactly: the trapezoidal rule on (1 - c) a + (d + e) v + omega^2 x has the
-    roots lambda_hat = (2 / h) tanh(lambda h / 2), so 1 - c = omega^2 / (lambda_hat_1 lambda_hat_2) and
-    d + e = -(1 - c) (lambda_hat_1 + lambda_hat_2) (undamped: c = 1 - ((omega h / 2) / tan(omega h / 2))^2,
-    e = 0); a mode at or above the cutoff gets the damping e = 2 zeta omega.  In the independent coordinates
-    Delta M_r = M_r Phi diag(c) Phi^T M_r = (L V) diag(c) (L V)^T and likewise D_u with e (neither acts on a
-    motion no spring resists: Phi^T M_r = diag(omega^-2) Phi^T K_r).  Servo-constraints (P = E_ic: no
-    symmetric reduced mass) get none, and so does the plain trapezoidal rule (``settings.modal`` False)."""
+def no_correction(n_ic):
+    """No modal correction yet (time -inf): the next step computes it."""
+    zeros = np.zeros((n_ic, n_ic))
+    return ModalCorrection(zeros, zeros.copy(), zeros.copy(), 0, zeros.copy(), -np.inf, 0.0, -np.inf)
+
+
+SHIFT = 1.0
+"""[rad^2/s^2]: :func:`tracked_correction` iterates with K_r + SHIFT M_r, positive definite although no spring
+resists the slew (a mode of zero frequency)."""
+
+
+@njit(cache=True, nogil=True)
+def reduced_stiffness(drive, partition: Partition, chain: ChainData):
+    """K_r = K[ic, ic] plus the drive's spring s_dr (``drive[1]``) on psi2: the springs act on independent
+    coordinates only, so K_r is constant."""
     independent = partition.independent
     n_ic = independent.size
-    if partition.servo or not settings.modal:
-        return ModalCorrection(np.zeros((n_ic, n_ic)), np.zeros((n_ic, n_ic)), t, h)
-    L = cholesky(reduced_mass)
     stiffness = np.empty((n_ic, n_ic))
     for i in range(n_ic):
         for j in range(n_ic):
             stiffness[i, j] = chain.stiffness[independent[i], independent[j]]
         if independent[i] == chain.drive_joint:
             stiffness[i, i] += drive[1]
-    L_inverse = np.linalg.inv(L)
-    omega_squared, V = np.linalg.eigh(L_inverse @ stiffness @ L_inverse.T)
-    LV = L @ V  # M_r Phi = L V
-    modal_damping = np.zeros(n_ic)
-    if chain.damped:
-        physical = np.empty((n_ic, n_ic))
+    return stiffness
+
+
+@njit(cache=True, nogil=True)
+def _modal_damping(modes, count, partition: Partition, chain: ChainData):
+    """d_i = phi_i^T D_r phi_i of the first ``count`` columns phi_i of ``modes`` (D_r = D[ic, ic]; zeros for an
+    undamped chain)."""
+    independent = partition.independent
+    n_ic = independent.size
+    out = np.zeros(count)
+    if not chain.damped:
+        return out
+    for m in range(count):
+        total = 0.0
         for i in range(n_ic):
             for j in range(n_ic):
-                physical[i, j] = chain.damping[independent[i], independent[j]]
-        modes = np.ascontiguousarray((L_inverse.T @ V).T)  # row i: phi_i
-        for i in range(n_ic):
-            modal_damping[i] = modes[i] @ (physical @ modes[i])
-    c = np.zeros(n_ic)
-    d = np.zeros(n_ic)
-    for i in range(n_ic):
+                total += modes[i, m] * chain.damping[independent[i], independent[j]] * modes[j, m]
+        out[m] = total
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _resolved_terms(omega_squared, modal_damping, h):
+    """The inertia and damping corrections c and e of resolved modes of squared frequencies omega^2 and physical
+    modal damping d (see :func:`modal_correction`): the trapezoidal rule on (1 - c) a + (d + e) v + omega^2 x has
+    the roots exp(lambda h) of lambda^2 + d lambda + omega^2 (zero for a mode no spring resists)."""
+    c = np.zeros(omega_squared.size)
+    e = np.zeros(omega_squared.size)
+    for i in range(omega_squared.size):
         k = max(omega_squared[i], 0.0)
-        omega = np.sqrt(k)
-        if omega * h >= settings.cutoff:
-            d[i] = 2.0 * settings.unresolved_damping * omega
-            continue
         root = np.sqrt(complex(modal_damping[i] ** 2 - 4.0 * k))
         second = 0.5 * (-modal_damping[i] - root)
         if abs(second * h) < 1e-6:
@@ -81,8 +99,117 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
         product = (mapped_first * mapped_second).real
         mass = k / product if product != 0.0 else 1.0
         c[i] = 1.0 - mass
-        d[i] = -mass * (mapped_first + mapped_second).real - modal_damping[i]
-    return ModalCorrection(_congruence(LV, c), _congruence(LV, d), t, h)
+        e[i] = -mass * (mapped_first + mapped_second).real - modal_damping[i]
+    return c, e
+
+
+@njit(cache=True, nogil=True)
+def _generalized_modes(stiffness, mass):
+    """The modes of the pencil (K, M) (symmetric, M positive definite): omega^2 ascending and Phi with
+    Phi^T M Phi = I, as Phi = L^-T V with M = L L^T and V the eigenvectors of L^-1 K L^-T; also L V = M Phi."""
+    L = cholesky(mass)
+    L_inverse = np.linalg.inv(L)
+    reduced = L_inverse @ stiffness @ L_inverse.T
+    omega_squared, V = np.linalg.eigh(0.5 * (reduced + reduced.T))
+    return omega_squared, L_inverse.T @ V, L @ V
+
+
+@njit(cache=True, nogil=True)
+def _symmetric(A):
+    """(A + A^T) / 2."""
+    return 0.5 * (A + A.T)
+
+
+@njit(cache=True, nogil=True)
+def _gram(X):
+    """X X^T, symmetric to the last bit (loops: the columns are few)."""
+    n = X.shape[0]
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            total = 0.0
+            for m in range(X.shape[1]):
+                total += X[i, m] * X[j, m]
+            out[i, j] = total
+            out[j, i] = total
+    return out
+
+
+@njit(cache=True, nogil=True)
+def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: ChainData, settings: StepSettings):
+    """The modal terms of the step h at a configuration of reduced mass M_r = B^T M B (see
+    :mod:`crane_reference.motion.integration`), from the full eigenproblem K_r phi = omega^2 M_r phi,
+    Phi^T M_r Phi = I (K_r :func:`reduced_stiffness`).  A mode with omega h below ``settings.cutoff`` gets the
+    inertia and damping corrections c and e that map its roots lambda of lambda^2 + d lambda + omega^2
+    (d = phi^T D_r phi, the physical modal damping) exactly: the trapezoidal rule on (1 - c) a + (d + e) v +
+    omega^2 x has the roots lambda_hat = (2 / h) tanh(lambda h / 2), so 1 - c = omega^2 / (lambda_hat_1
+    lambda_hat_2) and d + e = -(1 - c) (lambda_hat_1 + lambda_hat_2) (undamped: c = 1 - ((omega h / 2) /
+    tan(omega h / 2))^2, e = 0); a mode at or above the cutoff gets the damping e = 2 zeta omega.  In the
+    independent coordinates Delta M_r = M_r Phi diag(c) Phi^T M_r and likewise D_u with e (neither acts on a
+    motion no spring resists: Phi^T M_r = diag(omega^-2) Phi^T K_r); the unresolved modes' part of D_u is kept
+    as its factor G = M_r Phi_u diag(sqrt(e_u)) (D_u's part G G^T) for :func:`tracked_correction`.
+    Servo-constraints (P = E_ic: no symmetric reduced mass) get none, and so does the plain trapezoidal rule
+    (``settings.modal`` False)."""
+    n_ic = partition.independent.size
+    zeros = np.zeros((n_ic, n_ic))
+    if partition.servo or not settings.modal:
+        return ModalCorrection(zeros, zeros.copy(), zeros.copy(), 0, zeros.copy(), t, h, t)
+    omega_squared, modes, on_modes = _generalized_modes(reduced_stiffness(drive, partition, chain), reduced_mass)
+    resolved = 0
+    while resolved < n_ic and np.sqrt(max(omega_squared[resolved], 0.0)) * h < settings.cutoff:
+        resolved += 1
+    c, e = _resolved_terms(omega_squared[:resolved], _modal_damping(modes, resolved, partition, chain), h)
+    unresolved = zeros.copy()
+    for j in range(resolved, n_ic):
+        weight = np.sqrt(2.0 * settings.unresolved_damping * np.sqrt(max(omega_squared[j], 0.0)))
+        for i in range(n_ic):
+            unresolved[i, j] = on_modes[i, j] * weight
+    on_resolved = np.ascontiguousarray(on_modes[:, :resolved])
+    return ModalCorrection(_congruence(on_resolved, c), _congruence(on_resolved, e) + _gram(unresolved), modes,
+                           resolved, unresolved, t, h, t)
+
+
+@njit(cache=True, nogil=True)
+def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, partition: Partition, chain: ChainData):
+    """``correction`` carried to the configuration of ``reduced_mass`` by tracking its resolved modes Phi_r: one
+    shift-inverted subspace iteration from them, X = (K_r + s M_r)^-1 M_r Phi_r (s = :data:`SHIFT`), and the
+    Rayleigh-Ritz step on X (the modes of the pencil (X^T K_r X, X^T M_r X), by Jacobi rotations: it is nearly
+    diagonal) give the new Phi_r; Delta M_r and the resolved modes' damping follow from them as in
+    :func:`modal_correction`, and the unresolved modes' damping of the last full eigenproblem, G G^T, is projected
+    off them, P^T G G^T P with P = I - Phi_r Phi_r^T M_r, so that it damps no resolved mode (a stale D_u otherwise
+    damps a resolved mode psi by sum_u e_u (phi_u^T M_r psi)^2).  The modes stay resolved, and their number stays,
+    until the next full eigenproblem (``time`` is its; ``tracked`` becomes t)."""
+    r = correction.resolved
+    if r == 0:
+        return correction
+    n, h = reduced_mass.shape[0], correction.step
+    stiffness = reduced_stiffness(drive, partition, chain)
+    driving = reduced_mass @ np.ascontiguousarray(correction.modes[:, :r])
+    X = cholesky_solve_columns(cholesky(stiffness + SHIFT * reduced_mass), driving)
+    MX = reduced_mass @ X
+    KX = np.empty((n, r))  # K_r X = M_r Phi_r - s M_r X
+    for m in range(r):  # each column scaled to M_r-norm 1
+        norm = 0.0
+        for i in range(n):
+            norm += X[i, m] * MX[i, m]
+        scale = 1.0 / np.sqrt(norm)
+        for i in range(n):
+            KX[i, m] = (driving[i, m] - SHIFT * MX[i, m]) * scale
+            X[i, m] *= scale
+            MX[i, m] *= scale
+    inverse = lower_inverse(cholesky(_symmetric(X.T @ MX)))  # X^T M_r X = L L^T: the Ritz vectors X L^-T W
+    omega_squared, W = jacobi_eigh(_symmetric(inverse @ (X.T @ KX) @ inverse.T))
+    rotation = inverse.T @ W
+    tracked, on_resolved = X @ rotation, MX @ rotation
+    modes = correction.modes.copy()
+    modes[:, :r] = tracked
+    c, e = _resolved_terms(omega_squared, _modal_damping(tracked, r, partition, chain), h)
+    G = np.ascontiguousarray(correction.unresolved[:, r:])  # P^T G = G - M_r Phi_r (Phi_r^T G)
+    damping = _gram(G - on_resolved @ (tracked.T @ G))
+    if np.any(e != 0.0):
+        damping += _congruence(on_resolved, e)
+    return ModalCorrection(_congruence(on_resolved, c), damping, modes, r, correction.unresolved, correction.time, h,
+                           t)
 
 
 @njit(cache=True, nogil=True)

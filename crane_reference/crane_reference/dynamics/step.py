@@ -10,7 +10,13 @@ from .evaluation import accelerations_from, imbalance_from_terms
 from .inertia import composite_inertias, mass_matrix, world_pseudo_inertias
 from .kinematics import forward_kinematics, point_bias, point_jacobian, velocity_terms
 from .linalg import cholesky_solve, larger_magnitude, matvec, project_rows, smallest_singular_value
-from .modal_correction import converted_accelerations, iteration_factor, modal_correction, reduced_mass_matrix
+from .modal_correction import (
+    converted_accelerations,
+    iteration_factor,
+    modal_correction,
+    reduced_mass_matrix,
+    tracked_correction,
+)
 from .projection import PROJECTION_ITERATIONS, constraint_map, dependent_velocities, project_positions
 from .quadrics import acceleration_terms
 from .structures import (
@@ -122,21 +128,33 @@ def _unsolved(it: TrialState, a1):
 
 
 @njit(cache=True, nogil=True, inline='always')
-def _step_residual_at(it: TrialState, a1, correction: ModalCorrection, k: Coefficients, drive, partition: Partition,
-                      chain: ChainData):
-    """The residual of the step's equation, P^T (M qdd + h - Q) - Delta M_r a1_ic + D_u v_ic, at an iterate for
-    the accelerations a1 (:func:`newton_residual` plus the modal terms); also qdd, B and the world
-    pseudo-inertias Hw there."""
-    n_ic = partition.independent.size
+def _plain_residual_at(it: TrialState, a1, k: Coefficients, drive, partition: Partition, chain: ChainData):
+    """:func:`newton_residual` at an iterate for the accelerations a1, P^T (M qdd + h - Q) without the modal
+    terms; also qdd, B and the world pseudo-inertias Hw there."""
     Hw = world_pseudo_inertias(it.T, chain.body_joint, chain.body_H)
     qdd, residual, B = newton_residual(it.q, it.qd, a1, it.T, it.S, Hw, it.ee_position, it.ee_jacobian, k, drive,
                                        partition, chain)
-    independent, qd, damping, inertia = partition.independent, it.qd, correction.damping, correction.inertia
-    for i in range(n_ic):
+    return qdd, residual, B, Hw
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _add_modal_terms(residual, qd, a1, correction: ModalCorrection, partition: Partition):
+    """residual += D_u v_ic - Delta M_r a1_ic, the modal terms of the step's equation (in place)."""
+    independent, damping, inertia = partition.independent, correction.damping, correction.inertia
+    for i in range(independent.size):
         total = 0.0
-        for j in range(n_ic):
+        for j in range(independent.size):
             total += damping[i, j] * qd[independent[j]] - inertia[i, j] * a1[j]
         residual[i] += total
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _step_residual_at(it: TrialState, a1, correction: ModalCorrection, k: Coefficients, drive, partition: Partition,
+                      chain: ChainData):
+    """The residual of the step's equation, P^T (M qdd + h - Q) - Delta M_r a1_ic + D_u v_ic, at an iterate for
+    the accelerations a1; also qdd, B and the world pseudo-inertias Hw there."""
+    qdd, residual, B, Hw = _plain_residual_at(it, a1, k, drive, partition, chain)
+    _add_modal_terms(residual, it.qd, a1, correction, partition)
     return qdd, residual, B, Hw
 
 
@@ -204,7 +222,9 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
     M).
 
     The modal correction is computed again from M at q0 and B0 (:func:`modal_correction`) at the step nearest
-    ``settings.refresh_interval`` after the one in use was, and for another step size.  It is a coefficient
+    ``settings.refresh_interval`` after the one in use was, and for another step size; between, its resolved modes
+    are carried to the configuration of the first iterate (:func:`tracked_correction` with its M and B, before its
+    residual) at the step nearest ``settings.mode_tracking_interval`` after they last were.  It is a coefficient
     of the equation that follows the configuration: the step's end is solved with the new one, its start
     keeps the accelerations of the old one (Delta M_r piecewise constant in time, as the trapezoidal rule
     treats any coefficient; converting them would act on the slow motion's accelerations as on free
@@ -231,8 +251,12 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
     it = first_iterate(q0, qd0, qdd0, a0, a1, h, k, partition, chain, settings)
     if not it.solved:
         return _failed(q0, qd0, qdd0, B0, earlier, correction, _unsolved(it, a1), 1)
-    qdd, residual, B, Hw = _step_residual_at(it, a1, correction, k, drive, partition, chain)
+    qdd, residual, B, Hw = _plain_residual_at(it, a1, k, drive, partition, chain)
     M = mass_at(it.S, Hw, chain)
+    if t0 - correction.tracked >= settings.mode_tracking_interval - 0.5 * h:
+        correction = tracked_correction(reduced_mass_matrix(M, B, partition), correction, t0, drive, partition,
+                                        chain)
+    _add_modal_terms(residual, it.qd, a1, correction, partition)
     factor = iteration_factor(M, B, h, correction, drive, partition, chain)
     q1 = it.q
     status = NOT_CONVERGED

@@ -69,8 +69,10 @@ class StepSettings(NamedTuple):
     m/s], at most ``max_iterations``; ``projection_tolerance`` [rad] of Newton on the position constraints;
     the modal correction is computed again after ``refresh_interval`` [s] of motion (and for a new step
     size); modes with omega h at or above ``cutoff`` [rad] are not resolved by the step and get the damping
-    ratio ``unresolved_damping``; without ``modal`` there is no modal correction (the plain trapezoidal rule,
-    for comparison)."""
+    ratio ``unresolved_damping``; between, the resolved modes are tracked to the configuration after every
+    ``mode_tracking_interval`` [s] of motion (:func:`~crane_reference.dynamics.modal_correction.tracked_correction`;
+    0: every step, inf: never); without ``modal`` there is no modal correction (the plain trapezoidal rule, for
+    comparison)."""
 
     evaluations: int
     tolerance: float
@@ -79,6 +81,7 @@ class StepSettings(NamedTuple):
     refresh_interval: float
     cutoff: float
     unresolved_damping: float
+    mode_tracking_interval: float
     modal: bool
 
 
@@ -87,12 +90,21 @@ class ModalCorrection(NamedTuple):
     for the step ``step`` [s] (see :func:`crane_reference.dynamics.modal_correction.modal_correction`): ``inertia``
     Delta M_r, removed from the reduced mass so that the trapezoidal rule turns each resolved mode by
     exactly omega h per step, and ``damping`` D_u, which gives each resolved mode its exact decay per step
-    and damps the modes the step does not resolve."""
+    and damps the modes the step does not resolve; ``modes`` (n_ic, n_ic), whose first ``resolved`` columns are
+    the resolved modes Phi_r (Phi_r^T M_r Phi_r = I, ascending in frequency) at the configuration of the terms,
+    and ``unresolved`` D_u of the last full eigenproblem on its unresolved modes, which
+    :func:`~crane_reference.dynamics.modal_correction.tracked_correction` projects off the tracked ones, as its
+    factor G (columns ``resolved`` on; D_u = G G^T); ``tracked`` [s], when the modes were last tracked or
+    computed."""
 
     inertia: np.ndarray
     damping: np.ndarray
+    modes: np.ndarray
+    resolved: int
+    unresolved: np.ndarray
     time: float
     step: float
+    tracked: float
 
 
 class ChainTerms(NamedTuple):
@@ -394,13 +406,14 @@ class LinkTip(NamedTuple):
 class PlantCarry(NamedTuple):
     """The actuated plant's state carried from one control period to the next in arrays that
     :func:`~.closed_loop.held_period` updates in place: the time ``clock`` (1,) [s], q and qd, the work accounts
-    (3,) [J], the modal correction (:class:`ModalCorrection`: ``inertia``, ``damping``, ``modal`` (2,) its time
-    and step [s]); the position and velocity terms of the evaluation at the last step's end, on which (8) is
-    solved again as the next period's command makes the forces jump (those of :class:`Accelerations` but Q and
-    qdd: M, h, Q_g, the ``gravity_potential`` (1,) [J], E's position (3,) [m] and rotation (3, 3) in the world
-    frame, C, d, A, c and B); and beside q and qd what the plant reports: the actuator ``torques`` (n_a,) [N m or
-    N] at the period's end, E's ``ee_quaternion`` (x, y, z, w) in the world frame and the tip ``deflection``
-    (3,) [m] (:func:`~.deflection.deflection_at`)."""
+    (3,) [J], the modal correction (:class:`ModalCorrection`: ``inertia``, ``damping``, ``modes``, ``unresolved``,
+    ``modal`` (4,) its time and step [s], the number of resolved modes and when they were tracked [s]); the position
+    and velocity terms of the evaluation at the last step's end, on which (8) is solved again as the next period's
+    command makes the forces jump (those of :class:`Accelerations` but Q and qdd: M, h, Q_g, the
+    ``gravity_potential`` (1,) [J], E's position (3,) [m] and rotation (3, 3) in the world frame, C, d, A, c and B);
+    and beside q and qd what the plant reports: the actuator ``torques`` (n_a,) [N m or N] at the period's end, E's
+    ``ee_quaternion`` (x, y, z, w) in the world frame and the tip ``deflection`` (3,) [m]
+    (:func:`~.deflection.deflection_at`)."""
 
     clock: np.ndarray
     q: np.ndarray
@@ -408,6 +421,8 @@ class PlantCarry(NamedTuple):
     work: np.ndarray
     inertia: np.ndarray
     damping: np.ndarray
+    modes: np.ndarray
+    unresolved: np.ndarray
     modal: np.ndarray
     M: np.ndarray
     h: np.ndarray

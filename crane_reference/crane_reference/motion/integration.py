@@ -84,7 +84,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..dynamics.modal_correction import corrected_accelerations
+from ..dynamics.modal_correction import corrected_accelerations, no_correction
 from ..dynamics.runs import integration_run
 from ..dynamics.structures import (
     CONSTRAINTS_UNSOLVABLE,
@@ -116,6 +116,10 @@ REFRESH_INTERVAL = 0.01
 
 CUTOFF = 0.8 * math.pi
 """omega h [rad] from which a mode counts as not resolved by the step (damped, not turned exactly)."""
+
+MODE_TRACKING_INTERVAL = math.inf
+"""[s] of motion after which the resolved modes are tracked to the configuration between refreshes
+(:func:`~crane_reference.dynamics.modal_correction.tracked_correction`; 0: every step, inf: never)."""
 
 UNRESOLVED_DAMPING = 1.0
 """Damping ratio given to the modes the step does not resolve."""
@@ -170,6 +174,8 @@ class ExactFrequencyTrapezoidal:
         """[s] of motion after which the modal correction is computed again."""
         self.cutoff = CUTOFF
         """omega h [rad] from which a mode is not resolved (damped, not turned exactly)."""
+        self.mode_tracking_interval = MODE_TRACKING_INTERVAL
+        """[s] of motion after which the resolved modes are tracked to the configuration between refreshes."""
         self.evaluations = evaluations
         self.tolerance = tolerance
         self.max_iterations = max_iterations
@@ -180,12 +186,12 @@ class ExactFrequencyTrapezoidal:
     def settings(self) -> StepSettings:
         """The method and its stopping rules in the layout of the compiled kernels."""
         return StepSettings(self.evaluations, self.tolerance, self.max_iterations, PROJECTION_TOLERANCE,
-                            self.refresh_interval, self.cutoff, UNRESOLVED_DAMPING, self.modal)
+                            self.refresh_interval, self.cutoff, UNRESOLVED_DAMPING,
+                            self.mode_tracking_interval, self.modal)
 
     def _fresh(self) -> ModalCorrection:
         """No modal correction yet: the first step computes it."""
-        n_ic = len(self.motion.independent)
-        return ModalCorrection(np.zeros((n_ic, n_ic)), np.zeros((n_ic, n_ic)), -math.inf, 0.0)
+        return no_correction(len(self.motion.independent))
 
     def no_earlier(self) -> np.ndarray:
         """No earlier accelerations (a start, a restart: the predictor begins anew)."""
