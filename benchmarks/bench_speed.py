@@ -1,6 +1,7 @@
 """Speed of the simulation core; prints the figures quoted in the README and the closing notes.
 
     python benchmarks/bench_speed.py [--duration 10] [--repeats 3] [--only eval profile speed] [--rfe 6 24]
+                                     [--cutoff 0.3] [--mode-tracking 0.002]
 
 The machine's speed drifts between days, so every time is also given as a multiple of one call of
 Pinocchio's ABA (forward dynamics) on the URDF that crane-reference exports for the same chain, measured in
@@ -10,7 +11,8 @@ the same run.
    of calling a compiled function with the ChainData named tuple.
 2. [profile] Per crane of ``--rfe`` (default 6), the compiled cost of the parts of one step (timed in compiled
    loops, also in ABA calls): the modal correction
-   (an eigenproblem, every REFRESH_INTERVAL of motion), the iteration factor, per Newton evaluation a
+   (an eigenproblem, every REFRESH_INTERVAL of motion), the tracking of its resolved modes (every
+   MODE_TRACKING_INTERVAL), the iteration factor, per Newton evaluation a
    projection and a residual, a full evaluation (on the rows a caller reads) and what the node reads of a row
    (its effort and constraint distance, by inverse dynamics: ``evaluated_rows``).
 3. [speed] Per case (rigid; flexible with n_rfe = 6, 12, 24): Pinocchio's ABA per call; at
@@ -32,11 +34,15 @@ from typing import NamedTuple
 import numpy as np
 from common import aba_time, call_seconds, newton_iterations, run_times
 from numba import njit
-from scipy.linalg import eigh
 
 from crane_reference.dynamics.evaluation import accelerations_at, evaluate
 from crane_reference.dynamics.inertia import world_pseudo_inertias
-from crane_reference.dynamics.modal_correction import iteration_factor, modal_correction
+from crane_reference.dynamics.modal_correction import (
+    iteration_factor,
+    modal_correction,
+    reduced_mass_matrix,
+    tracked_correction,
+)
 from crane_reference.dynamics.projection import project_positions
 from crane_reference.dynamics.runs import evaluated_rows, integration_run
 from crane_reference.dynamics.step import newton_residual
@@ -44,7 +50,8 @@ from crane_reference.dynamics.structures import Coefficients, StepStart
 from crane_reference.dynamics.terms import chain_terms, end_effector_jacobian, position_terms
 from crane_reference.model.config import load_config
 from crane_reference.model.description import CraneDescription
-from crane_reference.motion.integration import CUTOFF, REFRESH_INTERVAL, ExactFrequencyTrapezoidal, stop_flag
+from crane_reference.motion import integration
+from crane_reference.motion.integration import REFRESH_INTERVAL, ExactFrequencyTrapezoidal, stop_flag
 from crane_reference.motion.simulation import MotionStepper, Scenario, simulate
 from crane_reference.motion.steps import ONLINE_STEP
 
@@ -195,6 +202,14 @@ def _repeat_correction(reduced_mass, drive, partition, chain, settings, n):
 
 
 @njit
+def _repeat_tracking(reduced_mass, correction, drive, partition, chain, n):
+    total = 0.0
+    for _ in range(n):
+        total += tracked_correction(reduced_mass, correction, 0.0, drive, partition, chain).inertia[0, 0]
+    return total
+
+
+@njit
 def _repeat_evaluation(q, qd, k, drive, partition, chain, n):
     total = 0.0
     for _ in range(n):
@@ -216,6 +231,7 @@ PART_NAMES = {
     "projection": "projection on the position constraints",
     "residual": "Newton residual of (8) by inverse dynamics",
     "correction": f"modal correction (eigenproblem, every {REFRESH_INTERVAL * 1e3:g} ms)",
+    "tracking": "resolved modes tracked (tracked_correction)",
     "factor": "iteration matrix and its Cholesky factor",
     "accelerations": "qdd from (8) solved (accelerations_at)",
     "evaluation": "full evaluation (+ residuals, reactions, accounts)",
@@ -236,12 +252,13 @@ def part_times(scenario: Scenario, repeat: int) -> dict[str, float]:
     settings = ExactFrequencyTrapezoidal(motion).settings
     B = acc.velocity_map
     reduced_mass = B.T @ acc.M @ B
-    correction = modal_correction(reduced_mass, 1e-3, 0.0, drive, partition, chain, settings)
+    correction = modal_correction(reduced_mass, ONLINE_STEP, 0.0, drive, partition, chain, settings)
     parts = (("position_terms", _repeat_position_terms, (q, chain)),
              ("kinematics", _repeat_end_effector, (q, chain)),
              ("projection", _repeat_projection, (off, k, motion.holonomic_dependent, chain)),
              ("residual", _repeat_residual, (q, qd, acc.qdd[partition.integrated], k, drive, partition, chain)),
              ("correction", _repeat_correction, (reduced_mass, drive, partition, chain, settings)),
+             ("tracking", _repeat_tracking, (reduced_mass, correction, drive, partition, chain)),
              ("factor", _repeat_factor, (acc.M, acc.velocity_map, correction, drive, partition, chain)),
              ("accelerations", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
              ("evaluation", _repeat_evaluation, (q, qd, k, drive, partition, chain)),
@@ -292,16 +309,10 @@ def resolved_modes(scenario: Scenario, step: float) -> int:
     the modal inertia correction Delta M_r; the others make up the unresolved damping D_u."""
     motion = scenario.motion
     q, chain, partition = scenario.equilibrium.q, motion.dynamics.chain, motion.partition
-    acc = accelerations_at(q, np.zeros_like(q), motion.constraints.coefficients(0.0),
-                           motion.dynamics.drive.kernel_parameters(0.0), partition, chain)
-    independent = list(partition.independent)
-    stiffness = chain.stiffness[np.ix_(independent, independent)].copy()
-    if chain.drive_joint in independent:
-        stiffness[independent.index(chain.drive_joint), independent.index(chain.drive_joint)] += \
-            motion.dynamics.drive.kernel_parameters(0.0)[1]
-    B = acc.velocity_map
-    omega_squared = eigh(stiffness, B.T @ acc.M @ B, eigvals_only=True)
-    return int(np.count_nonzero(np.sqrt(np.maximum(omega_squared, 0.0)) * step < CUTOFF))
+    drive = motion.dynamics.drive.kernel_parameters(0.0)
+    acc = accelerations_at(q, np.zeros_like(q), motion.constraints.coefficients(0.0), drive, partition, chain)
+    return modal_correction(reduced_mass_matrix(acc.M, acc.velocity_map, partition), step, 0.0, drive, partition,
+                            chain, ExactFrequencyTrapezoidal(motion).settings).resolved
 
 
 def scaling(params: CraneDescription, duration: float, repeats: int) -> None:
@@ -326,7 +337,7 @@ def scaling(params: CraneDescription, duration: float, repeats: int) -> None:
     base = next((row for row in rows if row.n_rfe == 12), rows[0])
     print(f"[scaling] h = {ONLINE_STEP * 1e3:g} ms; each cost in ABA of its own chain (x: growth from "
           f"n_rfe = {base.n_rfe}); parts: iteration factor / M (position_terms) / a Newton residual / a projection / "
-          f"modal correction per step; modes resolved (omega h < {CUTOFF / math.pi:g} pi) of n_ic")
+          f"modal correction per step; modes resolved (omega h < {integration.CUTOFF / math.pi:g} pi) of n_ic")
     for n_rfe, dof, n_ic, resolved, aba, step, parts in rows:
         growth = " / ".join(f"{value:.2f} ({value / base.parts[name]:.1f}x)" for name, value in parts.items())
         print(f"[scaling] n_rfe={n_rfe:2d} dof={dof:3d} n_ic={n_ic:3d} resolved={resolved:2d}: ABA "
@@ -347,7 +358,15 @@ def main() -> None:
     parser.add_argument("--rfe", nargs="+", type=int, default=[6], help="[profile]: the cranes' RFE counts")
     parser.add_argument("--config", help="crane file (default: the packaged crane, the paper's); a crane's step is "
                         "stated in ABA of its own chain")
+    parser.add_argument("--cutoff", type=float, help="omega h [pi rad] from which every integrator made damps a mode "
+                        "instead of resolving it (default: integration.CUTOFF)")
+    parser.add_argument("--mode-tracking", type=float, help="[s] of motion after which every integrator made tracks "
+                        "its resolved modes (0: every step, inf: never; default: integration.MODE_TRACKING_INTERVAL)")
     args = parser.parse_args()
+    if args.cutoff is not None:
+        integration.CUTOFF = args.cutoff * math.pi  # what every integrator made from now on resolves below
+    if args.mode_tracking is not None:
+        integration.MODE_TRACKING_INTERVAL = args.mode_tracking
     params = load_config(args.config)
     if "eval" in args.only:
         evaluation_times(params)

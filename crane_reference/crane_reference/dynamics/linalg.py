@@ -242,31 +242,23 @@ def map_columns(Y, B, independent, dependent):
 
 
 @njit(cache=True, nogil=True)
-def jacobi_eigh(A, tolerance=1e-15, max_sweeps=30):
+def jacobi_eigh(A, max_sweeps=30):
     """Eigenvalues (ascending) and orthonormal eigenvectors (columns) of a small symmetric A by cyclic Jacobi
-    rotations (Golub and Van Loan, Algorithm 8.5.3): quadratically convergent, and from a nearly diagonal A one or
-    two sweeps; without LAPACK's call overhead, which dominates for the r x r problems of a tracked basis.  Sweeps
-    until the off-diagonal norm is at most ``tolerance`` times the Frobenius norm."""
+    rotations (Golub and Van Loan, Algorithm 8.5.3), skipping a rotation whose angle, about
+    a_pq / (a_qq - a_pp), is below round-off, until a sweep rotates nothing (at most ``max_sweeps``):
+    quadratically convergent, so few sweeps from a nearly diagonal A; without LAPACK's call overhead, which
+    dominates for the r x r problems of a tracked basis."""
     n = A.shape[0]
     a = A.copy()
     V = np.eye(n)
-    total = 0.0
-    for i in range(n):
-        for j in range(n):
-            total += a[i, j] * a[i, j]
-    bound = tolerance * tolerance * total
     for _ in range(max_sweeps):
-        off = 0.0
-        for i in range(n):
-            for j in range(i + 1, n):
-                off += 2.0 * a[i, j] * a[i, j]
-        if off <= bound:
-            break
+        rotated = False
         for p in range(n - 1):
             for q in range(p + 1, n):
                 apq = a[p, q]
-                if abs(apq) <= 1e-18 * (abs(a[p, p]) + abs(a[q, q])):  # below round-off of both diagonals
+                if abs(apq) <= 1e-17 * abs(a[q, q] - a[p, p]):
                     continue
+                rotated = True
                 tau = (a[q, q] - a[p, p]) / (2.0 * apq)
                 t = (1.0 if tau >= 0.0 else -1.0) / (abs(tau) + np.sqrt(1.0 + tau * tau))
                 c = 1.0 / np.sqrt(1.0 + t * t)
@@ -280,6 +272,8 @@ def jacobi_eigh(A, tolerance=1e-15, max_sweeps=30):
                 for k in range(n):
                     vkp, vkq = V[k, p], V[k, q]
                     V[k, p], V[k, q] = c * vkp - s * vkq, s * vkp + c * vkq
+        if not rotated:
+            break
     values = np.empty(n)
     for i in range(n):
         values[i] = a[i, i]

@@ -200,12 +200,12 @@ def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, part
     inverse = lower_inverse(cholesky(_symmetric(X.T @ MX)))  # X^T M_r X = L L^T: the Ritz vectors X L^-T W
     omega_squared, W = jacobi_eigh(_symmetric(inverse @ (X.T @ KX) @ inverse.T))
     rotation = inverse.T @ W
-    tracked, on_resolved = X @ rotation, MX @ rotation
+    phi_r, on_resolved = X @ rotation, MX @ rotation
     modes = correction.modes.copy()
-    modes[:, :r] = tracked
-    c, e = _resolved_terms(omega_squared, _modal_damping(tracked, r, partition, chain), h)
+    modes[:, :r] = phi_r
+    c, e = _resolved_terms(omega_squared, _modal_damping(phi_r, r, partition, chain), h)
     G = np.ascontiguousarray(correction.unresolved[:, r:])  # P^T G = G - M_r Phi_r (Phi_r^T G)
-    damping = _gram(G - on_resolved @ (tracked.T @ G))
+    damping = _gram(G - on_resolved @ (phi_r.T @ G))
     if np.any(e != 0.0):
         damping += _congruence(on_resolved, e)
     return ModalCorrection(_congruence(on_resolved, c), damping, modes, r, correction.unresolved, correction.time, h,

@@ -223,8 +223,9 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
 
     The modal correction is computed again from M at q0 and B0 (:func:`modal_correction`) at the step nearest
     ``settings.refresh_interval`` after the one in use was, and for another step size; between, its resolved modes
-    are carried to the configuration of the first iterate (:func:`tracked_correction` with its M and B, before its
-    residual) at the step nearest ``settings.mode_tracking_interval`` after they last were.  It is a coefficient
+    are carried to the configuration of the first iterate (:func:`tracked_correction` with its M and B, before the
+    modal terms enter its residual) at the step nearest ``settings.mode_tracking_interval`` after they last were
+    (``tracked`` counts from the step's start t0).  It is a coefficient
     of the equation that follows the configuration: the step's end is solved with the new one, its start
     keeps the accelerations of the old one (Delta M_r piecewise constant in time, as the trapezoidal rule
     treats any coefficient; converting them would act on the slow motion's accelerations as on free
@@ -253,7 +254,7 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
         return _failed(q0, qd0, qdd0, B0, earlier, correction, _unsolved(it, a1), 1)
     qdd, residual, B, Hw = _plain_residual_at(it, a1, k, drive, partition, chain)
     M = mass_at(it.S, Hw, chain)
-    if t0 - correction.tracked >= settings.mode_tracking_interval - 0.5 * h:
+    if correction.resolved > 0 and t0 - correction.tracked >= settings.mode_tracking_interval - 0.5 * h:
         correction = tracked_correction(reduced_mass_matrix(M, B, partition), correction, t0, drive, partition,
                                         chain)
     _add_modal_terms(residual, it.qd, a1, correction, partition)

@@ -91,7 +91,8 @@ class ModalCorrection(NamedTuple):
     Delta M_r, removed from the reduced mass so that the trapezoidal rule turns each resolved mode by
     exactly omega h per step, and ``damping`` D_u, which gives each resolved mode its exact decay per step
     and damps the modes the step does not resolve; ``modes`` (n_ic, n_ic), whose first ``resolved`` columns are
-    the resolved modes Phi_r (Phi_r^T M_r Phi_r = I, ascending in frequency) at the configuration of the terms,
+    the resolved modes Phi_r (Phi_r^T M_r Phi_r = I, ascending in frequency) at the configuration of the terms (the
+    other columns: the last full eigenproblem's unresolved modes, not read),
     and ``unresolved`` D_u of the last full eigenproblem on its unresolved modes, which
     :func:`~crane_reference.dynamics.modal_correction.tracked_correction` projects off the tracked ones, as its
     factor G (columns ``resolved`` on; D_u = G G^T); ``tracked`` [s], when the modes were last tracked or
