@@ -547,7 +547,7 @@ def main() -> None:
                         help="sections to run")
     parser.add_argument("--hours", type=float, default=1.0, help="[long]: hours of motion")
     parser.add_argument("--cutoff", type=float, help="omega h [pi rad] from which every integrator made damps a mode "
-                        "instead of resolving it (default: integration.CUTOFF, 0.3)")
+                        "instead of resolving it (default: integration.CUTOFF, 0.8)")
     parser.add_argument("--refresh", type=float, help="[s] of motion after which every integrator made computes its "
                         "modal correction again (default: integration.REFRESH_INTERVAL, 0.01)")
     parser.add_argument("--mode-tracking", type=float, help="[s] of motion after which every integrator made tracks "

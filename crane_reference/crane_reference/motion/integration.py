@@ -35,23 +35,25 @@ for lambda_hat = (2 / h) tanh(lambda h / 2), and a mass and a damping correction
 roots (:func:`crane_reference.dynamics.modal_correction.modal_correction`): each damped mode turns and decays per
 step as the model's does.
 
-Modes with omega h at or above the cutoff (0.3 pi: at the node's 0.5 ms those above 300 Hz) are not resolved: they
-cannot be turned exactly near pi (tan has a pole there), and the velocities of a resolved mode come out larger than
-the exact ones by tan(omega h / 2) / (omega h / 2) (1.08 at 0.3 pi, 2.4 at 0.8 pi); resolving modes close to pi
-made the slow motion's phase along the task drift over a minute by an amount erratic in h (docs/performance.md,
-"Over a minute").  The unresolved modes get D_u = M_r Phi_u diag(2 zeta omega) Phi_u^T M_r, which damps them with
-zeta = 1 (they keep their static deflection), so that no such mode rings at a frequency it does not have.
+Modes with omega h at or above the cutoff (0.8 pi: the output sampled every step cannot show them; at h = 1 ms
+those above 400 Hz) cannot be turned exactly (tan has a pole at pi) and are not resolved.  The velocities of a
+resolved mode come out larger than the exact ones by tan(omega h / 2) / (omega h / 2) (2.4 at 0.8 pi, 1.08 at
+0.3 pi); resolving modes that close to pi makes the slow motion's phase along the task drift over a minute by an
+amount erratic in h, which a cutoff of 0.3 pi removes (docs/performance.md, "Over a minute").  The unresolved modes
+get D_u = M_r Phi_u diag(2 zeta omega) Phi_u^T M_r, which damps them with zeta = 1 (they keep their static
+deflection), so that no such mode rings at a frequency it does not have.
 
 M_r moves with the configuration.  Delta M_r and D_u are computed afresh every :data:`REFRESH_INTERVAL` of motion
-(the eigenproblem of the n_ic x n_ic reduced matrices), and between, every :data:`MODE_TRACKING_INTERVAL`, the
-resolved modes are tracked to the configuration (one shift-inverted subspace iteration from the last ones and a
-Rayleigh-Ritz step, :func:`~crane_reference.dynamics.modal_correction.tracked_correction`), with Delta M_r from
-them and the last D_u projected off them.  A stale D_u would damp the resolved modes by their overlaps with the
-old unresolved ones and take the resolved vibration over an hour.  These terms are coefficients of the equation,
-like M itself: they change from the next step's end on, and the carried accelerations are not converted (a
-conversion treats the slow motion's accelerations as free vibration and kicks it at every refresh, which made the
-slow motion's error depend on the refresh cadence).  Only a new equation (a start, a restart, another step size)
-solves its start's accelerations from the corrected equation.
+(the eigenproblem of the n_ic x n_ic reduced matrices); stale ones leak damping into resolved modes, the more the
+lower the cutoff.  Between refreshes the resolved modes can be tracked to the configuration every
+:data:`MODE_TRACKING_INTERVAL` (one shift-inverted subspace iteration from the last ones and a Rayleigh-Ritz step,
+:func:`~crane_reference.dynamics.modal_correction.tracked_correction`), with Delta M_r from them and the last D_u
+projected off them, which removes that leak: what a cutoff of 0.3 pi needs to keep the vibration over an hour
+(off by default: it costs the node's solver the margin it needs, docs/performance.md).  These terms are
+coefficients of the equation, like M itself: they change from the next step's end on, and the carried
+accelerations are not converted (a conversion treats the slow motion's accelerations as free vibration and kicks
+it at every refresh, which made the slow motion's error depend on the refresh cadence).  Only a new equation (a
+start, a restart, another step size) solves its start's accelerations from the corrected equation.
 Servo-constraints (P = E_ic) have no symmetric reduced mass and use the plain trapezoidal rule.
 
 The holonomically dependent coordinates are never integrated: q_hd comes from the position constraints
@@ -116,10 +118,10 @@ velocities and (8) are then evaluated at the projected q itself."""
 REFRESH_INTERVAL = 0.01
 """[s] of motion after which the modal correction is computed again at the current configuration."""
 
-CUTOFF = 0.3 * math.pi
+CUTOFF = 0.8 * math.pi
 """omega h [rad] from which a mode counts as not resolved by the step (damped, not turned exactly)."""
 
-MODE_TRACKING_INTERVAL = 2e-3
+MODE_TRACKING_INTERVAL = math.inf
 """[s] of motion after which the resolved modes are tracked to the configuration between refreshes
 (:func:`~crane_reference.dynamics.modal_correction.tracked_correction`; 0: every step, inf: never)."""
 
