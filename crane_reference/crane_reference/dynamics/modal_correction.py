@@ -110,7 +110,7 @@ def _generalized_modes(stiffness, mass):
     L = cholesky(mass)
     L_inverse = np.linalg.inv(L)
     reduced = L_inverse @ stiffness @ L_inverse.T
-    omega_squared, V = np.linalg.eigh(0.5 * (reduced + reduced.T))
+    omega_squared, V = np.linalg.eigh(_symmetric(reduced))
     return omega_squared, L_inverse.T @ V, L @ V
 
 
@@ -118,21 +118,6 @@ def _generalized_modes(stiffness, mass):
 def _symmetric(A):
     """(A + A^T) / 2."""
     return 0.5 * (A + A.T)
-
-
-@njit(cache=True, nogil=True)
-def _gram(X):
-    """X X^T, symmetric to the last bit (loops: the columns are few)."""
-    n = X.shape[0]
-    out = np.empty((n, n))
-    for i in range(n):
-        for j in range(i + 1):
-            total = 0.0
-            for m in range(X.shape[1]):
-                total += X[i, m] * X[j, m]
-            out[i, j] = total
-            out[j, i] = total
-    return out
 
 
 @njit(cache=True, nogil=True)
@@ -165,7 +150,8 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
         for i in range(n_ic):
             unresolved[i, j] = on_modes[i, j] * weight
     on_resolved = np.ascontiguousarray(on_modes[:, :resolved])
-    return ModalCorrection(_congruence(on_resolved, c), _congruence(on_resolved, e) + _gram(unresolved), modes,
+    damping_unresolved = _congruence(np.ascontiguousarray(unresolved[:, resolved:]), np.ones(n_ic - resolved))
+    return ModalCorrection(_congruence(on_resolved, c), _congruence(on_resolved, e) + damping_unresolved, modes,
                            resolved, unresolved, t, h, t)
 
 
@@ -205,7 +191,7 @@ def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, part
     modes[:, :r] = phi_r
     c, e = _resolved_terms(omega_squared, _modal_damping(phi_r, r, partition, chain), h)
     G = np.ascontiguousarray(correction.unresolved[:, r:])  # P^T G = G - M_r Phi_r (Phi_r^T G)
-    damping = _gram(G - on_resolved @ (phi_r.T @ G))
+    damping = _congruence(G - on_resolved @ (phi_r.T @ G), np.ones(n - r))
     if np.any(e != 0.0):
         damping += _congruence(on_resolved, e)
     return ModalCorrection(_congruence(on_resolved, c), damping, modes, r, correction.unresolved, correction.time, h,
