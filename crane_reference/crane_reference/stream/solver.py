@@ -68,6 +68,7 @@ from .solver_messages import (
 from .stream_solver import STREAM_COMMANDS, StreamSolver
 
 POLL_PERIOD = 0.1  # [s] between checks of the caller's stop flag while it waits for the solver process
+SILENCE = 2.0 * HEARTBEAT_PERIOD + POLL_PERIOD  # [s] without a beat: a process stopped or hung (at close)
 
 
 class SolverClient:
@@ -234,10 +235,23 @@ class SolverProcess(SolverClient):
         self._process.kill()
         self._process.wait()
 
+    def _beating(self) -> bool:
+        """Whether the process beats: its counter changes within :data:`SILENCE` s from now (a change first seen
+        now may have been made long ago, before the process stopped); False at once for a process seen silent for
+        longer already."""
+        if self.silent_for() > SILENCE:
+            return False
+        deadline = time.monotonic() + SILENCE
+        while time.monotonic() < deadline:
+            time.sleep(0.2 * HEARTBEAT_PERIOD)
+            if self.silent_for() == 0.0:
+                return True
+        return False
+
     def close(self, timeout: float = 1.0) -> None:
-        """End the process: ask it, then wait up to ``timeout`` s, then kill it; a process that has not beaten for
-        two periods and more (stopped, or hung) is killed at once."""
-        if self.silent_for() > 2.0 * HEARTBEAT_PERIOD + POLL_PERIOD:
+        """End the process: ask it, then wait up to ``timeout`` s, then kill it; a process that does not beat
+        (:meth:`_beating`: stopped, or hung) is killed at once."""
+        if self._process.poll() is None and not self._beating():
             self._kill()
         if self._process.poll() is None and self._lock.acquire(timeout=timeout):
             try:
