@@ -337,13 +337,16 @@ def scaling(params: CraneDescription, duration: float, repeats: int) -> None:
     base = next((row for row in rows if row.n_rfe == 12), rows[0])
     print(f"[scaling] h = {ONLINE_STEP * 1e3:g} ms; each cost in ABA of its own chain (x: growth from "
           f"n_rfe = {base.n_rfe}); parts: iteration factor / M (position_terms) / a Newton residual / a projection / "
-          f"modal correction per step; modes resolved (omega h < {integration.CUTOFF / math.pi:g} pi) of n_ic")
+          f"modal correction per step; modes resolved (omega h < {integration.CUTOFF / math.pi:g} pi) of n_ic; "
+          f"the rest: the step less those three (its Newton residuals and projections, the solves with the factor, "
+          f"the modal terms' products, the step's end)")
     for n_rfe, dof, n_ic, resolved, aba, step, parts in rows:
         growth = " / ".join(f"{value:.2f} ({value / base.parts[name]:.1f}x)" for name, value in parts.items())
+        dense = parts["factor"] + parts["position_terms"] + parts["correction"]
         print(f"[scaling] n_rfe={n_rfe:2d} dof={dof:3d} n_ic={n_ic:3d} resolved={resolved:2d}: ABA "
               f"{aba * 1e6:6.2f} us, step {step * 1e6:7.1f} us = {step / aba:4.1f} ABA "
               f"({step / aba / (base.step / base.aba):.2f}x), real-time factor {ONLINE_STEP / step:5.1f}; "
-              f"parts {growth}")
+              f"parts {growth}; the rest {step / aba - dense:.2f} ABA")
 
 
 SECTIONS = ("eval", "profile", "speed", "scaling")

@@ -17,6 +17,6 @@ COMPILE_PID=$!
 bash scripts/check_colcon.sh
 wait "$COMPILE_PID"
 STATUS=0  # both parts run whatever the first's outcome
-.venv/bin/python -m pytest -q -n auto --dist loadscope -m "not wall_clock" crane_reference || STATUS=$?
-.venv/bin/python -m pytest -q -m wall_clock crane_reference || STATUS=$?
+.venv/bin/python -m pytest -q --durations=15 -n auto --dist loadscope -m "not wall_clock" crane_reference || STATUS=$?
+.venv/bin/python -m pytest -q --durations=15 -m wall_clock crane_reference || STATUS=$?
 exit "$STATUS"
