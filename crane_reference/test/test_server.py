@@ -355,17 +355,16 @@ def test_a_hung_solver_process_is_killed_and_reported_and_the_server_holds(monke
         os.kill(process.pid, 0)
 
 
-def test_closing_ends_a_live_solver_process_by_request_and_kills_a_stopped_one_at_once() -> None:
+def test_closing_ends_a_live_solver_process_by_request_and_kills_a_stopped_one_without_its_timeout() -> None:
     live = SolverProcess(spec())
     live.close(timeout=60.0)
     assert live.exit_code == 0  # it beats: asked to end, it ended by itself
     process = SolverProcess(spec())
     os.kill(process.pid, signal.SIGSTOP)
-    time.sleep(3 * solver_module.HEARTBEAT_PERIOD + solver_module.POLL_PERIOD)  # no beat since
     start = time.monotonic()
-    process.close(timeout=60.0)  # without its beats it is not waited for
+    process.close(timeout=60.0)  # no beat for HUNG_AFTER: killed
     assert process.exit_code == -signal.SIGKILL
-    assert time.monotonic() - start < 10.0  # killed without waiting for the timeout (60 s)
+    assert time.monotonic() - start < 10.0  # not after the timeout (60 s)
 
 
 def test_a_new_preview_applies_to_the_frames_made_after_it(server: ReferenceServer) -> None:

@@ -33,8 +33,8 @@ iteration, projection and compiled run of it is bounded.  So a caller waiting fo
 :data:`HUNG_AFTER` holds the process hung (stopped by a signal or a debugger, swapped out, stuck holding
 Python's lock), kills and reaps it and raises :class:`SolverHungError` (a :class:`SolverStoppedError`: the
 server holds the last sample and reports it).  The bound is not applied while the process starts (compiling
-the kernels can hold Python's lock for seconds), and :meth:`SolverProcess.close` kills a process without beats
-at once instead of waiting for it to end.
+the kernels can hold Python's lock for seconds), and :meth:`SolverProcess.close` kills a process that gives no
+beat for :data:`HUNG_AFTER` instead of waiting out its timeout.
 """
 
 from __future__ import annotations
@@ -68,7 +68,6 @@ from .solver_messages import (
 from .stream_solver import STREAM_COMMANDS, StreamSolver
 
 POLL_PERIOD = 0.1  # [s] between checks of the caller's stop flag while it waits for the solver process
-SILENCE = 2.0 * HEARTBEAT_PERIOD + POLL_PERIOD  # [s] without a beat: a process stopped or hung (at close)
 
 
 class SolverClient:
@@ -235,24 +234,9 @@ class SolverProcess(SolverClient):
         self._process.kill()
         self._process.wait()
 
-    def _beating(self) -> bool:
-        """Whether the process beats: its counter changes within :data:`SILENCE` s from now (a change first seen
-        now may have been made long ago, before the process stopped); False at once for a process seen silent for
-        longer already."""
-        if self.silent_for() > SILENCE:
-            return False
-        deadline = time.monotonic() + SILENCE
-        while time.monotonic() < deadline:
-            time.sleep(0.2 * HEARTBEAT_PERIOD)
-            if self.silent_for() == 0.0:
-                return True
-        return False
-
     def close(self, timeout: float = 1.0) -> None:
-        """End the process: ask it, then wait up to ``timeout`` s, then kill it; a process that does not beat
-        (:meth:`_beating`: stopped, or hung) is killed at once."""
-        if self._process.poll() is None and not self._beating():
-            self._kill()
+        """End the process: ask it, then wait up to ``timeout`` s for it to end, then kill it; a process that gives no
+        beat for :data:`HUNG_AFTER` s meanwhile (stopped, or hung) is killed then instead of waited for."""
         if self._process.poll() is None and self._lock.acquire(timeout=timeout):
             try:
                 self._requests.send(None)
@@ -261,9 +245,11 @@ class SolverProcess(SolverClient):
             finally:
                 self._lock.release()
         self._requests.close()
-        try:
-            self._process.wait(timeout)
-        except subprocess.TimeoutExpired:
-            self._process.kill()
-            self._process.wait()
+        deadline = time.monotonic() + timeout
+        self.silent_for()  # the silence counts from now on at the latest
+        while self._process.poll() is None:
+            if time.monotonic() >= deadline or self.silent_for() > HUNG_AFTER:
+                self._kill()
+                break
+            time.sleep(0.2 * HEARTBEAT_PERIOD)
         self._replies.close()
