@@ -299,6 +299,8 @@ def main() -> None:
     parser.add_argument("--rfe", nargs="+", type=int, default=[6, 12, 24, 48])
     parser.add_argument("--states", type=int, default=5)
     args = parser.parse_args()
+    if args.states < 1:
+        parser.error("--states: at least 1 random state")
     for n_rfe in args.rfe:
         crane(n_rfe, args.states, 3000 if n_rfe <= 12 else 500)
 
