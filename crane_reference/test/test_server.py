@@ -356,9 +356,11 @@ def test_a_hung_solver_process_is_killed_and_reported_and_the_server_holds(monke
 
 
 def test_closing_ends_a_live_solver_process_by_request_and_kills_a_stopped_one_without_its_timeout() -> None:
+    """``close``: a live solver process, asked to end, ends by itself (exit code 0, not a kill); a stopped one
+    (SIGSTOP) gives no beat and is killed after HUNG_AFTER, long before the close's timeout."""
     live = SolverProcess(spec())
     live.close(timeout=60.0)
-    assert live.exit_code == 0  # it beats: asked to end, it ended by itself
+    assert live.exit_code == 0
     process = SolverProcess(spec())
     os.kill(process.pid, signal.SIGSTOP)
     start = time.monotonic()
