@@ -72,7 +72,8 @@ def _scipy_modes(scenario, q):
 def test_modal_terms_are_the_exact_frequency_correction_of_scipys_modes(scenario):
     """Undamped crane: with K_r phi = omega^2 M_r phi (scipy.linalg.eigh) and u = omega h, Delta M_r =
     M_r Phi diag(c) Phi^T M_r and D_u = M_r Phi diag(e) Phi^T M_r with c = 1 - ((u / 2) / tan(u / 2))^2, e = 0
-    below the cutoff, and c = 0, e = 2 zeta omega (zeta the unresolved modes' damping ratio) at or above it."""
+    below the cutoff, and c = 0, e = 2 zeta omega^2 h / cutoff (zeta the unresolved modes' damping ratio at the
+    cutoff) at or above it."""
     q = scenario.equilibrium.q
     reduced_mass, omega_squared, phi = _scipy_modes(scenario, q)
     omega = np.sqrt(omega_squared)
@@ -83,7 +84,7 @@ def test_modal_terms_are_the_exact_frequency_correction_of_scipys_modes(scenario
     ratio = np.ones_like(half)  # (omega h / 2) / tan(omega h / 2) -> 1 for a mode no spring resists (omega = 0)
     ratio[half > 0.0] = half[half > 0.0] / np.tan(half[half > 0.0])
     c[resolved] = 1.0 - ratio**2
-    e[~resolved] = 2.0 * UNRESOLVED_DAMPING * omega[~resolved]
+    e[~resolved] = 2.0 * UNRESOLVED_DAMPING * omega[~resolved] ** 2 * STEP / CUTOFF
     terms = _terms(scenario, q, 0.0)
     for computed, per_mode in ((terms.inertia, c), (terms.damping, e)):
         expected = reduced_mass @ phi @ np.diag(per_mode) @ phi.T @ reduced_mass
@@ -120,8 +121,8 @@ def test_tracked_modes_follow_scipys_across_a_rotating_near_degenerate_pair(scen
     expected_inertia = on_b @ np.diag(1.0 - ratio**2) @ on_b.T
     on_unresolved_a = mass_a @ phi_a[:, resolved:]
     projector = np.eye(omega_b.size) - phi_b[:, :resolved] @ on_b.T
-    expected_damping = projector.T @ on_unresolved_a @ np.diag(2.0 * UNRESOLVED_DAMPING * omega_a[resolved:]) \
-        @ on_unresolved_a.T @ projector
+    e_a = 2.0 * UNRESOLVED_DAMPING * omega_a[resolved:] ** 2 * h / settings.cutoff
+    expected_damping = projector.T @ on_unresolved_a @ np.diag(e_a) @ on_unresolved_a.T @ projector
     at_a = modal_correction(mass_a, h, 0.0, drive, partition, chain, settings)
     assert at_a.resolved == resolved
     tracked = tracked_correction(mass_b, at_a, states[1].t, drive, partition, chain)

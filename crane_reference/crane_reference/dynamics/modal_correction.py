@@ -129,7 +129,10 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
     (d = phi^T D_r phi, the physical modal damping) exactly: the trapezoidal rule on (1 - c) a + (d + e) v +
     omega^2 x has the roots lambda_hat = (2 / h) tanh(lambda h / 2), so 1 - c = omega^2 / (lambda_hat_1
     lambda_hat_2) and d + e = -(1 - c) (lambda_hat_1 + lambda_hat_2) (undamped: c = 1 - ((omega h / 2) /
-    tan(omega h / 2))^2, e = 0); a mode at or above the cutoff gets the damping e = 2 zeta omega.  In the
+    tan(omega h / 2))^2, e = 0); a mode at or above the cutoff omega_c = ``settings.cutoff`` / h gets the damping
+    e = beta omega^2, beta = 2 zeta / omega_c (damping ratio zeta omega / omega_c: ``settings.unresolved_damping``
+    zeta at the cutoff, stiffness-proportional, so that the unresolved part of D_u is
+    beta (K_r - M_r Phi_r diag(omega_r^2) Phi_r^T M_r), K_r less a part of the resolved modes' rank).  In the
     independent coordinates Delta M_r = M_r Phi diag(c) Phi^T M_r and likewise D_u with e (neither acts on a
     motion no spring resists: Phi^T M_r = diag(omega^-2) Phi^T K_r); the unresolved modes' part of D_u is kept
     as its factor G = M_r Phi_u diag(sqrt(e_u)) (D_u's part G G^T) for :func:`tracked_correction`.
@@ -145,8 +148,9 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
         resolved += 1
     c, e = _resolved_terms(omega_squared[:resolved], _modal_damping(modes, resolved, partition, chain), h)
     unresolved = zeros.copy()
+    beta = 2.0 * settings.unresolved_damping * h / settings.cutoff
     for j in range(resolved, n_ic):
-        weight = np.sqrt(2.0 * settings.unresolved_damping * np.sqrt(max(omega_squared[j], 0.0)))
+        weight = np.sqrt(beta * omega_squared[j])
         for i in range(n_ic):
             unresolved[i, j] = on_modes[i, j] * weight
     on_resolved = np.ascontiguousarray(on_modes[:, :resolved])

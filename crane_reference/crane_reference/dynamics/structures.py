@@ -69,7 +69,8 @@ class StepSettings(NamedTuple):
     m/s], at most ``max_iterations``; ``projection_tolerance`` [rad] of Newton on the position constraints;
     the modal correction is computed again after ``refresh_interval`` [s] of motion (and for a new step
     size); modes with omega h at or above ``cutoff`` [rad] are not resolved by the step and get the damping
-    ratio ``unresolved_damping``; between, the resolved modes are tracked to the configuration after every
+    ratio ``unresolved_damping`` omega h / ``cutoff`` (stiffness-proportional: ``unresolved_damping`` at the
+    cutoff); between, the resolved modes are tracked to the configuration after every
     ``mode_tracking_interval`` [s] of motion (:func:`~crane_reference.dynamics.modal_correction.tracked_correction`;
     0: every step, inf: never); without ``modal`` there is no modal correction (the plain trapezoidal rule, for
     comparison)."""

@@ -40,8 +40,12 @@ those above 400 Hz) cannot be turned exactly (tan has a pole at pi) and are not 
 resolved mode come out larger than the exact ones by tan(omega h / 2) / (omega h / 2) (2.4 at 0.8 pi, 1.08 at
 0.3 pi); resolving modes that close to pi makes the slow motion's phase along the task drift over a minute by an
 amount erratic in h, which a cutoff of 0.3 pi removes (docs/performance.md, "Over a minute").  The unresolved modes
-get D_u = M_r Phi_u diag(2 zeta omega) Phi_u^T M_r, which damps them with zeta = 1 (they keep their static
-deflection), so that no such mode rings at a frequency it does not have.
+get D_u = M_r Phi_u diag(beta omega^2) Phi_u^T M_r with beta = 2 zeta / omega_c (omega_c = 0.8 pi / h), which damps
+each with the ratio zeta omega / omega_c, zeta = 1 at the cutoff and more above it (they keep their static
+deflection), so that no such mode rings at a frequency it does not have.  Being stiffness-proportional, that part
+is beta (K_r - M_r Phi_r diag(omega_r^2) Phi_r^T M_r): the constant springs less a term of the resolved modes'
+rank, which an articulated-body solve of the iteration matrix can take (docs/performance.md, "Toward an O(n)
+step").
 
 M_r moves with the configuration.  Delta M_r and D_u are computed afresh every :data:`REFRESH_INTERVAL` of motion
 (the eigenproblem of the n_ic x n_ic reduced matrices); stale ones leak damping into resolved modes, the more the
@@ -126,7 +130,7 @@ MODE_TRACKING_INTERVAL = math.inf
 (:func:`~crane_reference.dynamics.modal_correction.tracked_correction`; 0: every step, inf: never)."""
 
 UNRESOLVED_DAMPING = 1.0
-"""Damping ratio given to the modes the step does not resolve."""
+"""Damping ratio given to a mode the step does not resolve at the cutoff; above it the ratio grows as omega."""
 
 METHOD = "trapezoidal rule with exact modal frequencies (crane_reference.motion.integration)"
 """How reports name the method."""
