@@ -40,7 +40,15 @@ def chain_data(model: ChainModel, damping_matrix: np.ndarray) -> ChainData:
         ee_point=np.asarray(model.end_effector_point, dtype=float),
         stiffness=np.ascontiguousarray(model.stiffness, dtype=float),
         damping=np.ascontiguousarray(damping_matrix, dtype=float), damped=bool(np.any(damping_matrix != 0.0)),
-        drive_joint=int(model.drive_joint))
+        drive_joint=int(model.drive_joint), root_size=root_size(model.stiffness, damping_matrix))
+
+
+def root_size(stiffness: np.ndarray, damping_matrix: np.ndarray) -> int:
+    """The joints up to the last that K or D couples to another (the root block of the articulated solve)."""
+    coupling = (stiffness != 0.0) | (damping_matrix != 0.0)
+    np.fill_diagonal(coupling, False)
+    coupled = np.flatnonzero(coupling.any(axis=1))
+    return int(coupled.max()) + 1 if coupled.size else 0
 
 
 class CraneDynamics:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .articulated import joint_term
 from .linalg import (
     cholesky,
     cholesky_solve,
@@ -239,16 +240,12 @@ def iteration_factor(M, B, h, correction: ModalCorrection, drive, partition: Par
         reduced = map_columns(project_rows(M, B, independent, dependent, True), B, independent, dependent)
     else:
         reduced = congruent(M, B, independent, dependent)
-    stiffness, damping, inertia, modal_damping = chain.stiffness, chain.damping, correction.inertia, correction.damping
+    inertia, modal_damping = correction.inertia, correction.damping
     spring, drive_row = 0.25 * h * h * drive[1], B[chain.drive_joint]
     for i in range(independent.size):
         row = independent[i]
         left = drive_row[i] if not servo else (1.0 if row == chain.drive_joint else 0.0)
         for j in range(independent.size):
-            column = independent[j]
-            value = (0.25 * h * h) * stiffness[row, column] + (0.5 * h) * modal_damping[i, j] - inertia[i, j] \
-                + spring * left * drive_row[j]
-            if chain.damped:
-                value += (0.5 * h) * damping[row, column]
-            reduced[i, j] += value
+            reduced[i, j] += joint_term(0.25 * h * h, 0.5 * h, chain, row, independent[j]) \
+                + (0.5 * h) * modal_damping[i, j] - inertia[i, j] + spring * left * drive_row[j]
     return cholesky(reduced) if not servo else np.linalg.inv(reduced)

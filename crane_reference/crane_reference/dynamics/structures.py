@@ -22,7 +22,8 @@ class ChainData(NamedTuple):
     their pseudo-inertia matrices in the joint frame; ``gravity`` [m/s^2] (along -z);
     ``ee_joint`` and ``ee_point`` (3,): E's frame and position in it; ``stiffness`` K and ``damping``
     D (n, n), ``damped`` whether D has a non-zero entry; ``drive_joint``: the coordinate the column drive
-    acts on (psi2)."""
+    acts on (psi2); ``root_size``: the joints up to the last that K or D couples to another (an off-diagonal
+    entry), the root block of :mod:`~crane_reference.dynamics.articulated`."""
 
     kinds: np.ndarray
     axes: np.ndarray
@@ -36,6 +37,7 @@ class ChainData(NamedTuple):
     damping: np.ndarray
     damped: bool
     drive_joint: int
+    root_size: int
 
 
 class Coefficients(NamedTuple):
@@ -440,3 +442,25 @@ class PlantCarry(NamedTuple):
     torques: np.ndarray
     ee_quaternion: np.ndarray
     deflection: np.ndarray
+
+
+class ArticulatedFactor(NamedTuple):
+    """X = M + J factored by :func:`~crane_reference.dynamics.articulated.articulated_factor`: the joints' twists
+    ``s`` (n, 6), ``U`` = I^A s and ``D`` = s^T I^A s + J_kk of the joints beyond the root block (n, 6 and n; the
+    root's rows unused), and ``root`` the Cholesky factor of the root block with the articulated inertia of the
+    joints beyond it."""
+
+    s: np.ndarray
+    U: np.ndarray
+    D: np.ndarray
+    root: np.ndarray
+
+
+class ConstrainedFactor(NamedTuple):
+    """B^T X B factored by :func:`~crane_reference.dynamics.articulated.constrained_factor`: the ``articulated``
+    factor of X, the constraint Jacobian ``A`` (m, n), ``Z`` = X^-1 A^T and ``schur`` the Cholesky factor of A Z."""
+
+    articulated: ArticulatedFactor
+    A: np.ndarray
+    Z: np.ndarray
+    schur: np.ndarray
