@@ -20,8 +20,10 @@ the same run.
    0.25 s, best of ``--repeats``), as a multiple of one ABA call and as a real-time factor, and with every
    row's full evaluation (what simulate records); single steps (one compiled call each, from 1 s on):
    median, worst and 99.9 % quantile; the mean Newton evaluations per step and the largest constraint residual.
-4. [scaling] (not by default) The step at ONLINE_STEP in ABA of its own chain at n_rfe = 6, 12, 24 and 48, its
-   growth from n_rfe = 12, and the parts of a step in ABA with their growth (where the cost is not O(n)).
+4. [scaling] (not by default) The step at ONLINE_STEP in ABA of its own chain at n_rfe = 6, 12, 24 and 48, with
+   the iteration matrix factored densely and solved by the articulated-body recursion (and which of the two the
+   integrator chooses), their growth from n_rfe = 12, and the parts of a dense step in ABA with their growth
+   (where the cost is not O(n)).
 """
 
 from __future__ import annotations
@@ -202,10 +204,10 @@ def _repeat_correction(reduced_mass, drive, partition, chain, settings, n):
 
 
 @njit
-def _repeat_tracking(reduced_mass, correction, drive, partition, chain, n):
+def _repeat_tracking(reduced_mass, correction, drive, partition, chain, settings, n):
     total = 0.0
     for _ in range(n):
-        total += tracked_correction(reduced_mass, correction, 0.0, drive, partition, chain).inertia[0, 0]
+        total += tracked_correction(reduced_mass, correction, 0.0, drive, partition, chain, settings).inertia[0, 0]
     return total
 
 
@@ -258,7 +260,7 @@ def part_times(scenario: Scenario, repeat: int) -> dict[str, float]:
              ("projection", _repeat_projection, (off, k, motion.holonomic_dependent, chain)),
              ("residual", _repeat_residual, (q, qd, acc.qdd[partition.integrated], k, drive, partition, chain)),
              ("correction", _repeat_correction, (reduced_mass, drive, partition, chain, settings)),
-             ("tracking", _repeat_tracking, (reduced_mass, correction, drive, partition, chain)),
+             ("tracking", _repeat_tracking, (reduced_mass, correction, drive, partition, chain, settings)),
              ("factor", _repeat_factor, (acc.M, acc.velocity_map, correction, drive, partition, chain)),
              ("accelerations", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
              ("evaluation", _repeat_evaluation, (q, qd, k, drive, partition, chain)),
@@ -301,6 +303,8 @@ class ScalingRow(NamedTuple):
     resolved: int
     aba: float
     step: float
+    articulated_step: float
+    chosen: bool
     parts: dict[str, float]
 
 
@@ -317,36 +321,43 @@ def resolved_modes(scenario: Scenario, step: float) -> int:
 
 def scaling(params: CraneDescription, duration: float, repeats: int) -> None:
     """[scaling] Per n_rfe of :data:`SCALING_RFE` (every flexible link): the step at the node's ONLINE_STEP (the
-    steps alone, compiled runs of 0.25 s from rest, best of ``repeats``) in ABA of its own chain (Pinocchio, this
-    run) and its growth from n_rfe = 12 (a step of O(n) cost would not grow); beside it the parts of a
-    step (:func:`part_times`) in ABA, with the modal correction per step (its cost times ONLINE_STEP /
-    REFRESH_INTERVAL), and how each part grows from 12 to the row's n_rfe."""
+    steps alone, compiled runs of 0.25 s from rest, best of ``repeats``) with the dense iteration matrix and with
+    the articulated one, in ABA of its own chain (Pinocchio, this run), and their growth from n_rfe = 12 (a step of
+    O(n) cost would not grow); beside them the parts of a dense step (:func:`part_times`) in ABA, with the modal
+    correction per step (its cost times ONLINE_STEP / REFRESH_INTERVAL), and how each part grows from 12 to the
+    row's n_rfe."""
     rows = []
     for n_rfe in SCALING_RFE:
         scenario = Scenario(params.with_rfe_count(n_rfe), "flexible")
         simulate(scenario.motion, scenario.equilibrium.q, 0.01, step=1e-3)  # compile / load the kernels
         aba = aba_time(scenario)
         steps = round(duration / ONLINE_STEP)
-        step = min(run_times(scenario, ONLINE_STEP, duration, False) for _ in range(repeats)) / steps
+        step, articulated = (min(run_times(scenario, ONLINE_STEP, duration, False, articulated=articulated)
+                                 for _ in range(repeats)) / steps for articulated in (False, True))
         parts = part_times(scenario, 3000 if n_rfe <= 12 else 300)
         parts["correction"] *= ONLINE_STEP / REFRESH_INTERVAL
         rows.append(ScalingRow(n_rfe, scenario.model.dof, scenario.motion.partition.independent.size,
-                               resolved_modes(scenario, ONLINE_STEP), aba, step,
+                               resolved_modes(scenario, ONLINE_STEP), aba, step, articulated,
+                               ExactFrequencyTrapezoidal(scenario.motion).articulated,
                                {name: parts[name] / aba for name in ("factor", "position_terms", "residual",
                                                                      "projection", "correction")}))
     base = next((row for row in rows if row.n_rfe == 12), rows[0])
     print(f"[scaling] h = {ONLINE_STEP * 1e3:g} ms; each cost in ABA of its own chain (x: growth from "
-          f"n_rfe = {base.n_rfe}); parts: iteration factor / M (position_terms) / a Newton residual / a projection / "
+          f"n_rfe = {base.n_rfe}); the step with the iteration matrix dense, then articulated (*: the integrator's "
+          f"choice, articulated from n_ic = {integration.ARTICULATED_FROM}); parts of the dense step: "
+          f"iteration factor / M (position_terms) / a Newton residual / a projection / "
           f"modal correction per step; modes resolved (omega h < {integration.CUTOFF / math.pi:g} pi) of n_ic; "
           f"the rest: the step less those three (its Newton residuals and projections, the solves with the factor, "
           f"the modal terms' products, the step's end)")
-    for n_rfe, dof, n_ic, resolved, aba, step, parts in rows:
+    for n_rfe, dof, n_ic, resolved, aba, step, articulated, chosen, parts in rows:
         growth = " / ".join(f"{value:.2f} ({value / base.parts[name]:.1f}x)" for name, value in parts.items())
         dense = parts["factor"] + parts["position_terms"] + parts["correction"]
         print(f"[scaling] n_rfe={n_rfe:2d} dof={dof:3d} n_ic={n_ic:3d} resolved={resolved:2d}: ABA "
-              f"{aba * 1e6:6.2f} us, step {step * 1e6:7.1f} us = {step / aba:4.1f} ABA "
-              f"({step / aba / (base.step / base.aba):.2f}x), real-time factor {ONLINE_STEP / step:5.1f}; "
-              f"parts {growth}; the rest {step / aba - dense:.2f} ABA")
+              f"{aba * 1e6:6.2f} us; step dense{' ' if chosen else '*'} {step * 1e6:7.1f} us = {step / aba:4.1f} ABA "
+              f"({step / aba / (base.step / base.aba):.2f}x), articulated{'*' if chosen else ' '} "
+              f"{articulated * 1e6:7.1f} us = {articulated / aba:4.1f} ABA "
+              f"({articulated / aba / (base.articulated_step / base.aba):.2f}x), real-time factor "
+              f"{ONLINE_STEP / min(step, articulated):5.1f}; parts {growth}; the rest {step / aba - dense:.2f} ABA")
 
 
 SECTIONS = ("eval", "profile", "speed", "scaling")

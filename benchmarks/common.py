@@ -63,12 +63,16 @@ def aba_time(scenario: Scenario, repeat: int = 20000) -> float:
 
 
 def run_times(scenario: Scenario, step: float, duration: float, every_row: bool, chunk: float = 0.25,
-              paced: bool = False) -> float:
+              paced: bool = False, articulated: bool | None = None) -> float:
     """Wall time [s] of ``duration`` seconds of motion from rest in compiled runs of ``chunk`` seconds: the
     steps alone (only each run's last row evaluated, what a caller that reads the motion needs) or with
     every row's full evaluation (reactions, residuals, energy accounts: what ``simulate`` records); ``paced``:
-    each run waits until its motion's end is reached in wall time (as a real-time solver runs them)."""
+    each run waits until its motion's end is reached in wall time (as a real-time solver runs them);
+    ``articulated``: the iteration matrix solved by the articulated-body recursion or densely (None: as the
+    integrator chooses by size)."""
     integrator = ExactFrequencyTrapezoidal(scenario.motion)
+    if articulated is not None:
+        integrator.articulated = articulated
     state = integrator.start(0.0, scenario.equilibrium.q, np.zeros_like(scenario.equilibrium.q))
     per_run = round(chunk / step)
     start = time.perf_counter()

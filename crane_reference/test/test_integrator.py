@@ -125,11 +125,11 @@ def test_tracked_modes_follow_scipys_across_a_rotating_near_degenerate_pair(scen
     expected_damping = projector.T @ on_unresolved_a @ np.diag(e_a) @ on_unresolved_a.T @ projector
     at_a = modal_correction(mass_a, h, 0.0, drive, partition, chain, settings)
     assert at_a.resolved == resolved
-    tracked = tracked_correction(mass_b, at_a, states[1].t, drive, partition, chain)
+    tracked = tracked_correction(mass_b, at_a, states[1].t, drive, partition, chain, settings)
     scale = np.abs(expected_inertia).max()
     assert np.abs(tracked.inertia - expected_inertia).max() <= 0.1 * np.abs(at_a.inertia - expected_inertia).max()
     for _ in range(40):
-        tracked = tracked_correction(mass_b, tracked, states[1].t, drive, partition, chain)
+        tracked = tracked_correction(mass_b, tracked, states[1].t, drive, partition, chain, settings)
     assert np.abs(tracked.inertia - expected_inertia).max() <= 1e-9 * scale
     assert np.abs(tracked.damping - expected_damping).max() <= 1e-9 * np.abs(expected_damping).max()
 
@@ -265,8 +265,9 @@ def test_the_iteration_matrix_is_the_dense_formula(scenario, servo):
         P = np.eye(n)[:, independent] if servo else B
         expected = P.T @ (M + 0.25 * STEP**2 * stiffness + 0.5 * STEP * chain.damping) @ B - inertia \
             + 0.5 * STEP * damping
-        factor = iteration_factor(M, B, STEP, ModalCorrection(inertia, damping, np.zeros((n_ic, n_ic)), 0,
-                                                                  np.zeros((n_ic, n_ic)), 0.0, STEP, 0.0), drive,
+        zeros = np.zeros((n_ic, n_ic))
+        factor = iteration_factor(M, B, STEP, ModalCorrection(inertia, damping, zeros, 0, zeros, 0.0, STEP, 0.0, zeros,
+                                                                  np.zeros(n_ic)), drive,
                                           Partition(independent, dependent, independent, dependent, servo), chain)
         matrix = np.linalg.inv(factor) if servo else factor @ factor.T
         np.testing.assert_allclose(matrix, expected, rtol=1e-11, atol=1e-11 * np.abs(expected).max())

@@ -41,7 +41,8 @@ def _congruence(X, weights):
 def no_correction(n_ic):
     """No modal correction yet (time -inf): the next step computes it."""
     zeros = np.zeros((n_ic, n_ic))
-    return ModalCorrection(zeros, zeros.copy(), zeros.copy(), 0, zeros.copy(), -np.inf, 0.0, -np.inf)
+    return ModalCorrection(zeros, zeros.copy(), zeros.copy(), 0, zeros.copy(), -np.inf, 0.0, -np.inf, zeros.copy(),
+                           np.zeros(n_ic))
 
 
 SHIFT = 1.0
@@ -136,32 +137,58 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
     beta (K_r - M_r Phi_r diag(omega_r^2) Phi_r^T M_r), K_r less a part of the resolved modes' rank).  In the
     independent coordinates Delta M_r = M_r Phi diag(c) Phi^T M_r and likewise D_u with e (neither acts on a
     motion no spring resists: Phi^T M_r = diag(omega^-2) Phi^T K_r); the unresolved modes' part of D_u is kept
-    as its factor G = M_r Phi_u diag(sqrt(e_u)) (D_u's part G G^T) for :func:`tracked_correction`.
+    as its factor G = M_r Phi_u diag(sqrt(e_u)) (D_u's part G G^T) for :func:`tracked_correction`, and the resolved
+    modes' U = M_r Phi_r with the weights W of the iteration matrix (:func:`_iteration_weights`).
     Servo-constraints (P = E_ic: no symmetric reduced mass) get none, and so does the plain trapezoidal rule
     (``settings.modal`` False)."""
     n_ic = partition.independent.size
     zeros = np.zeros((n_ic, n_ic))
     if partition.servo or not settings.modal:
-        return ModalCorrection(zeros, zeros.copy(), zeros.copy(), 0, zeros.copy(), t, h, t)
+        return ModalCorrection(zeros, zeros.copy(), zeros.copy(), 0, zeros.copy(), t, h, t, zeros.copy(),
+                               np.zeros(n_ic))
     omega_squared, modes, on_modes = _generalized_modes(reduced_stiffness(drive, partition, chain), reduced_mass)
     resolved = 0
     while resolved < n_ic and np.sqrt(max(omega_squared[resolved], 0.0)) * h < settings.cutoff:
         resolved += 1
     c, e = _resolved_terms(omega_squared[:resolved], _modal_damping(modes, resolved, partition, chain), h)
-    unresolved = zeros.copy()
-    beta = 2.0 * settings.unresolved_damping * h / settings.cutoff
-    for j in range(resolved, n_ic):
-        weight = np.sqrt(beta * omega_squared[j])
+    unresolved, loads = zeros.copy(), zeros.copy()
+    beta = unresolved_rate(h, settings)
+    for j in range(n_ic):
+        weight = np.sqrt(beta * omega_squared[j]) if j >= resolved else 1.0
         for i in range(n_ic):
-            unresolved[i, j] = on_modes[i, j] * weight
+            if j >= resolved:
+                unresolved[i, j] = on_modes[i, j] * weight
+            else:
+                loads[i, j] = on_modes[i, j]
     on_resolved = np.ascontiguousarray(on_modes[:, :resolved])
     damping_unresolved = _congruence(np.ascontiguousarray(unresolved[:, resolved:]), np.ones(n_ic - resolved))
     return ModalCorrection(_congruence(on_resolved, c), _congruence(on_resolved, e) + damping_unresolved, modes,
-                           resolved, unresolved, t, h, t)
+                           resolved, unresolved, t, h, t, loads,
+                           _iteration_weights(omega_squared[:resolved], c, e, h, beta, n_ic))
 
 
 @njit(cache=True, nogil=True)
-def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, partition: Partition, chain: ChainData):
+def unresolved_rate(h, settings: StepSettings):
+    """beta = 2 zeta / omega_c [s] (omega_c = ``settings.cutoff`` / h, zeta = ``settings.unresolved_damping``): an
+    unresolved mode's damping e = beta omega^2 (:func:`modal_correction`)."""
+    return 2.0 * settings.unresolved_damping * h / settings.cutoff
+
+
+@njit(cache=True, nogil=True)
+def _iteration_weights(omega_squared, c, e, h, beta, n_ic):
+    """W = -c + h/2 (e - beta omega^2) of the resolved modes (n_ic entries, zeros beyond them): the iteration
+    matrix is B^T (M + (h^2/4 + beta h/2) K + h/2 D) B + U diag(W) U^T with U = M_r Phi_r, since
+    -Delta M_r + h/2 D_u = U diag(-c + h/2 e) U^T + h/2 beta (K_r - U diag(omega_r^2) U^T) (K_r = M_r Phi diag(omega^2)
+    Phi^T M_r over all modes)."""
+    weights = np.zeros(n_ic)
+    for i in range(omega_squared.size):
+        weights[i] = -c[i] + (0.5 * h) * (e[i] - beta * max(omega_squared[i], 0.0))
+    return weights
+
+
+@njit(cache=True, nogil=True)
+def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, partition: Partition, chain: ChainData,
+                       settings: StepSettings):
     """``correction`` carried to the configuration of ``reduced_mass`` by tracking its resolved modes Phi_r: one
     shift-inverted subspace iteration from them, X = (K_r + s M_r)^-1 M_r Phi_r (s = :data:`SHIFT`), and the
     Rayleigh-Ritz step on X (the modes of the pencil (X^T K_r X, X^T M_r X), by Jacobi rotations: it is nearly
@@ -169,7 +196,10 @@ def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, part
     :func:`modal_correction`, and the unresolved modes' damping of the last full eigenproblem, G G^T, is projected
     off them, P^T G G^T P with P = I - Phi_r Phi_r^T M_r, so that it damps no resolved mode (a stale D_u otherwise
     damps a resolved mode psi by sum_u e_u (phi_u^T M_r psi)^2).  The modes stay resolved, and their number stays,
-    until the next full eigenproblem (``time`` is its; ``tracked`` becomes t)."""
+    until the next full eigenproblem (``time`` is its; ``tracked`` becomes t).  U = M_r Phi_r and the weights W follow
+    the tracked modes; the articulated iteration matrix, which takes the unresolved damping as
+    beta (K_r - U diag(omega_r^2) U^T), then differs from the projected one by what the tracking moved, as a Newton
+    iteration matrix may."""
     r = correction.resolved
     if r == 0:
         return correction
@@ -199,8 +229,10 @@ def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, part
     damping = _congruence(G - on_resolved @ (phi_r.T @ G), np.ones(n - r))
     if np.any(e != 0.0):
         damping += _congruence(on_resolved, e)
+    loads = np.zeros((n, n))
+    loads[:, :r] = on_resolved
     return ModalCorrection(_congruence(on_resolved, c), damping, modes, r, correction.unresolved, correction.time, h,
-                           t)
+                           t, loads, _iteration_weights(omega_squared, c, e, h, unresolved_rate(h, settings), n))
 
 
 @njit(cache=True, nogil=True)

@@ -8,15 +8,10 @@ from numba import njit
 
 from .evaluation import accelerations_from, imbalance_from_terms
 from .inertia import composite_inertias, mass_matrix, world_pseudo_inertias
+from .iteration_matrix import articulated_iteration_factor, dense_iteration_factor, iteration_solve
 from .kinematics import forward_kinematics, point_bias, point_jacobian, velocity_terms
-from .linalg import cholesky_solve, larger_magnitude, matvec, project_rows, smallest_singular_value
-from .modal_correction import (
-    converted_accelerations,
-    iteration_factor,
-    modal_correction,
-    reduced_mass_matrix,
-    tracked_correction,
-)
+from .linalg import larger_magnitude, matvec, project_rows, smallest_singular_value
+from .modal_correction import converted_accelerations, modal_correction, reduced_mass_matrix, tracked_correction
 from .projection import PROJECTION_ITERATIONS, constraint_map, dependent_velocities, project_positions
 from .quadrics import acceleration_terms
 from .structures import (
@@ -195,8 +190,8 @@ def step_residual(a1, q0, qd0, a0, correction: ModalCorrection, h, k: Coefficien
                   chain: ChainData, settings: StepSettings):
     """The residual of the step's equation (:func:`_step_residual_at`) as a function of the accelerations a1 of
     the integrated coordinates, at the trapezoidal state for a1 with q_hd on the position constraints (what
-    the Newton iteration drives to zero; its Jacobian is what :func:`iteration_factor` with M and B at the
-    first iterate approximates)."""
+    the Newton iteration drives to zero; its Jacobian is what the iteration matrix
+    (:mod:`~crane_reference.dynamics.iteration_matrix`) with M and B at the first iterate approximates)."""
     integrated = partition.integrated
     guess = q0 + h * qd0
     guess[integrated] += (0.25 * h * h) * (a0 + a1)
@@ -215,7 +210,8 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
     :func:`first_iterate` at the :func:`predicted_accelerations` (from ``earlier``, the accelerations of the
     integrated coordinates at the two previous steps' starts, NaN where unknown; forgotten at a new step
     size), whose M and B (the step end's to first order in h) give the iteration matrix
-    (:func:`iteration_factor`); q_hd predicted to second order in the change of x at the later iterates,
+    (:mod:`~crane_reference.dynamics.iteration_matrix`: formed densely, or with ``settings.articulated`` solved by
+    the articulated-body recursion without M); q_hd predicted to second order in the change of x at the later iterates,
     qd_dc from the velocity-level constraints at every iterate.  At least ``settings.evaluations``
     evaluations, then until the last correction is below the tolerance; the step ends at the state of the
     corrected accelerations, on the position constraints, with qdd = B a_ic + e there (:class:`StepEnd`; no
@@ -253,19 +249,24 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
     if not it.solved:
         return _failed(q0, qd0, qdd0, B0, earlier, correction, _unsolved(it, a1), 1)
     qdd, residual, B, Hw = _plain_residual_at(it, a1, k, drive, partition, chain)
-    M = mass_at(it.S, Hw, chain)
-    if correction.resolved > 0 and t0 - correction.tracked >= settings.mode_tracking_interval - 0.5 * h:
+    tracking = correction.resolved > 0 and t0 - correction.tracked >= settings.mode_tracking_interval - 0.5 * h
+    articulated = settings.articulated and not servo
+    M = mass_at(it.S, Hw, chain) if tracking or not articulated else np.empty((0, 0))
+    if tracking:
         correction = tracked_correction(reduced_mass_matrix(M, B, partition), correction, t0, drive, partition,
-                                        chain)
+                                        chain, settings)
     _add_modal_terms(residual, it.qd, a1, correction, partition)
-    factor = iteration_factor(M, B, h, correction, drive, partition, chain)
+    if articulated:
+        factor = articulated_iteration_factor(it.S, Hw, B, h, correction, settings, drive, partition, chain)
+    else:
+        factor = dense_iteration_factor(M, B, h, correction, drive, partition, chain)
     q1 = it.q
     status = NOT_CONVERGED
     for iteration in range(settings.max_iterations):
         if iteration > 0:
             it = _state_at(a1, x0, v0, a0, q1, q0.size, h, k, partition, chain, settings, GUESSED)
             qdd, residual, B, Hw = _step_residual_at(it, a1, correction, k, drive, partition, chain)
-        solved = cholesky_solve(factor, residual) if not servo else matvec(factor, residual)
+        solved = iteration_solve(factor, residual, partition)
         largest = 0.0
         for i in range(integrated.size):  # Newton on a_ic, fixed point on a_vd
             if i < n_ic:

@@ -75,7 +75,8 @@ class StepSettings(NamedTuple):
     cutoff); between, the resolved modes are tracked to the configuration after every
     ``mode_tracking_interval`` [s] of motion (:func:`~crane_reference.dynamics.modal_correction.tracked_correction`;
     0: every step, inf: never); without ``modal`` there is no modal correction (the plain trapezoidal rule, for
-    comparison)."""
+    comparison); with ``articulated`` the Newton iteration matrix is solved by the articulated-body recursion and
+    Woodbury's identity (:mod:`~crane_reference.dynamics.iteration_matrix`), else factored densely."""
 
     evaluations: int
     tolerance: float
@@ -86,6 +87,7 @@ class StepSettings(NamedTuple):
     unresolved_damping: float
     mode_tracking_interval: float
     modal: bool
+    articulated: bool
 
 
 class ModalCorrection(NamedTuple):
@@ -99,7 +101,10 @@ class ModalCorrection(NamedTuple):
     and ``unresolved`` D_u of the last full eigenproblem on its unresolved modes, which
     :func:`~crane_reference.dynamics.modal_correction.tracked_correction` projects off the tracked ones, as its
     factor G (columns ``resolved`` on; D_u = G G^T); ``tracked`` [s], when the modes were last tracked or
-    computed."""
+    computed; ``on_resolved`` U = M_r Phi_r (its first ``resolved`` columns; zeros beyond) and ``weights`` W (the
+    first ``resolved`` entries), -c + h/2 (e - beta omega^2) per resolved mode, with which the iteration matrix is
+    B^T (M + (h^2/4 + beta h/2) K + h/2 D) B + U diag(W) U^T
+    (:func:`~crane_reference.dynamics.iteration_matrix.articulated_iteration_factor`)."""
 
     inertia: np.ndarray
     damping: np.ndarray
@@ -109,6 +114,8 @@ class ModalCorrection(NamedTuple):
     time: float
     step: float
     tracked: float
+    on_resolved: np.ndarray
+    weights: np.ndarray
 
 
 class ChainTerms(NamedTuple):
@@ -411,12 +418,12 @@ class PlantCarry(NamedTuple):
     """The actuated plant's state carried from one control period to the next in arrays that
     :func:`~.closed_loop.held_period` updates in place: the time ``clock`` (1,) [s], q and qd, the work accounts
     (3,) [J], the modal correction (:class:`ModalCorrection`: ``inertia``, ``damping``, ``modes``, ``unresolved``,
-    ``modal`` (4,) its time and step [s], the number of resolved modes and when they were tracked [s]); the position
-    and velocity terms of the evaluation at the last step's end, on which (8) is solved again as the next period's
-    command makes the forces jump (those of :class:`Accelerations` but Q and qdd: M, h, Q_g, the
-    ``gravity_potential`` (1,) [J], E's position (3,) [m] and rotation (3, 3) in the world frame, C, d, A, c and B);
-    and beside q and qd what the plant reports: the actuator ``torques`` (n_a,) [N m or N] at the period's end, E's
-    ``ee_quaternion`` (x, y, z, w) in the world frame and the tip ``deflection`` (3,) [m]
+    ``on_resolved``, ``weights``, ``modal`` (4,) its time and step [s], the number of resolved modes and when they
+    were tracked [s]); the position and velocity terms of the evaluation at the last step's end, on which (8) is
+    solved again as the next period's command makes the forces jump (those of :class:`Accelerations` but Q and qdd:
+    M, h, Q_g, the ``gravity_potential`` (1,) [J], E's position (3,) [m] and rotation (3, 3) in the world frame, C,
+    d, A, c and B); and beside q and qd what the plant reports: the actuator ``torques`` (n_a,) [N m or N] at the
+    period's end, E's ``ee_quaternion`` (x, y, z, w) in the world frame and the tip ``deflection`` (3,) [m]
     (:func:`~.deflection.deflection_at`)."""
 
     clock: np.ndarray
@@ -427,6 +434,8 @@ class PlantCarry(NamedTuple):
     damping: np.ndarray
     modes: np.ndarray
     unresolved: np.ndarray
+    on_resolved: np.ndarray
+    weights: np.ndarray
     modal: np.ndarray
     M: np.ndarray
     h: np.ndarray
@@ -464,3 +473,18 @@ class ConstrainedFactor(NamedTuple):
     A: np.ndarray
     Z: np.ndarray
     schur: np.ndarray
+
+
+class IterationFactor(NamedTuple):
+    """The Newton iteration matrix of a step, factored (:mod:`~crane_reference.dynamics.iteration_matrix`):
+    densely, ``dense`` its Cholesky factor (ideal constraints) or its inverse (servo-constraints), the other fields
+    empty; or by the articulated-body recursion, ``dense`` empty (0 x 0), ``constrained`` the factor of
+    Y = B^T X' B, ``loads`` U (n_ic, r), ``solved`` Y^-1 U, ``capacitance`` (I + diag(W) U^T Y^-1 U)^-1 and
+    ``weights`` W (r,), so that (Y + U diag(W) U^T)^-1 = Y^-1 - Y^-1 U capacitance diag(W) U^T Y^-1 (Woodbury)."""
+
+    dense: np.ndarray
+    constrained: ConstrainedFactor
+    loads: np.ndarray
+    solved: np.ndarray
+    capacitance: np.ndarray
+    weights: np.ndarray

@@ -129,6 +129,12 @@ MODE_TRACKING_INTERVAL = math.inf
 """[s] of motion after which the resolved modes are tracked to the configuration between refreshes
 (:func:`~crane_reference.dynamics.modal_correction.tracked_correction`; 0: every step, inf: never)."""
 
+ARTICULATED_FROM = 60
+"""Independent coordinates from which the Newton iteration matrix is solved by the articulated-body recursion and
+Woodbury's identity (:mod:`~crane_reference.dynamics.iteration_matrix`), O(n) in the chain, instead of formed and
+factored densely, O(n^3): where the articulated one is the cheaper (docs/performance.md, "The articulated
+iteration matrix")."""
+
 UNRESOLVED_DAMPING = 1.0
 """Damping ratio given to a mode the step does not resolve at the cutoff; above it the ratio grows as omega."""
 
@@ -184,6 +190,8 @@ class ExactFrequencyTrapezoidal:
         """omega h [rad] from which a mode is not resolved (damped, not turned exactly)."""
         self.mode_tracking_interval = MODE_TRACKING_INTERVAL
         """[s] of motion after which the resolved modes are tracked to the configuration between refreshes."""
+        self.articulated = len(motion.independent) >= ARTICULATED_FROM
+        """Whether the Newton iteration matrix is solved by the articulated-body recursion (else densely)."""
         self.evaluations = evaluations
         self.tolerance = tolerance
         self.max_iterations = max_iterations
@@ -195,7 +203,7 @@ class ExactFrequencyTrapezoidal:
         """The method and its stopping rules in the layout of the compiled kernels."""
         return StepSettings(self.evaluations, self.tolerance, self.max_iterations, PROJECTION_TOLERANCE,
                             self.refresh_interval, self.cutoff, UNRESOLVED_DAMPING,
-                            self.mode_tracking_interval, self.modal)
+                            self.mode_tracking_interval, self.modal, self.articulated)
 
     def _fresh(self) -> ModalCorrection:
         """No modal correction yet: the first step computes it."""

@@ -1,0 +1,89 @@
+"""The Newton iteration matrix of a step (see :mod:`crane_reference.motion.integration`), factored and solved
+(compiled with numba): densely, or, O(n) in the chain, by the articulated-body recursion and Woodbury's identity.
+
+The iteration matrix is J = B^T (M + h^2/4 K + h/2 D) B - Delta M_r + h/2 D_u (K with the drive's spring s_dr on
+psi2; :func:`~crane_reference.dynamics.modal_correction.iteration_factor` forms and factors it).  With the resolved
+modes' U = M_r Phi_r and the unresolved modes' damping beta omega^2
+(:func:`~crane_reference.dynamics.modal_correction.modal_correction`), -Delta M_r + h/2 D_u = U diag(W) U^T +
+h/2 beta K_r, so J = Y + U diag(W) U^T with Y = B^T X' B, X' = M + (h^2/4 + beta h/2) (K + s_dr on psi2) + h/2 D:
+Y is solved by :mod:`~crane_reference.dynamics.articulated` (the task constraints as rows A with A B = 0), and
+J^-1 = Y^-1 - Y^-1 U (I + diag(W) U^T Y^-1 U)^-1 diag(W) U^T Y^-1 (r more solves to factor; diag(W) is not
+inverted, so a weight may be zero).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .articulated import constrained_factor, reduced_solve
+from .linalg import cholesky_solve, matvec
+from .modal_correction import iteration_factor, unresolved_rate
+from .structures import (
+    ArticulatedFactor,
+    ChainData,
+    ConstrainedFactor,
+    IterationFactor,
+    ModalCorrection,
+    Partition,
+    StepSettings,
+)
+
+
+@njit(cache=True, nogil=True)
+def constraint_rows(B, partition: Partition):
+    """Rows A (m, n) whose null space B spans (B[ic] = I): A[:, ic] = -B[dc], A[:, dc] = I (the acceleration
+    constraints of (7) solved for q_dc)."""
+    independent, dependent = partition.independent, partition.dependent
+    rows = np.zeros((dependent.size, B.shape[0]))
+    for i in range(dependent.size):
+        for j in range(independent.size):
+            rows[i, independent[j]] = -B[dependent[i], j]
+        rows[i, dependent[i]] = 1.0
+    return rows
+
+
+@njit(cache=True, nogil=True)
+def dense_iteration_factor(M, B, h, correction: ModalCorrection, drive, partition: Partition, chain: ChainData):
+    """J formed and factored by :func:`~crane_reference.dynamics.modal_correction.iteration_factor`."""
+    none, empty = np.empty((0, 0)), np.empty(0)
+    articulated = ArticulatedFactor(np.empty((0, 6)), np.empty((0, 6)), empty, none)
+    return IterationFactor(np.ascontiguousarray(iteration_factor(M, B, h, correction, drive, partition, chain)),
+                           ConstrainedFactor(articulated, none, none, none), none, none, none, empty)
+
+
+@njit(cache=True, nogil=True)
+def articulated_iteration_factor(S, Hw, B, h, correction: ModalCorrection, settings: StepSettings, drive,
+                                 partition: Partition, chain: ChainData):
+    """J = Y + U diag(W) U^T at the twists S, world pseudo-inertias Hw and velocity map B: Y's articulated factor,
+    Y^-1 U and the capacitance (I + diag(W) U^T Y^-1 U)^-1 (ideal constraints only: P = B)."""
+    r, independent = correction.resolved, partition.independent
+    beta = unresolved_rate(h, settings) if settings.modal else 0.0
+    constrained = constrained_factor(S, Hw, constraint_rows(B, partition), 0.25 * h * h + 0.5 * h * beta, 0.5 * h,
+                                     drive, chain)
+    loads = np.ascontiguousarray(correction.on_resolved[:, :r])
+    weights = correction.weights[:r].copy()
+    solved = np.empty((independent.size, r))
+    for m in range(r):
+        solved[:, m] = reduced_solve(constrained, independent, loads[:, m].copy())
+    capacitance = loads.T @ solved
+    for i in range(r):
+        for j in range(r):
+            capacitance[i, j] *= weights[i]
+        capacitance[i, i] += 1.0
+    inverse = np.ascontiguousarray(np.linalg.inv(capacitance)) if r > 0 else capacitance
+    return IterationFactor(np.empty((0, 0)), constrained, loads, solved, inverse, weights)
+
+
+@njit(cache=True, nogil=True)
+def iteration_solve(factor: IterationFactor, residual, partition: Partition):
+    """J^-1 residual: by the dense factor (Cholesky; the inverse for servo-constraints), or by Woodbury's identity
+    on the articulated one."""
+    if factor.dense.shape[0] > 0:
+        return cholesky_solve(factor.dense, residual) if not partition.servo else matvec(factor.dense, residual)
+    y = reduced_solve(factor.constrained, partition.independent, residual)
+    r = factor.weights.size
+    if r > 0:
+        projected = matvec(factor.loads.T, y) * factor.weights
+        y -= matvec(factor.solved, matvec(factor.capacitance, projected))
+    return y
