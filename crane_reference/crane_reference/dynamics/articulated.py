@@ -26,11 +26,13 @@ from .structures import ArticulatedFactor, ChainData, ConstrainedFactor
 
 
 @njit(cache=True, nogil=True, inline='always')
-def joint_term(spring_weight, damper_weight, chain: ChainData, row, column):
-    """The entry (row, column) of spring_weight K + damper_weight D (without the drive's spring)."""
-    value = spring_weight * chain.stiffness[row, column]
-    if chain.damped:
-        value += damper_weight * chain.damping[row, column]
+def joint_term(spring_weight, damper_weight, stiffness, damping, damped, row, column):
+    """The entry (row, column) of spring_weight K + damper_weight D (without the drive's spring; ``damped``: D has a
+    non-zero entry).  The caller passes the chain's arrays, not the chain: numba counts a reference at every
+    extraction of an array from a tuple."""
+    value = spring_weight * stiffness[row, column]
+    if damped:
+        value += damper_weight * damping[row, column]
     return value
 
 
@@ -70,11 +72,13 @@ def articulated_factor(S, Hw, spring_weight, damper_weight, drive, chain: ChainD
         s[k, 0], s[k, 1], s[k, 2] = S[k, 2, 1], S[k, 0, 2], S[k, 1, 0]
         s[k, 3], s[k, 4], s[k, 5] = S[k, 0, 3], S[k, 1, 3], S[k, 2, 3]
     drive_spring = spring_weight * drive[1]
+    stiffness, damping, damped = chain.stiffness, chain.damping, chain.damped
     U = np.zeros((n, 6))
     D = np.zeros(n)
     articulated = np.zeros((6, 6))
     for k in range(n - 1, root_size - 1, -1):
-        d = joint_term(spring_weight, damper_weight, chain, k, k) + (drive_spring if k == chain.drive_joint else 0.0)
+        d = joint_term(spring_weight, damper_weight, stiffness, damping, damped, k, k) \
+            + (drive_spring if k == chain.drive_joint else 0.0)
         for a in range(6):
             total = 0.0
             for c in range(6):
@@ -90,7 +94,7 @@ def articulated_factor(S, Hw, spring_weight, damper_weight, drive, chain: ChainD
     root = np.empty((root_size, root_size))
     for i in range(root_size):
         for j in range(root_size):
-            root[i, j] = joint_term(spring_weight, damper_weight, chain, i, j)
+            root[i, j] = joint_term(spring_weight, damper_weight, stiffness, damping, damped, i, j)
     if chain.drive_joint < root_size:
         root[chain.drive_joint, chain.drive_joint] += drive_spring
     projected = np.empty(6)

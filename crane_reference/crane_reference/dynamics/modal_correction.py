@@ -273,11 +273,12 @@ def iteration_factor(M, B, h, correction: ModalCorrection, drive, partition: Par
     else:
         reduced = congruent(M, B, independent, dependent)
     inertia, modal_damping = correction.inertia, correction.damping
+    stiffness, damping, damped = chain.stiffness, chain.damping, chain.damped
     spring, drive_row = 0.25 * h * h * drive[1], B[chain.drive_joint]
     for i in range(independent.size):
         row = independent[i]
         left = drive_row[i] if not servo else (1.0 if row == chain.drive_joint else 0.0)
         for j in range(independent.size):
-            reduced[i, j] += joint_term(0.25 * h * h, 0.5 * h, chain, row, independent[j]) \
+            reduced[i, j] += joint_term(0.25 * h * h, 0.5 * h, stiffness, damping, damped, row, independent[j]) \
                 + (0.5 * h) * modal_damping[i, j] - inertia[i, j] + spring * left * drive_row[j]
     return cholesky(reduced) if not servo else np.linalg.inv(reduced)
