@@ -204,10 +204,10 @@ def _repeat_correction(reduced_mass, drive, partition, chain, settings, n):
 
 
 @njit
-def _repeat_tracking(reduced_mass, correction, drive, partition, chain, settings, n):
+def _repeat_tracking(reduced_mass, correction, drive, partition, chain, n):
     total = 0.0
     for _ in range(n):
-        total += tracked_correction(reduced_mass, correction, 0.0, drive, partition, chain, settings).inertia[0, 0]
+        total += tracked_correction(reduced_mass, correction, 0.0, drive, partition, chain).inertia[0, 0]
     return total
 
 
@@ -260,7 +260,7 @@ def part_times(scenario: Scenario, repeat: int) -> dict[str, float]:
              ("projection", _repeat_projection, (off, k, motion.holonomic_dependent, chain)),
              ("residual", _repeat_residual, (q, qd, acc.qdd[partition.integrated], k, drive, partition, chain)),
              ("correction", _repeat_correction, (reduced_mass, drive, partition, chain, settings)),
-             ("tracking", _repeat_tracking, (reduced_mass, correction, drive, partition, chain, settings)),
+             ("tracking", _repeat_tracking, (reduced_mass, correction, drive, partition, chain)),
              ("factor", _repeat_factor, (acc.M, acc.velocity_map, correction, drive, partition, chain)),
              ("accelerations", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
              ("evaluation", _repeat_evaluation, (q, qd, k, drive, partition, chain)),

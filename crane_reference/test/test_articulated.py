@@ -148,8 +148,7 @@ def test_articulated_iteration_matrix_solves_as_the_dense_one_with_the_modal_ter
         correction = modal_correction(B.T @ M @ B, ONLINE_STEP, 0.0, drive, partition, chain, settings)
         assert 0 < correction.resolved < independent.size
         dense = dense_iteration_factor(M, B, ONLINE_STEP, correction, drive, partition, chain)
-        articulated = articulated_iteration_factor(S, Hw, B, ONLINE_STEP, correction, settings, drive, partition,
-                                                   chain)
+        articulated = articulated_iteration_factor(S, Hw, B, ONLINE_STEP, correction, drive, partition, chain)
         r = rng.normal(size=independent.size)
         expected = iteration_solve(dense, r, partition)
         worst = max(worst, _difference(iteration_solve(articulated, r, partition), expected))

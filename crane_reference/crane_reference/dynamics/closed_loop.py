@@ -171,8 +171,9 @@ def held_period(carry: PlantCarry, end, start_step, end_step, steps: PlannedStep
     na, s0, s1 = plant.actuated.size, start_step, end_step
     zeros, held = np.zeros(na), np.empty((2, na))
     held[0], held[1] = efforts, efforts  # the feedforward at the period's start and at the next one's
-    correction = ModalCorrection(carry.inertia, carry.damping, carry.modes, int(carry.modal[2]), carry.unresolved,
-                                 carry.modal[0], carry.modal[1], carry.modal[3], carry.on_resolved, carry.weights)
+    correction = ModalCorrection(carry.inertia, carry.damping, carry.modes, int(carry.modal[2]), carry.modal[0],
+                                 carry.modal[1], carry.modal[3], carry.on_resolved, carry.inertia_weights,
+                                 carry.damping_weights, carry.modal[4])
     empty = np.empty(0)  # Q and qdd: not read
     terms = Accelerations(carry.M, carry.h, empty, carry.gravity_forces, carry.gravity_potential[0],
                           carry.ee_position, carry.ee_rotation, carry.ee_jacobian, carry.ee_bias, carry.A, carry.c,
@@ -190,10 +191,11 @@ def held_period(carry: PlantCarry, end, start_step, end_step, steps: PlannedStep
     carry.clock[0] = run.t
     carry.q[:], carry.qd[:], carry.work[:] = rows.q[-1], rows.qd[-1], rows.work[-1]
     carry.inertia[:], carry.damping[:] = run.correction.inertia, run.correction.damping
-    carry.modes[:], carry.unresolved[:] = run.correction.modes, run.correction.unresolved
-    carry.on_resolved[:], carry.weights[:] = run.correction.on_resolved, run.correction.weights
+    carry.modes[:], carry.on_resolved[:] = run.correction.modes, run.correction.on_resolved
+    carry.inertia_weights[:], carry.damping_weights[:] = run.correction.inertia_weights, run.correction.damping_weights
     carry.modal[0], carry.modal[1] = run.correction.time, run.correction.step
     carry.modal[2], carry.modal[3] = run.correction.resolved, run.correction.tracked
+    carry.modal[4] = run.correction.unresolved_rate
     carry.M[:], carry.h[:], carry.gravity_forces[:] = terms.M, terms.h, terms.gravity_forces
     carry.gravity_potential[0] = terms.gravity_potential
     carry.ee_position[:], carry.ee_rotation[:] = terms.ee_position, terms.ee_rotation
@@ -223,9 +225,10 @@ def plant_carry(t, q, qd, work, correction: ModalCorrection, terms: Acceleration
     ``correction``, the evaluation's ``terms`` there and the actuator ``torques`` (n_a,) [N m or N] (copies of
     them all)."""
     return PlantCarry(np.array([t]), q.copy(), qd.copy(), work.copy(), correction.inertia.copy(),
-                      correction.damping.copy(), correction.modes.copy(), correction.unresolved.copy(),
-                      correction.on_resolved.copy(), correction.weights.copy(),
-                      np.array([correction.time, correction.step, correction.resolved, correction.tracked]),
+                      correction.damping.copy(), correction.modes.copy(), correction.on_resolved.copy(),
+                      correction.inertia_weights.copy(), correction.damping_weights.copy(),
+                      np.array([correction.time, correction.step, correction.resolved, correction.tracked,
+                                correction.unresolved_rate]),
                       terms.M.copy(),
                       terms.h.copy(), terms.gravity_forces.copy(), np.array([terms.gravity_potential]),
                       np.array(terms.ee_position, dtype=float), np.array(terms.ee_rotation, dtype=float),

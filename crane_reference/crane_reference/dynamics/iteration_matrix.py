@@ -3,10 +3,10 @@
 
 The iteration matrix is J = B^T (M + h^2/4 K + h/2 D) B - Delta M_r + h/2 D_u (K with the drive's spring s_dr on
 psi2; :func:`~crane_reference.dynamics.modal_correction.iteration_factor` forms and factors it).  With the resolved
-modes' U = M_r Phi_r and the unresolved modes' damping beta omega^2
-(:func:`~crane_reference.dynamics.modal_correction.modal_correction`), -Delta M_r + h/2 D_u = U diag(W) U^T +
-h/2 beta K_r, so J = Y + U diag(W) U^T with Y = B^T X' B, X' = M + (h^2/4 + beta h/2) (K + s_dr on psi2) + h/2 D:
-Y is solved by :mod:`~crane_reference.dynamics.articulated` (the task constraints as rows A with A B = 0), and
+modes' U = M_r Phi_r and the unresolved modes' damping beta omega^2 (:class:`ModalCorrection`), -Delta M_r +
+h/2 D_u = U diag(W) U^T + h/2 beta K_r with W = -c + h/2 (e - beta omega^2), so J = Y + U diag(W) U^T with
+Y = B^T X' B, X' = M + (h^2/4 + beta h/2) (K + s_dr on psi2) + h/2 D: Y is solved by
+:mod:`~crane_reference.dynamics.articulated` (the task constraints as rows A with A B = 0), and
 J^-1 = Y^-1 - Y^-1 U (I + diag(W) U^T Y^-1 U)^-1 diag(W) U^T Y^-1 (r more solves to factor; diag(W) is not
 inverted, so a weight may be zero).
 """
@@ -18,7 +18,7 @@ from numba import njit
 
 from .articulated import constrained_factor, reduced_solve
 from .linalg import cholesky_solve, matvec
-from .modal_correction import iteration_factor, unresolved_rate
+from .modal_correction import iteration_factor
 from .structures import (
     ArticulatedFactor,
     ChainData,
@@ -26,7 +26,6 @@ from .structures import (
     IterationFactor,
     ModalCorrection,
     Partition,
-    StepSettings,
 )
 
 
@@ -53,16 +52,16 @@ def dense_iteration_factor(M, B, h, correction: ModalCorrection, drive, partitio
 
 
 @njit(cache=True, nogil=True)
-def articulated_iteration_factor(S, Hw, B, h, correction: ModalCorrection, settings: StepSettings, drive,
-                                 partition: Partition, chain: ChainData):
-    """J = Y + U diag(W) U^T at the twists S, world pseudo-inertias Hw and velocity map B: Y's articulated factor,
-    Y^-1 U and the capacitance (I + diag(W) U^T Y^-1 U)^-1 (ideal constraints only: P = B)."""
+def articulated_iteration_factor(S, Hw, B, h, correction: ModalCorrection, drive, partition: Partition,
+                                 chain: ChainData):
+    """J = Y + U diag(W) U^T at the twists S, world pseudo-inertias Hw and velocity map B, W = -c + h/2 (e - beta
+    omega^2) of the correction's resolved modes: Y's articulated factor, Y^-1 U and the capacitance
+    (I + diag(W) U^T Y^-1 U)^-1 (ideal constraints only: P = B)."""
     r, independent = correction.resolved, partition.independent
-    beta = unresolved_rate(h, settings) if settings.modal else 0.0
-    constrained = constrained_factor(S, Hw, constraint_rows(B, partition), 0.25 * h * h + 0.5 * h * beta, 0.5 * h,
-                                     drive, chain)
+    constrained = constrained_factor(S, Hw, constraint_rows(B, partition),
+                                     0.25 * h * h + 0.5 * h * correction.unresolved_rate, 0.5 * h, drive, chain)
     loads = np.ascontiguousarray(correction.on_resolved[:, :r])
-    weights = correction.weights[:r].copy()
+    weights = -correction.inertia_weights[:r] + (0.5 * h) * correction.damping_weights[:r]
     solved = np.empty((independent.size, r))
     for m in range(r):
         solved[:, m] = reduced_solve(constrained, independent, loads[:, m].copy())

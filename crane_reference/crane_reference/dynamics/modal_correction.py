@@ -41,8 +41,8 @@ def _congruence(X, weights):
 def no_correction(n_ic):
     """No modal correction yet (time -inf): the next step computes it."""
     zeros = np.zeros((n_ic, n_ic))
-    return ModalCorrection(zeros, zeros.copy(), zeros.copy(), 0, zeros.copy(), -np.inf, 0.0, -np.inf, zeros.copy(),
-                           np.zeros(n_ic))
+    return ModalCorrection(zeros, zeros.copy(), zeros.copy(), 0, -np.inf, 0.0, -np.inf, zeros.copy(), np.zeros(n_ic),
+                           np.zeros(n_ic), 0.0)
 
 
 SHIFT = 1.0
@@ -136,35 +136,22 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
     zeta at the cutoff, stiffness-proportional, so that the unresolved part of D_u is
     beta (K_r - M_r Phi_r diag(omega_r^2) Phi_r^T M_r), K_r less a part of the resolved modes' rank).  In the
     independent coordinates Delta M_r = M_r Phi diag(c) Phi^T M_r and likewise D_u with e (neither acts on a
-    motion no spring resists: Phi^T M_r = diag(omega^-2) Phi^T K_r); the unresolved modes' part of D_u is kept
-    as its factor G = M_r Phi_u diag(sqrt(e_u)) (D_u's part G G^T) for :func:`tracked_correction`, and the resolved
-    modes' U = M_r Phi_r with the weights W of the iteration matrix (:func:`_iteration_weights`).
-    Servo-constraints (P = E_ic: no symmetric reduced mass) get none, and so does the plain trapezoidal rule
-    (``settings.modal`` False)."""
+    motion no spring resists: Phi^T M_r = diag(omega^-2) Phi^T K_r), both from the resolved modes alone
+    (:func:`_terms_of_resolved_modes`).  Servo-constraints (P = E_ic: no symmetric reduced mass) get none, and so
+    does the plain trapezoidal rule (``settings.modal`` False)."""
     n_ic = partition.independent.size
     zeros = np.zeros((n_ic, n_ic))
     if partition.servo or not settings.modal:
-        return ModalCorrection(zeros, zeros.copy(), zeros.copy(), 0, zeros.copy(), t, h, t, zeros.copy(),
-                               np.zeros(n_ic))
+        return ModalCorrection(zeros, zeros.copy(), zeros.copy(), 0, t, h, t, zeros.copy(), np.zeros(n_ic),
+                               np.zeros(n_ic), 0.0)
     omega_squared, modes, on_modes = _generalized_modes(reduced_stiffness(drive, partition, chain), reduced_mass)
     resolved = 0
     while resolved < n_ic and np.sqrt(max(omega_squared[resolved], 0.0)) * h < settings.cutoff:
         resolved += 1
     c, e = _resolved_terms(omega_squared[:resolved], _modal_damping(modes, resolved, partition, chain), h)
-    unresolved, loads = zeros.copy(), zeros.copy()
-    beta = unresolved_rate(h, settings)
-    for j in range(n_ic):
-        weight = np.sqrt(beta * omega_squared[j]) if j >= resolved else 1.0
-        for i in range(n_ic):
-            if j >= resolved:
-                unresolved[i, j] = on_modes[i, j] * weight
-            else:
-                loads[i, j] = on_modes[i, j]
     on_resolved = np.ascontiguousarray(on_modes[:, :resolved])
-    damping_unresolved = _congruence(np.ascontiguousarray(unresolved[:, resolved:]), np.ones(n_ic - resolved))
-    return ModalCorrection(_congruence(on_resolved, c), _congruence(on_resolved, e) + damping_unresolved, modes,
-                           resolved, unresolved, t, h, t, loads,
-                           _iteration_weights(omega_squared[:resolved], c, e, h, beta, n_ic))
+    return _terms_of_resolved_modes(on_resolved, omega_squared[:resolved], c, e, unresolved_rate(h, settings),
+                                    reduced_stiffness(drive, partition, chain), modes, t, h, t)
 
 
 @njit(cache=True, nogil=True)
@@ -175,31 +162,47 @@ def unresolved_rate(h, settings: StepSettings):
 
 
 @njit(cache=True, nogil=True)
-def _iteration_weights(omega_squared, c, e, h, beta, n_ic):
-    """W = -c + h/2 (e - beta omega^2) of the resolved modes (n_ic entries, zeros beyond them): the iteration
-    matrix is B^T (M + (h^2/4 + beta h/2) K + h/2 D) B + U diag(W) U^T with U = M_r Phi_r, since
-    -Delta M_r + h/2 D_u = U diag(-c + h/2 e) U^T + h/2 beta (K_r - U diag(omega_r^2) U^T) (K_r = M_r Phi diag(omega^2)
-    Phi^T M_r over all modes)."""
-    weights = np.zeros(n_ic)
-    for i in range(omega_squared.size):
-        weights[i] = -c[i] + (0.5 * h) * (e[i] - beta * max(omega_squared[i], 0.0))
-    return weights
+def _terms_of_resolved_modes(on_resolved, omega_squared, c, e, beta, stiffness, modes, time, h, tracked):
+    """:class:`ModalCorrection` from the resolved modes alone (U = M_r Phi_r, their omega^2, c and e) and the
+    unresolved modes' rate beta: Delta M_r = U diag(c) U^T, and D_u = U diag(e - beta omega^2) U^T + beta K_r, since
+    the unresolved modes' part sum_u beta omega_u^2 M_r phi_u phi_u^T M_r is beta K_r less the resolved modes' part
+    (K_r = M_r Phi diag(omega^2) Phi^T M_r over all modes; ``stiffness`` K_r).  U, c and e - beta omega^2 are kept,
+    padded to n_ic, for the residual's products and the iteration matrix."""
+    n, r = stiffness.shape[0], c.size
+    damping_weights = e - beta * np.maximum(omega_squared, 0.0)
+    loads, inertia_weights, padded_damping = np.zeros((n, n)), np.zeros(n), np.zeros(n)
+    loads[:, :r], inertia_weights[:r], padded_damping[:r] = on_resolved, c, damping_weights
+    return ModalCorrection(_congruence(on_resolved, c), _congruence(on_resolved, damping_weights) + beta * stiffness,
+                           modes, r, time, h, tracked, loads, inertia_weights, padded_damping, beta)
 
 
 @njit(cache=True, nogil=True)
-def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, partition: Partition, chain: ChainData,
-                       settings: StepSettings):
+def stiffness_product(v, drive, partition: Partition, chain: ChainData):
+    """K_r v (:func:`reduced_stiffness`) in O(n): K is diagonal beyond the chain's root block."""
+    independent, stiffness, root_size = partition.independent, chain.stiffness, chain.root_size
+    out = np.empty(independent.size)
+    for i in range(independent.size):
+        row = independent[i]
+        total = stiffness[row, row] * v[i]
+        if row < root_size:
+            for j in range(independent.size):
+                if j != i and independent[j] < root_size:
+                    total += stiffness[row, independent[j]] * v[j]
+        if row == chain.drive_joint:
+            total += drive[1] * v[i]
+        out[i] = total
+    return out
+
+
+@njit(cache=True, nogil=True)
+def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, partition: Partition, chain: ChainData):
     """``correction`` carried to the configuration of ``reduced_mass`` by tracking its resolved modes Phi_r: one
     shift-inverted subspace iteration from them, X = (K_r + s M_r)^-1 M_r Phi_r (s = :data:`SHIFT`), and the
     Rayleigh-Ritz step on X (the modes of the pencil (X^T K_r X, X^T M_r X), by Jacobi rotations: it is nearly
-    diagonal) give the new Phi_r; Delta M_r and the resolved modes' damping follow from them as in
-    :func:`modal_correction`, and the unresolved modes' damping of the last full eigenproblem, G G^T, is projected
-    off them, P^T G G^T P with P = I - Phi_r Phi_r^T M_r, so that it damps no resolved mode (a stale D_u otherwise
-    damps a resolved mode psi by sum_u e_u (phi_u^T M_r psi)^2).  The modes stay resolved, and their number stays,
-    until the next full eigenproblem (``time`` is its; ``tracked`` becomes t).  U = M_r Phi_r and the weights W follow
-    the tracked modes; the articulated iteration matrix, which takes the unresolved damping as
-    beta (K_r - U diag(omega_r^2) U^T), then differs from the projected one by what the tracking moved, as a Newton
-    iteration matrix may."""
+    diagonal) give the new Phi_r; Delta M_r and D_u follow from them as in :func:`modal_correction`: the
+    unresolved modes' damping is beta K_r less the tracked modes' part, so that it damps no resolved mode (a stale
+    D_u otherwise damps a resolved mode psi by sum_u e_u (phi_u^T M_r psi)^2).  The modes stay resolved, and their
+    number stays, until the next full eigenproblem (``time`` is its; ``tracked`` becomes t)."""
     r = correction.resolved
     if r == 0:
         return correction
@@ -225,14 +228,8 @@ def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, part
     modes = correction.modes.copy()
     modes[:, :r] = phi_r
     c, e = _resolved_terms(omega_squared, _modal_damping(phi_r, r, partition, chain), h)
-    G = np.ascontiguousarray(correction.unresolved[:, r:])  # P^T G = G - M_r Phi_r (Phi_r^T G)
-    damping = _congruence(G - on_resolved @ (phi_r.T @ G), np.ones(n - r))
-    if np.any(e != 0.0):
-        damping += _congruence(on_resolved, e)
-    loads = np.zeros((n, n))
-    loads[:, :r] = on_resolved
-    return ModalCorrection(_congruence(on_resolved, c), damping, modes, r, correction.unresolved, correction.time, h,
-                           t, loads, _iteration_weights(omega_squared, c, e, h, unresolved_rate(h, settings), n))
+    return _terms_of_resolved_modes(on_resolved, omega_squared, c, e, correction.unresolved_rate, stiffness, modes,
+                                    correction.time, h, t)
 
 
 @njit(cache=True, nogil=True)

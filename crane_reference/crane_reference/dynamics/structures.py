@@ -97,25 +97,23 @@ class ModalCorrection(NamedTuple):
     exactly omega h per step, and ``damping`` D_u, which gives each resolved mode its exact decay per step
     and damps the modes the step does not resolve; ``modes`` (n_ic, n_ic), whose first ``resolved`` columns are
     the resolved modes Phi_r (Phi_r^T M_r Phi_r = I, ascending in frequency) at the configuration of the terms (the
-    other columns: the last full eigenproblem's unresolved modes, not read),
-    and ``unresolved`` D_u of the last full eigenproblem on its unresolved modes, which
-    :func:`~crane_reference.dynamics.modal_correction.tracked_correction` projects off the tracked ones, as its
-    factor G (columns ``resolved`` on; D_u = G G^T); ``tracked`` [s], when the modes were last tracked or
-    computed; ``on_resolved`` U = M_r Phi_r (its first ``resolved`` columns; zeros beyond) and ``weights`` W (the
-    first ``resolved`` entries), -c + h/2 (e - beta omega^2) per resolved mode, with which the iteration matrix is
-    B^T (M + (h^2/4 + beta h/2) K + h/2 D) B + U diag(W) U^T
-    (:func:`~crane_reference.dynamics.iteration_matrix.articulated_iteration_factor`)."""
+    other columns: the last full eigenproblem's unresolved modes, not read); ``tracked`` [s], when the modes were
+    last tracked or computed; and the same terms by the resolved modes alone, which the residual and the articulated
+    iteration matrix use: ``on_resolved`` U = M_r Phi_r (its first ``resolved`` columns; zeros beyond),
+    ``inertia_weights`` c and ``damping_weights`` e - beta omega^2 (the first ``resolved`` entries) and
+    ``unresolved_rate`` beta [s], with Delta M_r = U diag(c) U^T and D_u = U diag(e - beta omega^2) U^T + beta K_r."""
 
     inertia: np.ndarray
     damping: np.ndarray
     modes: np.ndarray
     resolved: int
-    unresolved: np.ndarray
     time: float
     step: float
     tracked: float
     on_resolved: np.ndarray
-    weights: np.ndarray
+    inertia_weights: np.ndarray
+    damping_weights: np.ndarray
+    unresolved_rate: float
 
 
 class ChainTerms(NamedTuple):
@@ -417,14 +415,14 @@ class LinkTip(NamedTuple):
 class PlantCarry(NamedTuple):
     """The actuated plant's state carried from one control period to the next in arrays that
     :func:`~.closed_loop.held_period` updates in place: the time ``clock`` (1,) [s], q and qd, the work accounts
-    (3,) [J], the modal correction (:class:`ModalCorrection`: ``inertia``, ``damping``, ``modes``, ``unresolved``,
-    ``on_resolved``, ``weights``, ``modal`` (4,) its time and step [s], the number of resolved modes and when they
-    were tracked [s]); the position and velocity terms of the evaluation at the last step's end, on which (8) is
-    solved again as the next period's command makes the forces jump (those of :class:`Accelerations` but Q and qdd:
-    M, h, Q_g, the ``gravity_potential`` (1,) [J], E's position (3,) [m] and rotation (3, 3) in the world frame, C,
-    d, A, c and B); and beside q and qd what the plant reports: the actuator ``torques`` (n_a,) [N m or N] at the
-    period's end, E's ``ee_quaternion`` (x, y, z, w) in the world frame and the tip ``deflection`` (3,) [m]
-    (:func:`~.deflection.deflection_at`)."""
+    (3,) [J], the modal correction (:class:`ModalCorrection`: ``inertia``, ``damping``, ``modes``, ``on_resolved``,
+    ``inertia_weights``, ``damping_weights``, ``modal`` (5,) its time and step [s], the number of resolved modes,
+    when they were tracked [s] and the unresolved modes' rate [s]); the position and velocity terms of the evaluation
+    at the last step's end, on which (8) is solved again as the next period's command makes the forces jump (those
+    of :class:`Accelerations` but Q and qdd: M, h, Q_g, the ``gravity_potential`` (1,) [J], E's position (3,) [m]
+    and rotation (3, 3) in the world frame, C, d, A, c and B); and beside q and qd what the plant reports: the
+    actuator ``torques`` (n_a,) [N m or N] at the period's end, E's ``ee_quaternion`` (x, y, z, w) in the world frame
+    and the tip ``deflection`` (3,) [m] (:func:`~.deflection.deflection_at`)."""
 
     clock: np.ndarray
     q: np.ndarray
@@ -433,9 +431,9 @@ class PlantCarry(NamedTuple):
     inertia: np.ndarray
     damping: np.ndarray
     modes: np.ndarray
-    unresolved: np.ndarray
     on_resolved: np.ndarray
-    weights: np.ndarray
+    inertia_weights: np.ndarray
+    damping_weights: np.ndarray
     modal: np.ndarray
     M: np.ndarray
     h: np.ndarray

@@ -51,8 +51,8 @@ M_r moves with the configuration.  Delta M_r and D_u are computed afresh every :
 (the eigenproblem of the n_ic x n_ic reduced matrices); stale ones leak damping into resolved modes, the more the
 lower the cutoff.  Between refreshes the resolved modes can be tracked to the configuration every
 :data:`MODE_TRACKING_INTERVAL` (one shift-inverted subspace iteration from the last ones and a Rayleigh-Ritz step,
-:func:`~crane_reference.dynamics.modal_correction.tracked_correction`), with Delta M_r from them and the last D_u
-projected off them, which removes that leak: what a cutoff of 0.3 pi needs to keep the vibration over an hour
+:func:`~crane_reference.dynamics.modal_correction.tracked_correction`), with Delta M_r from them and the unresolved
+damping beta K_r less their part, which removes that leak: what a cutoff of 0.3 pi needs to keep the vibration over an hour
 (off by default: it costs the node's solver the margin it needs, docs/performance.md).  These terms are
 coefficients of the equation, like M itself: they change from the next step's end on, and the carried
 accelerations are not converted (a conversion treats the slow motion's accelerations as free vibration and kicks
