@@ -63,10 +63,10 @@ def random_case(scenario: Scenario, rng: np.random.Generator) -> Case:
 
 
 @njit
-def _repeat_articulated(S, Hw, A, spring_weight, damper_weight, drive, chain, n):
+def _repeat_articulated(S, Hw, A, spring_weight, damper_weight, drive_spring, chain, n):
     total = 0.0
     for _ in range(n):
-        total += constrained_factor(S, Hw, A, spring_weight, damper_weight, drive, chain).schur[0, 0]
+        total += constrained_factor(S, Hw, A, spring_weight, damper_weight, drive_spring, chain).schur[0, 0]
     return total
 
 
@@ -110,7 +110,7 @@ def crane(n_rfe: int, states: int, repeat: int) -> None:
         case = random_case(scenario, rng)
         r = rng.normal(size=independent.size)
         dense = np.linalg.solve(case.B.T @ (case.M + matrix) @ case.B, r)
-        factor = constrained_factor(case.S, case.Hw, case.A, *weights, drive, chain)
+        factor = constrained_factor(case.S, case.Hw, case.A, *weights, weights[0] * drive[1], chain)
         worst = max(worst, np.abs(reduced_solve(factor, independent, r) - dense).max() / np.abs(dense).max())
     aba = aba_time(scenario)
     correction = modal_correction(reduced_mass_matrix(case.M, case.B, partition), h, 0.0, drive, partition, chain,
@@ -121,7 +121,7 @@ def crane(n_rfe: int, states: int, repeat: int) -> None:
         function(*arguments, 10)
         return min(call_seconds(lambda: function(*arguments, repeat), 1, median=True) for _ in range(5)) / repeat
 
-    factor_cost = cost(_repeat_articulated, case.S, case.Hw, case.A, *weights, drive, chain)
+    factor_cost = cost(_repeat_articulated, case.S, case.Hw, case.A, *weights, weights[0] * drive[1], chain)
     solve_cost = cost(_repeat_reduced_solve, factor, independent, r)
     dense_cost = cost(_repeat_dense, case.S, case.Hw, case.B, correction, drive, partition, chain, h)
     dense_solve_cost = cost(_repeat_dense_solve, dense_factor, r)

@@ -14,6 +14,7 @@ import pinocchio as pin
 import pytest
 from cranes import CONFIG, EXAMPLES
 from test_dynamics_pinocchio import pin_configuration
+from velocity_map import random_velocity_map
 
 from crane_reference.dynamics.articulated import (
     articulated_factor,
@@ -32,6 +33,7 @@ from crane_reference.dynamics.iteration_matrix import (
 from crane_reference.dynamics.kinematics import forward_kinematics
 from crane_reference.dynamics.linalg import cholesky_solve
 from crane_reference.dynamics.modal_correction import iteration_factor, modal_correction
+from crane_reference.dynamics.structures import Partition
 from crane_reference.model.config import load_config
 from crane_reference.model.urdf import model_to_urdf
 from crane_reference.motion.integration import ExactFrequencyTrapezoidal
@@ -77,6 +79,15 @@ def _joint_matrix(chain) -> np.ndarray:
     return matrix
 
 
+def _velocity_map(A: np.ndarray, partition: Partition) -> np.ndarray:
+    """B with A B = 0 and B[ic] = I (the velocity map of (7) for the constraint rows A)."""
+    independent, dependent = partition.independent, partition.dependent
+    B = np.zeros((A.shape[1], independent.size))
+    B[independent] = np.eye(independent.size)
+    B[dependent] = -np.linalg.solve(A[:, dependent], A[:, independent])
+    return B
+
+
 def _difference(solution: np.ndarray, dense: np.ndarray) -> float:
     return float(np.abs(solution - dense).max() / np.abs(dense).max())
 
@@ -92,14 +103,13 @@ def test_articulated_solve_is_the_dense_solve_of_pinocchios_mass_matrix_with_the
                               root_size=0)
     assert chain.root_size in (0, 6) and root_size(rayleigh.stiffness, rayleigh.damping) == chain.root_size
     assert root_size(diagonal.stiffness, diagonal.damping) == 0
-    drive = np.array([0.0, DRIVE_SPRING, 0.0, 0.0])
     rng = np.random.default_rng(1)
     worst = 0.0
     for S, Hw, _, M in _states(scenario):
         for variant in (chain, rayleigh, chain._replace(root_size=n), diagonal):
             tau = rng.normal(size=n)
             dense = np.linalg.solve(M + _joint_matrix(variant), tau)
-            factor = articulated_factor(S, Hw, SPRING_WEIGHT, DAMPER_WEIGHT, drive, variant)
+            factor = articulated_factor(S, Hw, SPRING_WEIGHT, DAMPER_WEIGHT, SPRING_WEIGHT * DRIVE_SPRING, variant)
             worst = max(worst, _difference(articulated_solve(factor, tau), dense))
     assert worst <= TOLERANCE
 
@@ -110,19 +120,17 @@ def test_reduced_solve_is_the_dense_solve_and_the_dense_iteration_factor_of_the_
     Pinocchio's M without modal terms (the plain trapezoidal rule's settings)."""
     motion = scenario.motion
     chain, partition = motion.dynamics.chain, motion.partition
-    independent, dependent = partition.independent, partition.dependent
+    independent = partition.independent
     drive = np.array([0.0, DRIVE_SPRING, 0.0, 0.0])
     settings = ExactFrequencyTrapezoidal(motion).settings._replace(modal=False)
     rng = np.random.default_rng(2)
     worst = 0.0
     for S, Hw, A, M in _states(scenario):
-        B = np.zeros((chain.kinds.size, independent.size))
-        B[independent] = np.eye(independent.size)
-        B[dependent] = -np.linalg.solve(A[:, dependent], A[:, independent])
+        B = _velocity_map(A, partition)
         r = rng.normal(size=independent.size)
         dense = np.linalg.solve(B.T @ (M + _joint_matrix(chain)) @ B, r)
-        solution = reduced_solve(constrained_factor(S, Hw, A, SPRING_WEIGHT, DAMPER_WEIGHT, drive, chain),
-                                 independent, r)
+        factor = constrained_factor(S, Hw, A, SPRING_WEIGHT, DAMPER_WEIGHT, SPRING_WEIGHT * DRIVE_SPRING, chain)
+        solution = reduced_solve(factor, independent, r)
         none = modal_correction(B.T @ M @ B, ONLINE_STEP, 0.0, drive, partition, chain, settings)
         factor = iteration_factor(M, B, ONLINE_STEP, none, drive, partition, chain)
         worst = max(worst, _difference(solution, dense), _difference(cholesky_solve(factor, r), dense))
@@ -133,25 +141,27 @@ def test_articulated_iteration_matrix_solves_as_the_dense_one_with_the_modal_ter
     """With the modal correction computed at the state (the full eigenproblem of the pencil (K_r, M_r)), the
     iteration matrix solved as Y + U diag(W) U^T (articulated Y with the unresolved modes' damping as beta K,
     Woodbury for the resolved modes' U = M_r Phi_r) against the dense factor of B^T (M + h^2/4 K + h/2 D) B -
-    Delta M_r + h/2 D_u formed on Pinocchio's M (D_u from the unresolved modes themselves)."""
+    Delta M_r + h/2 D_u formed on Pinocchio's M with the correction's matrices (test_integrator checks those
+    against scipy's modes): with the crane's constraints, and with psi2 dependent (a random velocity map B), where
+    the drive's spring is in h^2/4 K but not in beta K_r."""
     motion = scenario.motion
-    chain, partition = motion.dynamics.chain, motion.partition
-    independent, dependent = partition.independent, partition.dependent
-    drive = motion.dynamics.drive.kernel_parameters(0.5)
+    chain, n = motion.dynamics.chain, scenario.model.dof
+    drive = np.array([0.0, DRIVE_SPRING, 0.0, 0.0])
     settings = ExactFrequencyTrapezoidal(motion).settings
     rng = np.random.default_rng(3)
     worst = 0.0
+    driven = np.array([chain.drive_joint, n - 1])
     for S, Hw, A, M in _states(scenario):
-        B = np.zeros((chain.kinds.size, independent.size))
-        B[independent] = np.eye(independent.size)
-        B[dependent] = -np.linalg.solve(A[:, dependent], A[:, independent])
-        correction = modal_correction(B.T @ M @ B, ONLINE_STEP, 0.0, drive, partition, chain, settings)
-        assert 0 < correction.resolved < independent.size
-        dense = dense_iteration_factor(M, B, ONLINE_STEP, correction, drive, partition, chain)
-        articulated = articulated_iteration_factor(S, Hw, B, ONLINE_STEP, correction, drive, partition, chain)
-        r = rng.normal(size=independent.size)
-        expected = iteration_solve(dense, r, partition)
-        worst = max(worst, _difference(iteration_solve(articulated, r, partition), expected))
+        B_crane = _velocity_map(A, motion.partition)
+        B_driven, free = random_velocity_map(rng, n, driven)
+        for B, partition in ((B_crane, motion.partition), (B_driven, Partition(free, driven, free, driven, False))):
+            correction = modal_correction(B.T @ M @ B, ONLINE_STEP, 0.0, drive, partition, chain, settings)
+            assert correction.resolved > 0
+            dense = dense_iteration_factor(M, B, ONLINE_STEP, correction, drive, partition, chain)
+            articulated = articulated_iteration_factor(S, Hw, B, ONLINE_STEP, correction, drive, partition, chain)
+            r = rng.normal(size=partition.independent.size)
+            expected = iteration_solve(dense, r, partition)
+            worst = max(worst, _difference(iteration_solve(articulated, r, partition), expected))
     assert worst <= TOLERANCE
 
 

@@ -27,9 +27,14 @@ from scipy.linalg import eigh
 from scipy.signal import butter, sosfiltfilt
 from velocity_map import random_velocity_map
 
-from crane_reference.dynamics.modal_correction import iteration_factor, modal_correction, tracked_correction
+from crane_reference.dynamics.modal_correction import (
+    iteration_factor,
+    modal_correction,
+    stiffness_product,
+    tracked_correction,
+)
 from crane_reference.dynamics.runs import integration_run
-from crane_reference.dynamics.step import first_iterate, predicted_accelerations, step_residual
+from crane_reference.dynamics.step import add_modal_terms, first_iterate, predicted_accelerations, step_residual
 from crane_reference.dynamics.structures import ACCOUNTS, ModalCorrection, Partition
 from crane_reference.motion.integration import CUTOFF, UNRESOLVED_DAMPING, ExactFrequencyTrapezoidal, stop_flag
 from crane_reference.motion.simulation import MotionStepper, Scenario
@@ -73,7 +78,8 @@ def test_modal_terms_are_the_exact_frequency_correction_of_scipys_modes(scenario
     """Undamped crane: with K_r phi = omega^2 M_r phi (scipy.linalg.eigh) and u = omega h, Delta M_r =
     M_r Phi diag(c) Phi^T M_r and D_u = M_r Phi diag(e) Phi^T M_r with c = 1 - ((u / 2) / tan(u / 2))^2, e = 0
     below the cutoff, and c = 0, e = 2 zeta omega^2 h / cutoff (zeta the unresolved modes' damping ratio at the
-    cutoff) at or above it."""
+    cutoff) at or above it; and the step's modal terms D_u v - Delta M_r a (``add_modal_terms``, from the resolved
+    modes and K_r alone) for random v and a, and K_r v (``stiffness_product``) with K_r scipy's."""
     q = scenario.equilibrium.q
     reduced_mass, omega_squared, phi = _scipy_modes(scenario, q)
     omega = np.sqrt(omega_squared)
@@ -86,9 +92,22 @@ def test_modal_terms_are_the_exact_frequency_correction_of_scipys_modes(scenario
     c[resolved] = 1.0 - ratio**2
     e[~resolved] = 2.0 * UNRESOLVED_DAMPING * omega[~resolved] ** 2 * STEP / CUTOFF
     terms = _terms(scenario, q, 0.0)
-    for computed, per_mode in ((terms.inertia, c), (terms.damping, e)):
-        expected = reduced_mass @ phi @ np.diag(per_mode) @ phi.T @ reduced_mass
-        assert np.max(np.abs(computed - expected)) <= 1e-9 * np.max(np.abs(expected))
+    expected = {}
+    for name, computed, per_mode in (("inertia", terms.inertia, c), ("damping", terms.damping, e)):
+        expected[name] = reduced_mass @ phi @ np.diag(per_mode) @ phi.T @ reduced_mass
+        assert np.max(np.abs(computed - expected[name])) <= 1e-9 * np.max(np.abs(expected[name]))
+    motion, rng = scenario.motion, np.random.default_rng(4)
+    independent, n = motion.partition.independent, q.size
+    qd, a = np.zeros(n), rng.normal(size=independent.size)
+    qd[independent] = rng.normal(size=independent.size)
+    v, drive, chain = qd[independent], motion.dynamics.drive.kernel_parameters(0.0), motion.dynamics.chain
+    terms_expected = expected["damping"] @ v - expected["inertia"] @ a
+    computed = np.zeros(independent.size)
+    add_modal_terms(computed, qd, a, terms, drive, motion.partition, chain)
+    assert np.max(np.abs(computed - terms_expected)) <= 1e-9 * np.max(np.abs(terms_expected))
+    springs = (reduced_mass @ phi) @ np.diag(omega_squared) @ (reduced_mass @ phi).T @ v  # K_r = M_r Phi W^2 Phi^T M_r
+    assert np.allclose(stiffness_product(v, drive, motion.partition, chain), springs, rtol=0.0,
+                       atol=1e-9 * np.abs(springs).max())
 
 
 def test_tracked_modes_follow_scipys_across_a_rotating_near_degenerate_pair(scenario):

@@ -1,9 +1,9 @@
-"""The articulated-body solve of X = M + w (K + s_dr on psi2) + (h / 2) D (compiled with numba): O(n) for a serial
-chain whose springs and dampers couple only the first joints (the base on its support springs), without forming M.
+"""The articulated-body solve of X = M + w K + d D + s e_psi2 e_psi2^T (compiled with numba): O(n) for a serial chain
+whose springs and dampers couple only the first joints (the base on its support springs), without forming M.
 
-The Newton iteration matrix of a step is B^T X B plus the modal terms, with w = h^2 / 4
-(:func:`~crane_reference.dynamics.modal_correction.iteration_factor`).  X is M with a joint-space term J = w (K + s_dr
-e_psi2 e_psi2^T) + (h / 2) D, diagonal beyond the root block of the first ``chain.root_size`` joints.  Featherstone's
+The Newton iteration matrix of a step is B^T X B plus the modal terms, with w = h^2/4 + beta h/2, d = h/2 and s the
+drive's spring s_dr so weighted (:mod:`~crane_reference.dynamics.iteration_matrix`).  X is M with a joint-space term
+diagonal beyond the root block of the first ``chain.root_size`` joints.  Featherstone's
 articulated-body recursion (ABA without velocity terms), here in the world frame, solves M x = tau; the diagonal
 of J enters it as the joints' armature, and the root block, once the joints beyond it are eliminated, is solved
 densely.  With the composite world pseudo-inertia of a body, J = T H T^T = [Sigma, m c; m c^T, m], and the joint's
@@ -58,9 +58,9 @@ def spatial_inertias(Hw, body_joint, n):
 
 
 @njit(cache=True, nogil=True)
-def articulated_factor(S, Hw, spring_weight, damper_weight, drive, chain: ChainData):
-    """The factor of X = M + spring_weight (K + s_dr on psi2) + damper_weight D at the twists S and world
-    pseudo-inertias Hw (``drive`` the drive's kernel parameters, s_dr = drive[1]): the backward pass of the
+def articulated_factor(S, Hw, spring_weight, damper_weight, drive_spring, chain: ChainData):
+    """The factor of X = M + spring_weight K + damper_weight D + ``drive_spring`` on psi2 at the twists S and world
+    pseudo-inertias Hw: the backward pass of the
     articulated-body recursion from the last joint to the root block, I^A_k = I_k + I^a_(k+1), U_k = I^A_k s_k,
     D_k = s_k^T U_k + X_kk - M_kk, I^a_k = I^A_k - U_k U_k^T / D_k; then the root block
     X'_ij = s_i^T (I^a_b + sum_(l = k..b-1) I_l) s_j + X_ij - M_ij (k = max(i, j), b = the root's size),
@@ -71,7 +71,6 @@ def articulated_factor(S, Hw, spring_weight, damper_weight, drive, chain: ChainD
     for k in range(n):
         s[k, 0], s[k, 1], s[k, 2] = S[k, 2, 1], S[k, 0, 2], S[k, 1, 0]
         s[k, 3], s[k, 4], s[k, 5] = S[k, 0, 3], S[k, 1, 3], S[k, 2, 3]
-    drive_spring = spring_weight * drive[1]
     stiffness, damping, damped = chain.stiffness, chain.damping, chain.damped
     U = np.zeros((n, 6))
     D = np.zeros(n)
@@ -155,10 +154,10 @@ def articulated_solve(factor: ArticulatedFactor, tau):
 
 
 @njit(cache=True, nogil=True)
-def constrained_factor(S, Hw, A, spring_weight, damper_weight, drive, chain: ChainData):
+def constrained_factor(S, Hw, A, spring_weight, damper_weight, drive_spring, chain: ChainData):
     """:func:`articulated_factor` with the task constraints' Schur complement: Z = X^-1 A^T (m solves) and the
     Cholesky factor of A Z."""
-    factor = articulated_factor(S, Hw, spring_weight, damper_weight, drive, chain)
+    factor = articulated_factor(S, Hw, spring_weight, damper_weight, drive_spring, chain)
     Z = np.empty((A.shape[1], A.shape[0]))
     for row in range(A.shape[0]):
         Z[:, row] = articulated_solve(factor, A[row].copy())

@@ -47,7 +47,7 @@ def root_size(stiffness: np.ndarray, damping_matrix: np.ndarray) -> int:
     """The joints up to the last that K or D couples to another (the root block of the articulated solve)."""
     coupling = (stiffness != 0.0) | (damping_matrix != 0.0)
     np.fill_diagonal(coupling, False)
-    coupled = np.flatnonzero(coupling.any(axis=1))
+    coupled = np.flatnonzero(coupling.any(axis=0) | coupling.any(axis=1))
     return int(coupled.max()) + 1 if coupled.size else 0
 
 

@@ -195,7 +195,7 @@ def held_period(carry: PlantCarry, end, start_step, end_step, steps: PlannedStep
     carry.inertia_weights[:], carry.damping_weights[:] = run.correction.inertia_weights, run.correction.damping_weights
     carry.modal[0], carry.modal[1] = run.correction.time, run.correction.step
     carry.modal[2], carry.modal[3] = run.correction.resolved, run.correction.tracked
-    carry.modal[4] = run.correction.unresolved_rate
+    carry.modal[4] = run.correction.unresolved_beta
     carry.M[:], carry.h[:], carry.gravity_forces[:] = terms.M, terms.h, terms.gravity_forces
     carry.gravity_potential[0] = terms.gravity_potential
     carry.ee_position[:], carry.ee_rotation[:] = terms.ee_position, terms.ee_rotation
@@ -228,7 +228,7 @@ def plant_carry(t, q, qd, work, correction: ModalCorrection, terms: Acceleration
                       correction.damping.copy(), correction.modes.copy(), correction.on_resolved.copy(),
                       correction.inertia_weights.copy(), correction.damping_weights.copy(),
                       np.array([correction.time, correction.step, correction.resolved, correction.tracked,
-                                correction.unresolved_rate]),
+                                correction.unresolved_beta]),
                       terms.M.copy(),
                       terms.h.copy(), terms.gravity_forces.copy(), np.array([terms.gravity_potential]),
                       np.array(terms.ee_position, dtype=float), np.array(terms.ee_rotation, dtype=float),

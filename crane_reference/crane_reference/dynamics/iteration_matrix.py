@@ -58,20 +58,25 @@ def articulated_iteration_factor(S, Hw, B, h, correction: ModalCorrection, drive
     omega^2) of the correction's resolved modes: Y's articulated factor, Y^-1 U and the capacitance
     (I + diag(W) U^T Y^-1 U)^-1 (ideal constraints only: P = B)."""
     r, independent = correction.resolved, partition.independent
-    constrained = constrained_factor(S, Hw, constraint_rows(B, partition),
-                                     0.25 * h * h + 0.5 * h * correction.unresolved_rate, 0.5 * h, drive, chain)
-    loads = np.ascontiguousarray(correction.on_resolved[:, :r])
+    spring_weight = 0.25 * h * h + 0.5 * h * correction.unresolved_beta
+    drive_weight = 0.25 * h * h  # beta K_r holds the drive's spring only when psi2 is independent
+    for i in range(independent.size):
+        if independent[i] == chain.drive_joint:
+            drive_weight = spring_weight
+    constrained = constrained_factor(S, Hw, constraint_rows(B, partition), spring_weight, 0.5 * h,
+                                     drive_weight * drive[1], chain)
+    on_resolved = np.ascontiguousarray(correction.on_resolved[:, :r])
     weights = -correction.inertia_weights[:r] + (0.5 * h) * correction.damping_weights[:r]
     solved = np.empty((independent.size, r))
     for m in range(r):
-        solved[:, m] = reduced_solve(constrained, independent, loads[:, m].copy())
-    capacitance = loads.T @ solved
+        solved[:, m] = reduced_solve(constrained, independent, on_resolved[:, m].copy())
+    capacitance = on_resolved.T @ solved if r > 0 else np.empty((0, 0))
     for i in range(r):
         for j in range(r):
             capacitance[i, j] *= weights[i]
         capacitance[i, i] += 1.0
     inverse = np.ascontiguousarray(np.linalg.inv(capacitance)) if r > 0 else capacitance
-    return IterationFactor(np.empty((0, 0)), constrained, loads, solved, inverse, weights)
+    return IterationFactor(np.empty((0, 0)), constrained, on_resolved, solved, inverse, weights)
 
 
 @njit(cache=True, nogil=True)
@@ -83,6 +88,6 @@ def iteration_solve(factor: IterationFactor, residual, partition: Partition):
     y = reduced_solve(factor.constrained, partition.independent, residual)
     r = factor.weights.size
     if r > 0:
-        projected = matvec(factor.loads.T, y) * factor.weights
+        projected = matvec(factor.on_resolved.T, y) * factor.weights
         y -= matvec(factor.solved, matvec(factor.capacitance, projected))
     return y

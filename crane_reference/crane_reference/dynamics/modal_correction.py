@@ -144,18 +144,19 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
     if partition.servo or not settings.modal:
         return ModalCorrection(zeros, zeros.copy(), zeros.copy(), 0, t, h, t, zeros.copy(), np.zeros(n_ic),
                                np.zeros(n_ic), 0.0)
-    omega_squared, modes, on_modes = _generalized_modes(reduced_stiffness(drive, partition, chain), reduced_mass)
+    stiffness = reduced_stiffness(drive, partition, chain)
+    omega_squared, modes, on_modes = _generalized_modes(stiffness, reduced_mass)
     resolved = 0
     while resolved < n_ic and np.sqrt(max(omega_squared[resolved], 0.0)) * h < settings.cutoff:
         resolved += 1
     c, e = _resolved_terms(omega_squared[:resolved], _modal_damping(modes, resolved, partition, chain), h)
     on_resolved = np.ascontiguousarray(on_modes[:, :resolved])
-    return _terms_of_resolved_modes(on_resolved, omega_squared[:resolved], c, e, unresolved_rate(h, settings),
-                                    reduced_stiffness(drive, partition, chain), modes, t, h, t)
+    return _terms_of_resolved_modes(on_resolved, omega_squared[:resolved], c, e, unresolved_beta(h, settings),
+                                    stiffness, modes, t, h, t)
 
 
 @njit(cache=True, nogil=True)
-def unresolved_rate(h, settings: StepSettings):
+def unresolved_beta(h, settings: StepSettings):
     """beta = 2 zeta / omega_c [s] (omega_c = ``settings.cutoff`` / h, zeta = ``settings.unresolved_damping``): an
     unresolved mode's damping e = beta omega^2 (:func:`modal_correction`)."""
     return 2.0 * settings.unresolved_damping * h / settings.cutoff
@@ -170,10 +171,10 @@ def _terms_of_resolved_modes(on_resolved, omega_squared, c, e, beta, stiffness, 
     padded to n_ic, for the residual's products and the iteration matrix."""
     n, r = stiffness.shape[0], c.size
     damping_weights = e - beta * np.maximum(omega_squared, 0.0)
-    loads, inertia_weights, padded_damping = np.zeros((n, n)), np.zeros(n), np.zeros(n)
-    loads[:, :r], inertia_weights[:r], padded_damping[:r] = on_resolved, c, damping_weights
+    padded, inertia_weights, padded_damping = np.zeros((n, n)), np.zeros(n), np.zeros(n)
+    padded[:, :r], inertia_weights[:r], padded_damping[:r] = on_resolved, c, damping_weights
     return ModalCorrection(_congruence(on_resolved, c), _congruence(on_resolved, damping_weights) + beta * stiffness,
-                           modes, r, time, h, tracked, loads, inertia_weights, padded_damping, beta)
+                           modes, r, time, h, tracked, padded, inertia_weights, padded_damping, beta)
 
 
 @njit(cache=True, nogil=True)
@@ -201,8 +202,10 @@ def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, part
     Rayleigh-Ritz step on X (the modes of the pencil (X^T K_r X, X^T M_r X), by Jacobi rotations: it is nearly
     diagonal) give the new Phi_r; Delta M_r and D_u follow from them as in :func:`modal_correction`: the
     unresolved modes' damping is beta K_r less the tracked modes' part, so that it damps no resolved mode (a stale
-    D_u otherwise damps a resolved mode psi by sum_u e_u (phi_u^T M_r psi)^2).  The modes stay resolved, and their
-    number stays, until the next full eigenproblem (``time`` is its; ``tracked`` becomes t)."""
+    D_u otherwise damps a resolved mode psi by sum_u e_u (phi_u^T M_r psi)^2); on Ritz vectors that are not yet
+    the pencil's modes it is indefinite by the order of their residual, beta (K_r Phi_r - M_r Phi_r diag(omega^2)).  The
+    modes stay resolved, and their number stays, until the next full eigenproblem (``time`` is its; ``tracked`` becomes
+    t)."""
     r = correction.resolved
     if r == 0:
         return correction
@@ -228,7 +231,7 @@ def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, part
     modes = correction.modes.copy()
     modes[:, :r] = phi_r
     c, e = _resolved_terms(omega_squared, _modal_damping(phi_r, r, partition, chain), h)
-    return _terms_of_resolved_modes(on_resolved, omega_squared, c, e, correction.unresolved_rate, stiffness, modes,
+    return _terms_of_resolved_modes(on_resolved, omega_squared, c, e, correction.unresolved_beta, stiffness, modes,
                                     correction.time, h, t)
 
 

@@ -139,27 +139,27 @@ def _plain_residual_at(it: TrialState, a1, k: Coefficients, drive, partition: Pa
 
 
 @njit(cache=True, nogil=True, inline='always')
-def _add_modal_terms(residual, qd, a1, correction: ModalCorrection, drive, partition: Partition, chain: ChainData):
+def add_modal_terms(residual, qd, a1, correction: ModalCorrection, drive, partition: Partition, chain: ChainData):
     """residual += D_u v_ic - Delta M_r a1_ic, the modal terms of the step's equation (in place), by the resolved
     modes in O(n r): U (diag(e - beta omega^2) U^T v - diag(c) U^T a) + beta K_r v (:class:`ModalCorrection`)."""
-    independent, loads = partition.independent, correction.on_resolved
+    independent, on_resolved = partition.independent, correction.on_resolved
     n_ic = independent.size
     v = np.empty(n_ic)
     for i in range(n_ic):
         v[i] = qd[independent[i]]
-    if correction.unresolved_rate != 0.0:
+    if correction.unresolved_beta != 0.0:
         springs = stiffness_product(v, drive, partition, chain)
         for i in range(n_ic):
-            residual[i] += correction.unresolved_rate * springs[i]
+            residual[i] += correction.unresolved_beta * springs[i]
     inertia_weights, damping_weights = correction.inertia_weights, correction.damping_weights
     for m in range(correction.resolved):
         on_velocity, on_acceleration = 0.0, 0.0
         for i in range(n_ic):
-            on_velocity += loads[i, m] * v[i]
-            on_acceleration += loads[i, m] * a1[i]
+            on_velocity += on_resolved[i, m] * v[i]
+            on_acceleration += on_resolved[i, m] * a1[i]
         weight = damping_weights[m] * on_velocity - inertia_weights[m] * on_acceleration
         for i in range(n_ic):
-            residual[i] += loads[i, m] * weight
+            residual[i] += on_resolved[i, m] * weight
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -168,7 +168,7 @@ def _step_residual_at(it: TrialState, a1, correction: ModalCorrection, k: Coeffi
     """The residual of the step's equation, P^T (M qdd + h - Q) - Delta M_r a1_ic + D_u v_ic, at an iterate for
     the accelerations a1; also qdd, B and the world pseudo-inertias Hw there."""
     qdd, residual, B, Hw = _plain_residual_at(it, a1, k, drive, partition, chain)
-    _add_modal_terms(residual, it.qd, a1, correction, drive, partition, chain)
+    add_modal_terms(residual, it.qd, a1, correction, drive, partition, chain)
     return qdd, residual, B, Hw
 
 
@@ -274,7 +274,7 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
     if tracking:
         correction = tracked_correction(reduced_mass_matrix(M, B, partition), correction, t0, drive, partition,
                                         chain)
-    _add_modal_terms(residual, it.qd, a1, correction, drive, partition, chain)
+    add_modal_terms(residual, it.qd, a1, correction, drive, partition, chain)
     if articulated:
         factor = articulated_iteration_factor(it.S, Hw, B, h, correction, drive, partition, chain)
     else:

@@ -101,7 +101,7 @@ class ModalCorrection(NamedTuple):
     last tracked or computed; and the same terms by the resolved modes alone, which the residual and the articulated
     iteration matrix use: ``on_resolved`` U = M_r Phi_r (its first ``resolved`` columns; zeros beyond),
     ``inertia_weights`` c and ``damping_weights`` e - beta omega^2 (the first ``resolved`` entries) and
-    ``unresolved_rate`` beta [s], with Delta M_r = U diag(c) U^T and D_u = U diag(e - beta omega^2) U^T + beta K_r."""
+    ``unresolved_beta`` beta [s], with Delta M_r = U diag(c) U^T and D_u = U diag(e - beta omega^2) U^T + beta K_r."""
 
     inertia: np.ndarray
     damping: np.ndarray
@@ -113,7 +113,7 @@ class ModalCorrection(NamedTuple):
     on_resolved: np.ndarray
     inertia_weights: np.ndarray
     damping_weights: np.ndarray
-    unresolved_rate: float
+    unresolved_beta: float
 
 
 class ChainTerms(NamedTuple):
@@ -477,12 +477,12 @@ class IterationFactor(NamedTuple):
     """The Newton iteration matrix of a step, factored (:mod:`~crane_reference.dynamics.iteration_matrix`):
     densely, ``dense`` its Cholesky factor (ideal constraints) or its inverse (servo-constraints), the other fields
     empty; or by the articulated-body recursion, ``dense`` empty (0 x 0), ``constrained`` the factor of
-    Y = B^T X' B, ``loads`` U (n_ic, r), ``solved`` Y^-1 U, ``capacitance`` (I + diag(W) U^T Y^-1 U)^-1 and
+    Y = B^T X' B, ``on_resolved`` U (n_ic, r), ``solved`` Y^-1 U, ``capacitance`` (I + diag(W) U^T Y^-1 U)^-1 and
     ``weights`` W (r,), so that (Y + U diag(W) U^T)^-1 = Y^-1 - Y^-1 U capacitance diag(W) U^T Y^-1 (Woodbury)."""
 
     dense: np.ndarray
     constrained: ConstrainedFactor
-    loads: np.ndarray
+    on_resolved: np.ndarray
     solved: np.ndarray
     capacitance: np.ndarray
     weights: np.ndarray

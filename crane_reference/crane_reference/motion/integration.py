@@ -40,7 +40,7 @@ those above 400 Hz) cannot be turned exactly (tan has a pole at pi) and are not 
 resolved mode come out larger than the exact ones by tan(omega h / 2) / (omega h / 2) (2.4 at 0.8 pi, 1.08 at
 0.3 pi); resolving modes that close to pi makes the slow motion's phase along the task drift over a minute by an
 amount erratic in h, which a cutoff of 0.3 pi removes (docs/performance.md, "Over a minute").  The unresolved modes
-get D_u = M_r Phi_u diag(beta omega^2) Phi_u^T M_r with beta = 2 zeta / omega_c (omega_c = 0.8 pi / h), which damps
+get D_u = M_r Phi_u diag(beta omega^2) Phi_u^T M_r with beta = 2 zeta / omega_c (omega_c = cutoff / h), which damps
 each with the ratio zeta omega / omega_c, zeta = 1 at the cutoff and more above it (they keep their static
 deflection), so that no such mode rings at a frequency it does not have.  Being stiffness-proportional, that part
 is beta (K_r - M_r Phi_r diag(omega_r^2) Phi_r^T M_r): the constant springs less a term of the resolved modes'
@@ -52,8 +52,8 @@ M_r moves with the configuration.  Delta M_r and D_u are computed afresh every :
 lower the cutoff.  Between refreshes the resolved modes can be tracked to the configuration every
 :data:`MODE_TRACKING_INTERVAL` (one shift-inverted subspace iteration from the last ones and a Rayleigh-Ritz step,
 :func:`~crane_reference.dynamics.modal_correction.tracked_correction`), with Delta M_r from them and the unresolved
-damping beta K_r less their part, which removes that leak: what a cutoff of 0.3 pi needs to keep the vibration over an hour
-(off by default: it costs the node's solver the margin it needs, docs/performance.md).  These terms are
+damping beta K_r less their part, which removes that leak: what a cutoff of 0.3 pi needs to keep the vibration over an
+hour (off by default: it costs the node's solver the margin it needs, docs/performance.md).  These terms are
 coefficients of the equation, like M itself: they change from the next step's end on, and the carried
 accelerations are not converted (a conversion treats the slow motion's accelerations as free vibration and kicks
 it at every refresh, which made the slow motion's error depend on the refresh cadence).  Only a new equation (a
