@@ -3,7 +3,7 @@
     python benchmarks/bench_accuracy.py [--duration 10] [--cache results/bench_accuracy] [--hours 1]
                                         [--rfe 6 3 12] [--cutoff 0.8] [--refresh 0.01] [--mode-tracking 0]
                                         [--only vibration growth long damped iterations matrix newton first-order
-                                                mechanism sensitivity slow reference drift]
+                                                mechanism sensitivity slow reference drift refined]
 
 The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simulate_reference``), sampled every
 0.1 ms and cached as NPZ in ``--cache`` (the first run of a section takes minutes per crane).
@@ -47,6 +47,10 @@ The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simula
     printed first), for the integrator as it is, so with the converged Newton iteration, and, when --cutoff or
     --mode-tracking change it, with the package's default cutoff and mode tracking.  0.3 ms is the one step whose
     grid misses the drive torque's end at t = 1 s (a cut step there, and a new step size twice).
+13. [refined] (not by default) The refined cranes, n_rfe = 24 and 48 (the iteration matrix solved by the
+    articulated-body recursion, integration.ARTICULATED_FROM), at the node's step against the same integrator at a
+    quarter of it over ``--duration``: the 40-250 Hz RMS kept per window and the raw and controller-band errors
+    (targets: RMS within 10 %, controller band <= 5e-5).
 11. [slow] The controller-band error at the node's 0.5 ms (ONLINE_STEP) and at 1 ms, undamped
     and damped crane: the integrator with its modal correction computed every step, every 5 ms, every
     REFRESH_INTERVAL (the default) and every 20 ms, and the plain trapezoidal rule; psi2's drift at 3, 5 and
@@ -75,7 +79,12 @@ from crane_reference.model.parameters import Damping, FlexibleDrive
 from crane_reference.model.profiles import Constant, QuinticRise
 from crane_reference.motion import integration
 from crane_reference.motion.constraints import ArealRate, ConstraintSet, EllipseXY, HeightZ
-from crane_reference.motion.integration import EVALUATIONS, ONLINE_TOLERANCE, REFRESH_INTERVAL
+from crane_reference.motion.integration import (
+    EVALUATIONS,
+    ONLINE_TOLERANCE,
+    REFRESH_INTERVAL,
+    ExactFrequencyTrapezoidal,
+)
 from crane_reference.motion.programmed_motion import ProgrammedMotion
 from crane_reference.motion.simulation import MotionStepper, Scenario, simulate, simulate_reference
 from crane_reference.motion.steps import ONLINE_STEP
@@ -161,7 +170,7 @@ def errors(reference: Trajectory, tr: Trajectory) -> tuple[np.ndarray, np.ndarra
     """Largest raw and controller-band errors of psi2, psi(3,0), psi4 [rad] and of E [m]: raw on the
     reference's samples (tr interpolated), controller band on the 1 kHz grid, the error low-passed at 10 Hz
     away from the ends (where forward-backward filtering has transients)."""
-    t = reference.t[::round(GRID / REFERENCE_SAMPLE)]
+    t = reference.t[::round(GRID / (reference.t[1] - reference.t[0]))]
     inner = (t > 0.05) & (t < t[-1] - 0.05)
     raw, slow = [], []
     for x_ref, x in ((coordinates(reference), coordinates(tr)), (reference.ee_position, tr.ee_position)):
@@ -200,6 +209,31 @@ def vibration(params: CraneDescription, duration: float, cache: Path, rfe_counts
             print(f"[vibration] n_rfe={n_rfe:2d} h={step * 1e3:.2f} ms ({duration / wall:4.1f}x real time): 40-250 Hz "
                   f"RMS kept psi2/psi30/psi4 {shares}; controller band {_triple(slow)} rad, E {ee_slow:.1e} m; "
                   f"max |error| {_triple(raw)} rad, E {ee:.1e} m")
+
+
+REFINED_RFE = (24, 48)
+"""[refined]: the refined cranes' n_rfe."""
+
+
+def refined(params: CraneDescription, duration: float) -> None:
+    """[refined] Per n_rfe of :data:`REFINED_RFE`: the undamped crane at ONLINE_STEP against the same integrator at
+    ONLINE_STEP / 4 (its motion and E's pose only), the RMS kept and the errors as in [vibration]."""
+    for n_rfe in REFINED_RFE:
+        scenario = Scenario(with_rfe(params, n_rfe), "flexible")
+        q0 = scenario.equilibrium.q
+        reference = simulate(scenario.motion, q0, duration, step=ONLINE_STEP / 4, every_row=False)
+        start = time.perf_counter()
+        tr = simulate(scenario.motion, q0, duration, step=ONLINE_STEP, every_row=False)
+        wall = time.perf_counter() - start
+        raw, slow, ee, ee_slow = errors(reference, tr)
+        kept = [band_rms(tr, w) / band_rms(reference, w) for w in WINDOWS]
+        shares = "; ".join(f"{a:g}-{b:g} s {_triple(k, '.0%')}" for (a, b), k in zip(WINDOWS, kept, strict=True))
+        articulated = ExactFrequencyTrapezoidal(scenario.motion).articulated
+        print(f"[refined] n_rfe={n_rfe:2d} dof={scenario.model.dof} iteration matrix "
+              f"{'articulated' if articulated else 'dense'}, h={ONLINE_STEP * 1e3:.2f} ms against "
+              f"{ONLINE_STEP * 250:.3f} ms ({duration / wall:4.1f}x real time): 40-250 Hz RMS kept psi2/psi30/psi4 "
+              f"{shares}; controller band {_triple(slow)} rad, E {ee_slow:.1e} m; max |error| {_triple(raw)} rad, "
+              f"E {ee:.1e} m")
 
 
 def growth(params: CraneDescription) -> None:
@@ -544,8 +578,8 @@ def step_drift(params: CraneDescription, cache: Path, duration: float = 60.0) ->
 
 
 SECTIONS = ("vibration", "growth", "long", "damped", "iterations", "matrix", "newton", "first-order", "mechanism",
-            "sensitivity", "slow", "reference", "drift")
-DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s not in ("long", "reference", "drift"))
+            "sensitivity", "slow", "reference", "drift", "refined")
+DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s not in ("long", "reference", "drift", "refined"))
 
 
 def main() -> None:
@@ -583,7 +617,8 @@ def main() -> None:
                          ("sensitivity", lambda: sensitivity(params, args.duration, args.cache)),
                          ("slow", lambda: slow_motion(params, args.duration, args.cache)),
                          ("reference", lambda: reference_check(params, args.duration, args.cache)),
-                         ("drift", lambda: step_drift(params, args.cache))):
+                         ("drift", lambda: step_drift(params, args.cache)),
+                         ("refined", lambda: refined(params, args.duration))):
         if section in args.only:
             run()
 
