@@ -210,14 +210,16 @@ def held_samples(data: dict[str, np.ndarray]) -> np.ndarray:
 def stream_times(data: dict[str, np.ndarray], reference: ReferenceStream, rate: int) -> np.ndarray:
     """Stream time [s] of each received sample of a moving reference, NaN where held: the first one found
     among the first second's samples k / rate of ``reference`` (the same stream before any command), each
-    later one a period on unless held."""
+    later one as many periods on as its stamp is after the last received one's unless held (a sample lost on its
+    way, as a loaded machine's transport may lose one, is counted by the stamps)."""
     reference.compute(1.0)
     distance = [np.max(np.abs(data["q"][0] - reference.sample(k / rate).q)) for k in range(rate)]
     first = int(np.argmin(distance))
     assert distance[first] < 1e-10, "the first sample received is one of the stream's first second"
     held = held_samples(data)
     assert held.mean() <= 0.2, "most samples must come from the stream"
-    return np.where(held, np.nan, (first + np.cumsum(~held) - 1) / rate)
+    periods = np.r_[0, np.rint(np.diff(data["stamp"]) * rate / NS).astype(int)]
+    return np.where(held, np.nan, (first + np.cumsum(np.where(held, 0, periods))) / rate)
 
 
 def stamp_at(data: dict[str, np.ndarray], tau: np.ndarray, stream_time: float) -> int:
