@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from .linalg import cholesky, cholesky_solve, matvec
-from .structures import ArticulatedFactor, ChainData, ConstrainedFactor
+from .structures import ArticulatedFactor, ChainData, ConstrainedFactor, Partition
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -151,6 +151,19 @@ def articulated_solve(factor: ArticulatedFactor, tau):
         for a in range(6):
             alpha[a] += s[k, a] * x[k]
     return x
+
+
+@njit(cache=True, nogil=True)
+def constraint_rows(B, partition: Partition):
+    """Rows A (m, n) whose null space B spans (B[ic] = I): A[:, ic] = -B[dc], A[:, dc] = I (the acceleration
+    constraints of (7) solved for q_dc)."""
+    independent, dependent = partition.independent, partition.dependent
+    rows = np.zeros((dependent.size, B.shape[0]))
+    for i in range(dependent.size):
+        for j in range(independent.size):
+            rows[i, independent[j]] = -B[dependent[i], j]
+        rows[i, dependent[i]] = 1.0
+    return rows
 
 
 @njit(cache=True, nogil=True)

@@ -16,9 +16,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .articulated import constrained_factor, reduced_solve
+from .articulated import constrained_factor, constraint_rows, reduced_solve
 from .linalg import cholesky_solve, matvec
-from .modal_correction import iteration_factor
+from .modal_correction import iteration_factor, reduced_drive_spring
 from .structures import (
     ArticulatedFactor,
     ChainData,
@@ -27,19 +27,6 @@ from .structures import (
     ModalCorrection,
     Partition,
 )
-
-
-@njit(cache=True, nogil=True)
-def constraint_rows(B, partition: Partition):
-    """Rows A (m, n) whose null space B spans (B[ic] = I): A[:, ic] = -B[dc], A[:, dc] = I (the acceleration
-    constraints of (7) solved for q_dc)."""
-    independent, dependent = partition.independent, partition.dependent
-    rows = np.zeros((dependent.size, B.shape[0]))
-    for i in range(dependent.size):
-        for j in range(independent.size):
-            rows[i, independent[j]] = -B[dependent[i], j]
-        rows[i, dependent[i]] = 1.0
-    return rows
 
 
 @njit(cache=True, nogil=True)
@@ -58,13 +45,11 @@ def articulated_iteration_factor(S, Hw, B, h, correction: ModalCorrection, drive
     omega^2) of the correction's resolved modes: Y's articulated factor, Y^-1 U and the capacitance
     (I + diag(W) U^T Y^-1 U)^-1 (ideal constraints only: P = B)."""
     r, independent = correction.resolved, partition.independent
-    spring_weight = 0.25 * h * h + 0.5 * h * correction.unresolved_beta
-    drive_weight = 0.25 * h * h  # beta K_r holds the drive's spring only when psi2 is independent
-    for i in range(independent.size):
-        if independent[i] == chain.drive_joint:
-            drive_weight = spring_weight
-    constrained = constrained_factor(S, Hw, constraint_rows(B, partition), spring_weight, 0.5 * h,
-                                     drive_weight * drive[1], chain)
+    beta = correction.unresolved_beta
+    spring_weight = 0.25 * h * h + 0.5 * h * beta
+    drive_spring = 0.25 * h * h * drive[1] + 0.5 * h * beta * reduced_drive_spring(drive, partition, chain)  # beta K_r
+    constrained = constrained_factor(S, Hw, constraint_rows(B, partition), spring_weight, 0.5 * h, drive_spring,
+                                     chain)
     on_resolved = np.ascontiguousarray(correction.on_resolved[:, :r])
     weights = -correction.inertia_weights[:r] + (0.5 * h) * correction.damping_weights[:r]
     solved = np.empty((independent.size, r))

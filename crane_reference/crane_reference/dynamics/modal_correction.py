@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .articulated import joint_term
+from .articulated import constrained_factor, constraint_rows, joint_term, reduced_solve
 from .linalg import (
     cholesky,
     cholesky_solve,
@@ -63,6 +63,16 @@ def reduced_stiffness(drive, partition: Partition, chain: ChainData):
         if independent[i] == chain.drive_joint:
             stiffness[i, i] += drive[1]
     return stiffness
+
+
+@njit(cache=True, nogil=True)
+def reduced_drive_spring(drive, partition: Partition, chain: ChainData):
+    """The drive's spring s_dr (``drive[1]``) as K_r holds it: on psi2 when psi2 is independent, else none (the
+    springs act on independent coordinates only)."""
+    for i in range(partition.independent.size):
+        if partition.independent[i] == chain.drive_joint:
+            return drive[1]
+    return 0.0
 
 
 @njit(cache=True, nogil=True)
@@ -153,6 +163,88 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
     on_resolved = np.ascontiguousarray(on_modes[:, :resolved])
     return _terms_of_resolved_modes(on_resolved, omega_squared[:resolved], c, e, unresolved_beta(h, settings),
                                     stiffness, modes, t, h, t)
+
+
+GUARD_MODES = 8
+"""Modes iterated beyond the resolved ones by :func:`refreshed_correction`: the lowest shows a mode that comes
+below the cutoff, and together they set how fast the resolved ones converge."""
+
+REFRESH_SHIFT = 0.3
+"""The shift s of :func:`refreshed_correction`'s iteration as a fraction of omega_c^2 (omega_c = cutoff / h)."""
+
+REFRESH_TOLERANCE = 1e-5
+"""The largest residual (K_r - omega^2 M_r) phi, relative to (omega^2 + s) M_r phi, that :func:`refreshed_correction`
+accepts of a resolved mode or the lowest guard mode."""
+
+REFRESH_ITERATIONS = 4
+"""Iterations after which :func:`refreshed_correction` solves the full eigenproblem instead."""
+
+
+@njit(cache=True, nogil=True)
+def refreshed_correction(reduced_mass, S, Hw, B, correction: ModalCorrection, h, t, drive, partition: Partition,
+                         chain: ChainData, settings: StepSettings):
+    """``correction`` (of the step h) computed again at the configuration of reduced mass M_r, twists S, world
+    pseudo-inertias Hw and velocity map B, as :func:`modal_correction` computes it but by subspace iteration from its
+    modes: X_0 = the resolved modes and :data:`GUARD_MODES` more, Y = (K_r + s M_r)^-1 M_r X (s =
+    :data:`REFRESH_SHIFT` omega_c^2), and X = the Rayleigh-Ritz modes of the pencil (K_r, M_r) on the span of Y
+    (those of (Y^T K_r Y, Y^T M_r Y)).  Each iteration shrinks a mode's error by (omega^2 + s) / (omega_g^2 + s),
+    omega_g the lowest mode beyond the iterated ones: the shift near the cutoff amplifies the resolved modes alike,
+    and keeps a guard mode's direction (with s = 0 a guard mode of omega^2 = 1e9 is lost under the resolved ones'
+    round-off).  (K_r + s M_r)^-1 = s^-1 (B^T (M + K / s) B)^-1 by the articulated-body solve (K with the drive's
+    spring where K_r holds it; :func:`~crane_reference.dynamics.articulated.reduced_solve`), O(n) per mode.  The
+    iteration stops when the residual ||K_r phi - omega^2 M_r phi|| / ((omega^2 + s) ||M_r phi||) of every resolved
+    mode and of the lowest guard is at most :data:`REFRESH_TOLERANCE`.  The Rayleigh-Ritz step is done as in
+    :func:`tracked_correction` (Y^T M_r Y = L L^T with Y's columns of M_r-norm 1, then Jacobi rotations: after the
+    first iteration the projected pencil is nearly diagonal).  The full eigenproblem is solved instead when the
+    iteration does not stop within :data:`REFRESH_ITERATIONS`, when the number of modes below the cutoff changes (a
+    mode crossed it: the guard modes are counted again), when no guard mode fits (r + :data:`GUARD_MODES` >= n_ic)
+    or when the span degenerates (a squared pivot of L below 1e-10)."""
+    n_ic, r, independent = partition.independent.size, correction.resolved, partition.independent
+    count = r + GUARD_MODES
+    if r == 0 or count >= n_ic or partition.servo or not settings.modal:
+        return modal_correction(reduced_mass, h, t, drive, partition, chain, settings)
+    cutoff_squared = (settings.cutoff / h) ** 2
+    shift = REFRESH_SHIFT * cutoff_squared
+    factor = constrained_factor(S, Hw, constraint_rows(B, partition), 1.0 / shift, 0.0,
+                                reduced_drive_spring(drive, partition, chain) / shift, chain)
+    X = np.ascontiguousarray(correction.modes[:, :count])
+    on_X = reduced_mass @ X
+    Y, springs = np.empty((n_ic, count)), np.empty((n_ic, count))
+    for _ in range(REFRESH_ITERATIONS):
+        for m in range(count):
+            Y[:, m] = reduced_solve(factor, independent, on_X[:, m].copy())
+        on_Y = reduced_mass @ Y
+        for m in range(count):
+            springs[:, m] = stiffness_product(Y[:, m].copy(), drive, partition, chain)
+        for m in range(count):  # each column scaled to M_r-norm 1
+            scale = 1.0 / np.sqrt(np.dot(Y[:, m], on_Y[:, m]))
+            Y[:, m] *= scale
+            on_Y[:, m] *= scale
+            springs[:, m] *= scale
+        L = cholesky(_symmetric(Y.T @ on_Y))  # Y^T M_r Y = L L^T: the Ritz vectors Y L^-T W
+        if not np.min(np.diag(L)) ** 2 > 1e-10:
+            break
+        inverse = lower_inverse(L)
+        omega_squared, W = jacobi_eigh(_symmetric(inverse @ (Y.T @ springs) @ inverse.T))
+        rotation = inverse.T @ W
+        X, on_X, springs = Y @ rotation, on_Y @ rotation, springs @ rotation
+        if omega_squared[r - 1] >= cutoff_squared or omega_squared[r] < cutoff_squared:
+            break
+        largest = 0.0
+        for m in range(r + 1):
+            residual, scale = 0.0, 0.0
+            for i in range(n_ic):
+                residual += (springs[i, m] - omega_squared[m] * on_X[i, m]) ** 2
+                scale += on_X[i, m] ** 2
+            largest = max(largest, np.sqrt(residual / scale) / (omega_squared[m] + shift))
+        if largest <= REFRESH_TOLERANCE:
+            modes = np.zeros((n_ic, n_ic))
+            modes[:, :count] = X
+            c, e = _resolved_terms(omega_squared[:r], _modal_damping(X, r, partition, chain), h)
+            return _terms_of_resolved_modes(np.ascontiguousarray(on_X[:, :r]), omega_squared[:r], c, e,
+                                            unresolved_beta(h, settings), reduced_stiffness(drive, partition, chain),
+                                            modes, t, h, t)
+    return modal_correction(reduced_mass, h, t, drive, partition, chain, settings)
 
 
 @njit(cache=True, nogil=True)

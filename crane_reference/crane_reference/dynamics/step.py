@@ -15,6 +15,7 @@ from .modal_correction import (
     converted_accelerations,
     modal_correction,
     reduced_mass_matrix,
+    refreshed_correction,
     stiffness_product,
     tracked_correction,
 )
@@ -236,11 +237,12 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
     corrected accelerations, on the position constraints, with qdd = B a_ic + e there (:class:`StepEnd`; no
     M).
 
-    The modal correction is computed again from M at q0 and B0 (:func:`modal_correction`) at the step nearest
-    ``settings.refresh_interval`` after the one in use was, and for another step size; between, its resolved modes
-    are carried to the configuration of the first iterate (:func:`tracked_correction` with its M and B, before the
-    modal terms enter its residual) at the step nearest ``settings.mode_tracking_interval`` after they last were
-    (``tracked`` counts from the step's start t0).  It is a coefficient
+    The modal correction is computed again from M at q0 and B0 at the step nearest ``settings.refresh_interval``
+    after the one in use was (:func:`modal_correction`, or with ``settings.subspace_refresh``
+    :func:`refreshed_correction` from its modes), and for another step size (:func:`modal_correction`); between,
+    its resolved modes are carried to the configuration of the first iterate (:func:`tracked_correction` with its M
+    and B, before the modal terms enter its residual) at the step nearest ``settings.mode_tracking_interval`` after
+    they last were (``tracked`` counts from the step's start t0).  It is a coefficient
     of the equation that follows the configuration: the step's end is solved with the new one, its start
     keeps the accelerations of the old one (Delta M_r piecewise constant in time, as the trapezoidal rule
     treats any coefficient; converting them would act on the slow motion's accelerations as on free
@@ -255,9 +257,13 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
     new_step = abs(h - correction.step) > 1e-9 * h
     if new_step or t0 - correction.time >= settings.refresh_interval - 0.5 * h:
         T0, S0 = forward_kinematics(q0, chain.kinds, chain.axes, chain.origins)
-        reduced_mass = reduced_mass_matrix(
-            mass_at(S0, world_pseudo_inertias(T0, chain.body_joint, chain.body_H), chain), B0, partition)
-        fresh = modal_correction(reduced_mass, h, t0, drive, partition, chain, settings)
+        Hw0 = world_pseudo_inertias(T0, chain.body_joint, chain.body_H)
+        reduced_mass = reduced_mass_matrix(mass_at(S0, Hw0, chain), B0, partition)
+        if settings.subspace_refresh and not new_step:
+            fresh = refreshed_correction(reduced_mass, S0, Hw0, B0, correction, h, t0, drive, partition, chain,
+                                         settings)
+        else:
+            fresh = modal_correction(reduced_mass, h, t0, drive, partition, chain, settings)
         if new_step and not servo:
             a0[:n_ic] = converted_accelerations(reduced_mass, a0[:n_ic], v0[:n_ic], correction, fresh)
         correction = fresh

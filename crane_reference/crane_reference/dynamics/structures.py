@@ -76,7 +76,9 @@ class StepSettings(NamedTuple):
     ``mode_tracking_interval`` [s] of motion (:func:`~crane_reference.dynamics.modal_correction.tracked_correction`;
     0: every step, inf: never); without ``modal`` there is no modal correction (the plain trapezoidal rule, for
     comparison); with ``articulated`` the Newton iteration matrix is solved by the articulated-body recursion and
-    Woodbury's identity (:mod:`~crane_reference.dynamics.iteration_matrix`), else factored densely."""
+    Woodbury's identity (:mod:`~crane_reference.dynamics.iteration_matrix`), else factored densely; with
+    ``subspace_refresh`` a refresh for the same step size iterates the last modes
+    (:func:`~crane_reference.dynamics.modal_correction.refreshed_correction`), else solves the full eigenproblem."""
 
     evaluations: int
     tolerance: float
@@ -88,6 +90,7 @@ class StepSettings(NamedTuple):
     mode_tracking_interval: float
     modal: bool
     articulated: bool
+    subspace_refresh: bool
 
 
 class ModalCorrection(NamedTuple):

@@ -192,6 +192,8 @@ class ExactFrequencyTrapezoidal:
         """[s] of motion after which the resolved modes are tracked to the configuration between refreshes."""
         self.articulated = len(motion.independent) >= ARTICULATED_FROM
         """Whether the Newton iteration matrix is solved by the articulated-body recursion (else densely)."""
+        self.subspace_refresh = self.articulated
+        """Whether a refresh iterates the last modes by articulated solves (else solves the full eigenproblem)."""
         self.evaluations = evaluations
         self.tolerance = tolerance
         self.max_iterations = max_iterations
@@ -203,7 +205,7 @@ class ExactFrequencyTrapezoidal:
         """The method and its stopping rules in the layout of the compiled kernels."""
         return StepSettings(self.evaluations, self.tolerance, self.max_iterations, PROJECTION_TOLERANCE,
                             self.refresh_interval, self.cutoff, UNRESOLVED_DAMPING,
-                            self.mode_tracking_interval, self.modal, self.articulated)
+                            self.mode_tracking_interval, self.modal, self.articulated, self.subspace_refresh)
 
     def _fresh(self) -> ModalCorrection:
         """No modal correction yet: the first step computes it."""
