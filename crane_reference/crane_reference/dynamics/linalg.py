@@ -38,6 +38,16 @@ def matmul(A, B, columns=None):
 @njit(cache=True, nogil=True)
 def cholesky(A):
     """Lower-triangular L with L L^T = A for a symmetric positive definite A (raises otherwise)."""
+    L, positive = cholesky_or_stop(A)
+    if not positive:
+        raise np.linalg.LinAlgError("matrix is not positive definite")
+    return L
+
+
+@njit(cache=True, nogil=True)
+def cholesky_or_stop(A):
+    """(L, True) with L L^T = A for a symmetric positive definite A; (L so far, False) at the first pivot that is
+    not positive."""
     n = A.shape[0]
     L = np.zeros((n, n))
     for j in range(n):
@@ -45,14 +55,14 @@ def cholesky(A):
         for k in range(j):
             total -= L[j, k] * L[j, k]
         if not total > 0.0:
-            raise np.linalg.LinAlgError("matrix is not positive definite")
+            return L, False
         L[j, j] = np.sqrt(total)
         for i in range(j + 1, n):
             total = A[i, j]
             for k in range(j):
                 total -= L[i, k] * L[j, k]
             L[i, j] = total / L[j, j]
-    return L
+    return L, True
 
 
 @njit(cache=True, nogil=True)

@@ -9,6 +9,7 @@ from numba import njit
 from .articulated import constrained_factor, constraint_rows, joint_term, reduced_solve
 from .linalg import (
     cholesky,
+    cholesky_or_stop,
     cholesky_solve,
     cholesky_solve_columns,
     congruent,
@@ -198,7 +199,7 @@ def refreshed_correction(reduced_mass, S, Hw, B, correction: ModalCorrection, h,
     first iteration the projected pencil is nearly diagonal).  The full eigenproblem is solved instead when the
     iteration does not stop within :data:`REFRESH_ITERATIONS`, when the number of modes below the cutoff changes (a
     mode crossed it: the guard modes are counted again), when no guard mode fits (r + :data:`GUARD_MODES` >= n_ic)
-    or when the span degenerates (a squared pivot of L below 1e-10)."""
+    or when the span degenerates (a squared pivot of L below 1e-10, or one not positive)."""
     n_ic, r, independent = partition.independent.size, correction.resolved, partition.independent
     count = r + GUARD_MODES
     if r == 0 or count >= n_ic or partition.servo or not settings.modal:
@@ -221,8 +222,8 @@ def refreshed_correction(reduced_mass, S, Hw, B, correction: ModalCorrection, h,
             Y[:, m] *= scale
             on_Y[:, m] *= scale
             springs[:, m] *= scale
-        L = cholesky(_symmetric(Y.T @ on_Y))  # Y^T M_r Y = L L^T: the Ritz vectors Y L^-T W
-        if not np.min(np.diag(L)) ** 2 > 1e-10:
+        L, positive = cholesky_or_stop(_symmetric(Y.T @ on_Y))  # Y^T M_r Y = L L^T: the Ritz vectors Y L^-T W
+        if not positive or not np.min(np.diag(L)) ** 2 > 1e-10:
             break
         inverse = lower_inverse(L)
         omega_squared, W = jacobi_eigh(_symmetric(inverse @ (Y.T @ springs) @ inverse.T))
