@@ -10,11 +10,12 @@ the same run.
 1. [eval] Time of M(q) with h, gravity and E's kinematics, and of one full qdd from (8), at 24 DOF; the cost
    of calling a compiled function with the ChainData named tuple.
 2. [profile] Per crane of ``--rfe`` (default 6), the compiled cost of the parts of one step (timed in compiled
-   loops, also in ABA calls): the modal correction
-   (an eigenproblem, every REFRESH_INTERVAL of motion), the tracking of its resolved modes (every
-   MODE_TRACKING_INTERVAL), the iteration factor, per Newton evaluation a
-   projection and a residual, a full evaluation (on the rows a caller reads) and what the node reads of a row
-   (its effort and constraint distance, by inverse dynamics: ``evaluated_rows``).
+   loops, also in ABA calls): the modal correction (an eigenproblem, every REFRESH_INTERVAL of motion), the same
+   refreshed by subspace iteration from the modes one REFRESH_INTERVAL before (at 1.01 s of the paper's task from
+   those at 1 s; the full eigenproblem where no guard mode fits), the tracking of its resolved modes (every
+   MODE_TRACKING_INTERVAL), the iteration factor, per Newton evaluation a projection and a residual, a full
+   evaluation (on the rows a caller reads) and what the node reads of a row (its effort and constraint distance, by
+   inverse dynamics: ``evaluated_rows``).
 3. [speed] Per case (rigid; flexible with n_rfe = 6, 12, 24): Pinocchio's ABA per call; at
    the node's default ``ONLINE_STEP`` and at 1 ms the steps alone per step (compiled runs of
    0.25 s, best of ``--repeats``), as a multiple of one ABA call and as a real-time factor, and with every
@@ -39,16 +40,18 @@ from numba import njit
 
 from crane_reference.dynamics.evaluation import accelerations_at, evaluate
 from crane_reference.dynamics.inertia import world_pseudo_inertias
+from crane_reference.dynamics.kinematics import forward_kinematics
 from crane_reference.dynamics.modal_correction import (
     iteration_factor,
     modal_correction,
     reduced_mass_matrix,
+    refreshed_correction,
     tracked_correction,
 )
 from crane_reference.dynamics.projection import project_positions
 from crane_reference.dynamics.runs import evaluated_rows, integration_run
 from crane_reference.dynamics.step import newton_residual
-from crane_reference.dynamics.structures import Coefficients, StepStart
+from crane_reference.dynamics.structures import Coefficients, StepSettings, StepStart
 from crane_reference.dynamics.terms import chain_terms, end_effector_jacobian, position_terms
 from crane_reference.model.config import load_config
 from crane_reference.model.description import CraneDescription
@@ -204,6 +207,15 @@ def _repeat_correction(reduced_mass, drive, partition, chain, settings, n):
 
 
 @njit
+def _repeat_refresh(reduced_mass, S, Hw, B, correction, drive, partition, chain, settings, n):
+    total = 0.0
+    for _ in range(n):
+        total += refreshed_correction(reduced_mass, S, Hw, B, correction, ONLINE_STEP, 0.0, drive, partition, chain,
+                                      settings).inertia[0, 0]
+    return total
+
+
+@njit
 def _repeat_tracking(reduced_mass, correction, drive, partition, chain, n):
     total = 0.0
     for _ in range(n):
@@ -233,12 +245,30 @@ PART_NAMES = {
     "projection": "projection on the position constraints",
     "residual": "Newton residual of (8) by inverse dynamics",
     "correction": f"modal correction (eigenproblem, every {REFRESH_INTERVAL * 1e3:g} ms)",
+    "refresh": f"modal correction iterated from {REFRESH_INTERVAL * 1e3:g} ms old modes",
     "tracking": "resolved modes tracked (tracked_correction)",
     "factor": "iteration matrix and its Cholesky factor",
     "accelerations": "qdd from (8) solved (accelerations_at)",
     "evaluation": "full evaluation (+ residuals, reactions, accounts)",
     "read_row": "a read row's effort and distance (evaluated_rows)",
 }
+
+
+def _refresh_arguments(scenario: Scenario, drive: np.ndarray, settings: StepSettings) -> tuple:
+    """[profile] What a refresh of the paper's task at t = 1.01 s reads (``refreshed_correction``): M_r, the twists,
+    world pseudo-inertias and velocity map there, and the modal correction of t = 1 s (at the node's step)."""
+    motion = scenario.motion
+    stepper = MotionStepper(motion, 0.0, scenario.equilibrium.q, np.zeros_like(scenario.equilibrium.q), ONLINE_STEP)
+    chain, partition, states = motion.dynamics.chain, motion.partition, []
+    for t in (1.0, 1.0 + REFRESH_INTERVAL):
+        stepper.advance_until(t)
+        state = stepper.state
+        T, S = forward_kinematics(state.q, chain.kinds, chain.axes, chain.origins)
+        solution = motion.solve(state.t, state.q, state.qd)
+        B = solution.velocity_map
+        states.append((B.T @ solution.dynamics.M @ B, S, world_pseudo_inertias(T, chain.body_joint, chain.body_H), B))
+    old = modal_correction(states[0][0], ONLINE_STEP, 0.0, drive, partition, chain, settings)
+    return (*states[1], old, drive, partition, chain, settings)
 
 
 def part_times(scenario: Scenario, repeat: int) -> dict[str, float]:
@@ -260,6 +290,7 @@ def part_times(scenario: Scenario, repeat: int) -> dict[str, float]:
              ("projection", _repeat_projection, (off, k, motion.holonomic_dependent, chain)),
              ("residual", _repeat_residual, (q, qd, acc.qdd[partition.integrated], k, drive, partition, chain)),
              ("correction", _repeat_correction, (reduced_mass, drive, partition, chain, settings)),
+             ("refresh", _repeat_refresh, _refresh_arguments(scenario, drive, settings)),
              ("tracking", _repeat_tracking, (reduced_mass, correction, drive, partition, chain)),
              ("factor", _repeat_factor, (acc.M, acc.velocity_map, correction, drive, partition, chain)),
              ("accelerations", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
@@ -324,8 +355,8 @@ def scaling(params: CraneDescription, duration: float, repeats: int) -> None:
     steps alone, compiled runs of 0.25 s from rest, best of ``repeats``) with the dense iteration matrix and with
     the articulated one, in ABA of its own chain (Pinocchio, this run), and their growth from n_rfe = 12 (a step of
     O(n) cost would not grow); beside them the parts of a dense step (:func:`part_times`) in ABA, with the modal
-    correction per step (its cost times ONLINE_STEP / REFRESH_INTERVAL), and how each part grows from 12 to the
-    row's n_rfe."""
+    correction per step (the integrator's refresh, iterated or the full eigenproblem, times ONLINE_STEP /
+    REFRESH_INTERVAL), and how each part grows from 12 to the row's n_rfe."""
     rows = []
     for n_rfe in SCALING_RFE:
         scenario = Scenario(params.with_rfe_count(n_rfe), "flexible")
@@ -335,23 +366,26 @@ def scaling(params: CraneDescription, duration: float, repeats: int) -> None:
         step, articulated = (min(run_times(scenario, ONLINE_STEP, duration, False, articulated=articulated)
                                  for _ in range(repeats)) / steps for articulated in (False, True))
         parts = part_times(scenario, 3000 if n_rfe <= 12 else 300)
-        parts["correction"] *= ONLINE_STEP / REFRESH_INTERVAL
+        integrator = ExactFrequencyTrapezoidal(scenario.motion)
+        parts["modal"] = parts["refresh" if integrator.subspace_refresh else "correction"] * (
+            ONLINE_STEP / REFRESH_INTERVAL)
         rows.append(ScalingRow(n_rfe, scenario.model.dof, scenario.motion.partition.independent.size,
-                               resolved_modes(scenario, ONLINE_STEP), aba, step, articulated,
-                               ExactFrequencyTrapezoidal(scenario.motion).articulated,
+                               resolved_modes(scenario, ONLINE_STEP), aba, step, articulated, integrator.articulated,
                                {name: parts[name] / aba for name in ("factor", "position_terms", "residual",
-                                                                     "projection", "correction")}))
+                                                                     "projection", "modal")}))
     base = next((row for row in rows if row.n_rfe == 12), rows[0])
     print(f"[scaling] h = {ONLINE_STEP * 1e3:g} ms; each cost in ABA of its own chain (x: growth from "
           f"n_rfe = {base.n_rfe}); the step with the iteration matrix dense, then articulated (*: the integrator's "
           f"choice, articulated from n_ic = {integration.ARTICULATED_FROM}); parts of the dense step: "
           f"iteration factor / M (position_terms) / a Newton residual / a projection / "
-          f"modal correction per step; modes resolved (omega h < {integration.CUTOFF / math.pi:g} pi) of n_ic; "
+          f"modal correction per step (the integrator's refresh: iterated from the last modes from n_ic = "
+          f"{integration.ARTICULATED_FROM}, else the full eigenproblem); modes resolved "
+          f"(omega h < {integration.CUTOFF / math.pi:g} pi) of n_ic; "
           f"the rest: the step less those three (its Newton residuals and projections, the solves with the factor, "
           f"the modal terms' products, the step's end)")
     for n_rfe, dof, n_ic, resolved, aba, step, articulated, chosen, parts in rows:
         growth = " / ".join(f"{value:.2f} ({value / base.parts[name]:.1f}x)" for name, value in parts.items())
-        dense = parts["factor"] + parts["position_terms"] + parts["correction"]
+        dense = parts["factor"] + parts["position_terms"] + parts["modal"]
         print(f"[scaling] n_rfe={n_rfe:2d} dof={dof:3d} n_ic={n_ic:3d} resolved={resolved:2d}: ABA "
               f"{aba * 1e6:6.2f} us; step dense{' ' if chosen else '*'} {step * 1e6:7.1f} us = {step / aba:4.1f} ABA "
               f"({step / aba / (base.step / base.aba):.2f}x), articulated{'*' if chosen else ' '} "
