@@ -1,7 +1,7 @@
 """The O(n) solve an O(n) step needs (:mod:`crane_reference.dynamics.articulated`), against the dense factor the step
 uses today.
 
-    python benchmarks/bench_articulated.py [--rfe 6 12 24 48] [--states 5]
+    python benchmarks/bench_articulated.py [--rfe 6 12 24 48] [--states 5] [--only solve refresh] [--duration 1]
 
 The Newton iteration matrix of a step is B^T X B (plus the modal terms) with X = M + h^2/4 K + h/2 D and the column
 drive's spring s_dr on psi2 (:func:`~crane_reference.dynamics.modal_correction.iteration_factor`); today it is
@@ -15,6 +15,14 @@ largest entry: the check), and, in ABA of its own chain (Pinocchio, this run), t
 factorization with the constraints' Schur complement; one solve of the reduced system; today's M and iteration
 factor; a Cholesky solve with it; and the factorization with r more solves, what a modal correction of rank r
 (the resolved modes, Woodbury) adds.
+
+[refresh] Per crane of ``--rfe``, the modal correction refreshed by subspace iteration from the last refresh's modes
+(:func:`~crane_reference.dynamics.modal_correction.refreshed_correction`, as the integrator chains it) against the
+full eigenproblem, at the states of ``--duration`` seconds of the paper's task at the node's step one
+REFRESH_INTERVAL apart: the largest difference of Delta M_r and D_u from the full eigenproblem's (relative to its
+largest entry: the check), beside how much the full terms change over one interval (what the step holds between
+refreshes); how many refreshes fell back to the full eigenproblem; and the cost of either, in ABA (at the last
+state).
 """
 
 from __future__ import annotations
@@ -31,11 +39,17 @@ from crane_reference.dynamics.evaluation import accelerations_at
 from crane_reference.dynamics.inertia import world_pseudo_inertias
 from crane_reference.dynamics.kinematics import forward_kinematics
 from crane_reference.dynamics.linalg import cholesky_solve
-from crane_reference.dynamics.modal_correction import iteration_factor, modal_correction, reduced_mass_matrix
+from crane_reference.dynamics.modal_correction import (
+    GUARD_MODES,
+    iteration_factor,
+    modal_correction,
+    reduced_mass_matrix,
+    refreshed_correction,
+)
 from crane_reference.dynamics.step import mass_at
 from crane_reference.model.config import load_config
-from crane_reference.motion.integration import ExactFrequencyTrapezoidal
-from crane_reference.motion.simulation import Scenario
+from crane_reference.motion.integration import REFRESH_INTERVAL, ExactFrequencyTrapezoidal
+from crane_reference.motion.simulation import MotionStepper, Scenario
 from crane_reference.motion.steps import ONLINE_STEP
 
 
@@ -134,15 +148,91 @@ def crane(n_rfe: int, states: int, repeat: int) -> None:
           f"today M and the iteration factor {dense_cost / aba:.2f}, a Cholesky solve {dense_solve_cost / aba:.3f}")
 
 
+@njit
+def _repeat_full(reduced_mass, h, drive, partition, chain, settings, n):
+    total = 0.0
+    for _ in range(n):
+        total += modal_correction(reduced_mass, h, 0.0, drive, partition, chain, settings).inertia[0, 0]
+    return total
+
+
+@njit
+def _repeat_refreshed(reduced_mass, S, Hw, B, correction, h, drive, partition, chain, settings, n):
+    total = 0.0
+    for _ in range(n):
+        total += refreshed_correction(reduced_mass, S, Hw, B, correction, h, 0.0, drive, partition, chain,
+                                      settings).inertia[0, 0]
+    return total
+
+
+def _relative(a: np.ndarray, b: np.ndarray) -> float:
+    """max |a - b| / max |b|."""
+    return float(np.abs(a - b).max() / np.abs(b).max())
+
+
+def refresh(n_rfe: int, duration: float, repeat: int) -> None:
+    """[refresh] The iterated refresh against the full eigenproblem along the paper's task (see the module)."""
+    scenario = Scenario(load_config().with_rfe_count(n_rfe), "flexible")
+    motion, h = scenario.motion, ONLINE_STEP
+    chain, partition = motion.dynamics.chain, motion.partition
+    settings = ExactFrequencyTrapezoidal(motion).settings
+    stepper = MotionStepper(motion, 0.0, scenario.equilibrium.q, np.zeros_like(scenario.equilibrium.q), h)
+    difference, change, fallbacks, refreshes = 0.0, 0.0, 0, 0
+    full = iterated = None
+    for t in np.arange(1, round(duration / REFRESH_INTERVAL) + 1) * REFRESH_INTERVAL:
+        stepper.advance_until(float(t))
+        state, drive = stepper.state, motion.dynamics.drive.kernel_parameters(float(t))
+        T, S = forward_kinematics(state.q, chain.kinds, chain.axes, chain.origins)
+        Hw = world_pseudo_inertias(T, chain.body_joint, chain.body_H)
+        B = state.solution.velocity_map
+        reduced_mass = reduced_mass_matrix(mass_at(S, Hw, chain), B, partition)
+        previous, full = full, modal_correction(reduced_mass, h, float(t), drive, partition, chain, settings)
+        if previous is None:
+            iterated = full
+            continue
+        arguments = (reduced_mass, S, Hw, B, iterated, h, drive, partition, chain, settings)
+        iterated = refreshed_correction(reduced_mass, S, Hw, B, iterated, h, float(t), drive, partition, chain,
+                                        settings)
+        refreshes += 1
+        iterated_count = iterated.resolved + GUARD_MODES  # the full eigenproblem fills every column of the modes
+        fallbacks += iterated_count >= partition.independent.size or bool(np.any(iterated.modes[:, iterated_count:]))
+        difference = max(difference, _relative(iterated.inertia, full.inertia), _relative(iterated.damping,
+                                                                                          full.damping))
+        change = max(change, _relative(previous.inertia, full.inertia), _relative(previous.damping, full.damping))
+    aba = aba_time(scenario)
+
+    def cost(function, *arguments) -> float:
+        function(*arguments, 2)
+        return min(call_seconds(lambda: function(*arguments, repeat), 1, median=True) for _ in range(5)) / repeat
+
+    full_cost = cost(_repeat_full, reduced_mass, h, drive, partition, chain, settings)
+    iterated_cost = cost(_repeat_refreshed, *arguments)
+    print(f"[refresh] n_rfe={n_rfe:2d} n_ic={partition.independent.size:3d} resolved={full.resolved}: iterated "
+          f"against the full eigenproblem {difference:.1e} (largest, relative, {refreshes} refreshes over "
+          f"{duration:g} s; the full terms change by up to {change:.1e} over {REFRESH_INTERVAL * 1e3:g} ms); "
+          f"fell back {fallbacks} times; ABA {aba * 1e6:.2f} us; in ABA: full eigenproblem {full_cost / aba:.1f}, "
+          f"iterated {iterated_cost / aba:.1f}")
+
+
+SECTIONS = ("solve", "refresh")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--rfe", nargs="+", type=int, default=[6, 12, 24, 48])
     parser.add_argument("--states", type=int, default=5)
+    parser.add_argument("--only", nargs="+", choices=SECTIONS, default=SECTIONS, help="sections to run")
+    parser.add_argument("--duration", type=float, default=1.0, help="[refresh]: seconds of the paper's task")
     args = parser.parse_args()
     if args.states < 1:
         parser.error("--states: at least 1 random state")
+    if args.duration < 2 * REFRESH_INTERVAL:
+        parser.error(f"--duration: at least {2 * REFRESH_INTERVAL:g} s (two refreshes)")
     for n_rfe in args.rfe:
-        crane(n_rfe, args.states, 3000 if n_rfe <= 12 else 500)
+        if "solve" in args.only:
+            crane(n_rfe, args.states, 3000 if n_rfe <= 12 else 500)
+        if "refresh" in args.only:
+            refresh(n_rfe, args.duration, 200 if n_rfe <= 12 else 20)
 
 
 if __name__ == "__main__":

@@ -44,12 +44,14 @@ get D_u = M_r Phi_u diag(beta omega^2) Phi_u^T M_r with beta = 2 zeta / omega_c 
 each with the ratio zeta omega / omega_c, zeta = 1 at the cutoff and more above it (they keep their static
 deflection), so that no such mode rings at a frequency it does not have.  Being stiffness-proportional, that part
 is beta (K_r - M_r Phi_r diag(omega_r^2) Phi_r^T M_r): the constant springs less a term of the resolved modes'
-rank, which an articulated-body solve of the iteration matrix can take (docs/performance.md, "Toward an O(n)
-step").
+rank, which an articulated-body solve of the iteration matrix can take (docs/performance.md, "The articulated
+iteration matrix").
 
-M_r moves with the configuration.  Delta M_r and D_u are computed afresh every :data:`REFRESH_INTERVAL` of motion
-(the eigenproblem of the n_ic x n_ic reduced matrices); stale ones leak damping into resolved modes, the more the
-lower the cutoff.  Between refreshes the resolved modes can be tracked to the configuration every
+M_r moves with the configuration.  Delta M_r and D_u are computed afresh every :data:`REFRESH_INTERVAL` of motion:
+from the eigenproblem of the n_ic x n_ic reduced matrices, or, from :data:`ARTICULATED_FROM` independent
+coordinates, by subspace iteration from the last refresh's modes with articulated solves
+(:func:`~crane_reference.dynamics.modal_correction.refreshed_correction`, which falls back to the eigenproblem);
+stale ones leak damping into resolved modes, the more the lower the cutoff.  Between refreshes the resolved modes can be tracked to the configuration every
 :data:`MODE_TRACKING_INTERVAL` (one shift-inverted subspace iteration from the last ones and a Rayleigh-Ritz step,
 :func:`~crane_reference.dynamics.modal_correction.tracked_correction`), with Delta M_r from them and the unresolved
 damping beta K_r less their part, which removes that leak: what a cutoff of 0.3 pi needs to keep the vibration over an
