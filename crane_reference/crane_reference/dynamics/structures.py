@@ -99,8 +99,10 @@ class ModalCorrection(NamedTuple):
     Delta M_r, removed from the reduced mass so that the trapezoidal rule turns each resolved mode by
     exactly omega h per step, and ``damping`` D_u, which gives each resolved mode its exact decay per step
     and damps the modes the step does not resolve; ``modes`` (n_ic, n_ic), whose first ``resolved`` columns are
-    the resolved modes Phi_r (Phi_r^T M_r Phi_r = I, ascending in frequency) at the configuration of the terms (the
-    other columns: the last full eigenproblem's unresolved modes, not read); ``tracked`` [s], when the modes were
+    the resolved modes Phi_r (Phi_r^T M_r Phi_r = I, ascending in frequency) at the configuration of the terms, and
+    whose next columns are the modes above them as the last refresh computed them (all of them by the full
+    eigenproblem; :data:`~crane_reference.dynamics.modal_correction.GUARD_MODES` of them by subspace iteration,
+    zeros beyond, which is where the next iterated refresh starts); ``tracked`` [s], when the modes were
     last tracked or computed; and the same terms by the resolved modes alone, which the residual and the articulated
     iteration matrix use: ``on_resolved`` U = M_r Phi_r (its first ``resolved`` columns; zeros beyond),
     ``inertia_weights`` c and ``damping_weights`` e - beta omega^2 (the first ``resolved`` entries) and

@@ -48,18 +48,18 @@ rank, which an articulated-body solve of the iteration matrix can take (docs/per
 iteration matrix").
 
 M_r moves with the configuration.  Delta M_r and D_u are computed afresh every :data:`REFRESH_INTERVAL` of motion:
-from the eigenproblem of the n_ic x n_ic reduced matrices, or, from :data:`ARTICULATED_FROM` independent
-coordinates, by subspace iteration from the last refresh's modes with articulated solves
-(:func:`~crane_reference.dynamics.modal_correction.refreshed_correction`, which falls back to the eigenproblem);
-stale ones leak damping into resolved modes, the more the lower the cutoff.  Between refreshes the resolved modes can be tracked to the configuration every
-:data:`MODE_TRACKING_INTERVAL` (one shift-inverted subspace iteration from the last ones and a Rayleigh-Ritz step,
-:func:`~crane_reference.dynamics.modal_correction.tracked_correction`), with Delta M_r from them and the unresolved
-damping beta K_r less their part, which removes that leak: what a cutoff of 0.3 pi needs to keep the vibration over an
-hour (off by default: it costs the node's solver the margin it needs, docs/performance.md).  These terms are
-coefficients of the equation, like M itself: they change from the next step's end on, and the carried
-accelerations are not converted (a conversion treats the slow motion's accelerations as free vibration and kicks
-it at every refresh, which made the slow motion's error depend on the refresh cadence).  Only a new equation (a
-start, a restart, another step size) solves its start's accelerations from the corrected equation.
+from the eigenproblem of the n_ic x n_ic reduced matrices, or, from :data:`ARTICULATED_FROM` independent coordinates,
+by subspace iteration from the last refresh's modes with articulated solves
+(:func:`~crane_reference.dynamics.modal_correction.refreshed_correction`, which falls back to the eigenproblem); stale
+ones leak damping into resolved modes, the more the lower the cutoff.  Between refreshes the resolved modes can be
+tracked to the configuration every :data:`MODE_TRACKING_INTERVAL` (one shift-inverted subspace iteration from the last
+ones and a Rayleigh-Ritz step, :func:`~crane_reference.dynamics.modal_correction.tracked_correction`), with Delta M_r
+from them and the unresolved damping beta K_r less their part, which removes that leak: what a cutoff of 0.3 pi needs
+to keep the vibration over an hour (off by default: it costs the node's solver the margin it needs,
+docs/performance.md).  These terms are coefficients of the equation, like M itself: they change from the next step's
+end on, and the carried accelerations are not converted (a conversion treats the slow motion's accelerations as free
+vibration and kicks it at every refresh, which made the slow motion's error depend on the refresh cadence).  Only a
+new equation (a start, a restart, another step size) solves its start's accelerations from the corrected equation.
 Servo-constraints (P = E_ic) have no symmetric reduced mass and use the plain trapezoidal rule.
 
 The holonomically dependent coordinates are never integrated: q_hd comes from the position constraints
