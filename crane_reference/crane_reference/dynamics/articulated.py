@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .linalg import cholesky, cholesky_solve, matvec
+from .linalg import cholesky, cholesky_solve_columns
 from .structures import ArticulatedFactor, ChainData, ConstrainedFactor, Partition
 
 
@@ -116,40 +116,46 @@ def articulated_factor(S, Hw, spring_weight, damper_weight, drive_spring, chain:
 
 @njit(cache=True, nogil=True)
 def articulated_solve(factor: ArticulatedFactor, tau):
-    """x = X^-1 tau: the bias of the joints beyond the root block gathered inward (u_k = tau_k - s_k^T p,
-    p += U_k u_k / D_k), the root block solved, then outward x_k = (u_k - U_k^T alpha) / D_k, alpha += s_k x_k
-    (alpha the spatial acceleration of the body before joint k)."""
+    """X^-1 tau for the columns of tau (n, k): the bias of the joints beyond the root block gathered inward
+    (u_k = tau_k - s_k^T p, p += U_k u_k / D_k), the root block solved, then outward x_k = (u_k - U_k^T alpha) / D_k,
+    alpha += s_k x_k (alpha the spatial acceleration of the body before joint k); each joint's arrays read once for
+    all the columns."""
     s, U, D, root = factor
-    n, b = tau.size, root.shape[0]
-    u = np.empty(n)
-    p = np.zeros(6)
-    for k in range(n - 1, b - 1, -1):
-        total = tau[k]
-        for a in range(6):
-            total -= s[k, a] * p[a]
-        u[k] = total
-        scaled = total / D[k]
-        for a in range(6):
-            p[a] += U[k, a] * scaled
-    rhs = np.empty(b)
+    n, b, k = tau.shape[0], root.shape[0], tau.shape[1]
+    u = np.empty((n, k))
+    p = np.zeros((k, 6))
+    for j in range(n - 1, b - 1, -1):
+        for m in range(k):
+            total = tau[j, m]
+            for a in range(6):
+                total -= s[j, a] * p[m, a]
+            u[j, m] = total
+            scaled = total / D[j]
+            for a in range(6):
+                p[m, a] += U[j, a] * scaled
+    rhs = np.empty((b, k))
     for i in range(b):
-        total = tau[i]
-        for a in range(6):
-            total -= s[i, a] * p[a]
-        rhs[i] = total
-    x = np.empty(n)
-    x[:b] = cholesky_solve(root, rhs)
-    alpha = np.zeros(6)
+        for m in range(k):
+            total = tau[i, m]
+            for a in range(6):
+                total -= s[i, a] * p[m, a]
+            rhs[i, m] = total
+    x = np.empty((n, k))
+    root_solution = cholesky_solve_columns(root, rhs)
+    alpha = np.zeros((k, 6))
     for i in range(b):
-        for a in range(6):
-            alpha[a] += s[i, a] * x[i]
-    for k in range(b, n):
-        total = u[k]
-        for a in range(6):
-            total -= U[k, a] * alpha[a]
-        x[k] = total / D[k]
-        for a in range(6):
-            alpha[a] += s[k, a] * x[k]
+        for m in range(k):
+            x[i, m] = root_solution[i, m]
+            for a in range(6):
+                alpha[m, a] += s[i, a] * x[i, m]
+    for j in range(b, n):
+        for m in range(k):
+            total = u[j, m]
+            for a in range(6):
+                total -= U[j, a] * alpha[m, a]
+            x[j, m] = total / D[j]
+            for a in range(6):
+                alpha[m, a] += s[j, a] * x[j, m]
     return x
 
 
@@ -171,18 +177,34 @@ def constrained_factor(S, Hw, A, spring_weight, damper_weight, drive_spring, cha
     """:func:`articulated_factor` with the task constraints' Schur complement: Z = X^-1 A^T (m solves) and the
     Cholesky factor of A Z."""
     factor = articulated_factor(S, Hw, spring_weight, damper_weight, drive_spring, chain)
-    Z = np.empty((A.shape[1], A.shape[0]))
-    for row in range(A.shape[0]):
-        Z[:, row] = articulated_solve(factor, A[row].copy())
+    Z = articulated_solve(factor, np.ascontiguousarray(A.T))
     return ConstrainedFactor(factor, A, Z, cholesky(A @ Z))
 
 
 @njit(cache=True, nogil=True)
-def reduced_solve(factor: ConstrainedFactor, independent, r):
-    """a with B^T X B a = r: y = X^-1 (E_ic r - A^T lambda), (A X^-1 A^T) lambda = A X^-1 E_ic r, a = y[ic]."""
-    load = np.zeros(factor.A.shape[1])
+def reduced_solve(factor: ConstrainedFactor, independent, R):
+    """a with B^T X B a = r for the columns r of R (n_ic, k): y = X^-1 (E_ic r - A^T lambda), (A X^-1 A^T) lambda =
+    A X^-1 E_ic r, a = y[ic]."""
+    load = np.zeros((factor.A.shape[1], R.shape[1]))
     for i in range(independent.size):
-        load[independent[i]] = r[i]
-    y = articulated_solve(factor.articulated, load)
-    y -= matvec(factor.Z, cholesky_solve(factor.schur, matvec(factor.A, y)))
-    return y[independent]
+        for m in range(R.shape[1]):
+            load[independent[i], m] = R[i, m]
+    Y = articulated_solve(factor.articulated, load)
+    A, Z, k = factor.A, factor.Z, R.shape[1]
+    on_rows = np.zeros((A.shape[0], k))  # A Y by loops: A has 2-3 rows, where a BLAS call costs more than the sum
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            weight = A[i, j]
+            for m in range(k):
+                on_rows[i, m] += weight * Y[j, m]
+    multipliers = cholesky_solve_columns(factor.schur, on_rows)
+    for j in range(A.shape[1]):
+        for i in range(A.shape[0]):
+            weight = Z[j, i]
+            for m in range(k):
+                Y[j, m] -= weight * multipliers[i, m]
+    out = np.empty((independent.size, k))
+    for i in range(independent.size):
+        for m in range(k):
+            out[i, m] = Y[independent[i], m]
+    return out

@@ -52,9 +52,7 @@ def articulated_iteration_factor(S, Hw, B, h, correction: ModalCorrection, drive
                                      chain)
     on_resolved = np.ascontiguousarray(correction.on_resolved[:, :r])
     weights = -correction.inertia_weights[:r] + (0.5 * h) * correction.damping_weights[:r]
-    solved = np.empty((independent.size, r))
-    for m in range(r):
-        solved[:, m] = reduced_solve(constrained, independent, on_resolved[:, m].copy())
+    solved = reduced_solve(constrained, independent, on_resolved) if r > 0 else np.empty((independent.size, 0))
     capacitance = on_resolved.T @ solved if r > 0 else np.empty((0, 0))
     for i in range(r):
         for j in range(r):
@@ -70,7 +68,9 @@ def iteration_solve(factor: IterationFactor, residual, partition: Partition):
     on the articulated one."""
     if factor.dense.shape[0] > 0:
         return cholesky_solve(factor.dense, residual) if not partition.servo else matvec(factor.dense, residual)
-    y = reduced_solve(factor.constrained, partition.independent, residual)
+    column = np.empty((residual.size, 1))
+    column[:, 0] = residual
+    y = reduced_solve(factor.constrained, partition.independent, column)[:, 0]
     r = factor.weights.size
     if r > 0:
         projected = matvec(factor.on_resolved.T, y) * factor.weights

@@ -210,10 +210,9 @@ def refreshed_correction(reduced_mass, S, Hw, B, correction: ModalCorrection, h,
                                 reduced_drive_spring(drive, partition, chain) / shift, chain)
     X = np.ascontiguousarray(correction.modes[:, :count])
     on_X = reduced_mass @ X
-    Y, springs = np.empty((n_ic, count)), np.empty((n_ic, count))
+    springs = np.empty((n_ic, count))
     for _ in range(REFRESH_ITERATIONS):
-        for m in range(count):
-            Y[:, m] = reduced_solve(factor, independent, on_X[:, m].copy())
+        Y = reduced_solve(factor, independent, on_X)
         on_Y = reduced_mass @ Y
         for m in range(count):
             springs[:, m] = stiffness_product(Y[:, m].copy(), drive, partition, chain)
