@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from crane_reference.motion.programmed_motion import ProgrammedMotion
-from crane_reference.motion.simulation import simulate, simulate_reference
+from crane_reference.motion.simulation import MotionStepper, Scenario, simulate, simulate_reference
+from crane_reference.motion.steps import ONLINE_STEP
 
 
 def errors_against_dop853(motion: ProgrammedMotion, q0: np.ndarray, duration: float, steps: tuple[float, ...],
@@ -20,3 +21,15 @@ def errors_against_dop853(motion: ProgrammedMotion, q0: np.ndarray, duration: fl
         on_reference = np.array([np.interp(times, tr.t, tr.q[:, k]) for k in range(tr.q.shape[1])]).T
         errors.append(float(np.max(np.abs(on_reference - reference.q))))
     return errors
+
+
+def second_of_steps(scenario: Scenario, **integrator: object):
+    """The state after 1 s at the node's step from the scenario's static equilibrium at rest (the drive's jump at
+    1 s included), with the integrator's attributes set as ``integrator`` gives them."""
+    q0 = scenario.equilibrium.q
+    stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), ONLINE_STEP)
+    for name, value in integrator.items():
+        setattr(stepper.integrator, name, value)
+    stepper.advance_until(1.0)
+    assert stepper.state.t == 1.0
+    return stepper.state

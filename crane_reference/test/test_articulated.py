@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from convergence import second_of_steps
 from cranes import CONFIG, EXAMPLES
 from test_dynamics_pinocchio import pin_configuration
 from velocity_map import random_velocity_map
@@ -37,7 +38,7 @@ from crane_reference.dynamics.structures import Partition
 from crane_reference.model.config import load_config
 from crane_reference.model.urdf import model_to_urdf
 from crane_reference.motion.integration import ExactFrequencyTrapezoidal
-from crane_reference.motion.simulation import MotionStepper, Scenario
+from crane_reference.motion.simulation import Scenario
 from crane_reference.motion.steps import ONLINE_STEP
 
 STATES = 4
@@ -175,13 +176,6 @@ def test_a_second_of_steps_with_the_articulated_iteration_matrix_is_the_dense_on
     and with it factored densely agree to 1e-9 in q and 1e-7 in qd (the Newton iterates differ only by
     round-off)."""
     scenario = Scenario(load_config().with_rfe_count(n_rfe), "flexible")
-    q0, ends = scenario.equilibrium.q, []
-    for articulated in (False, True):
-        stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), ONLINE_STEP)
-        stepper.integrator.articulated = articulated
-        stepper.advance_until(1.0)
-        ends.append(stepper.state)
-    dense, articulated = ends
-    assert dense.t == articulated.t == 1.0
+    dense, articulated = (second_of_steps(scenario, articulated=articulated) for articulated in (False, True))
     assert np.abs(articulated.q - dense.q).max() <= 1e-9
     assert np.abs(articulated.qd - dense.qd).max() <= 1e-7

@@ -26,6 +26,7 @@ import threading
 
 import numpy as np
 import pytest
+from convergence import second_of_steps
 from scipy.linalg import eigh
 from scipy.signal import butter, sosfiltfilt
 from velocity_map import random_velocity_map
@@ -214,14 +215,7 @@ def test_a_second_of_steps_with_the_refresh_iterated_is_the_full_eigenproblems(r
     """n_rfe = 12 from its static equilibrium over 1 s at the node's step (the drive's jump at 1 s included): the
     motion with every refresh iterated from the last modes and with the full eigenproblem at every refresh agree to
     1e-9 in q and 1e-7 in qd."""
-    q0, ends = refined.equilibrium.q, []
-    for subspace_refresh in (False, True):
-        stepper = MotionStepper(refined.motion, 0.0, q0, np.zeros_like(q0), ONLINE_STEP)
-        stepper.integrator.subspace_refresh = subspace_refresh
-        stepper.advance_until(1.0)
-        ends.append(stepper.state)
-    full, iterated = ends
-    assert full.t == iterated.t == 1.0
+    full, iterated = (second_of_steps(refined, subspace_refresh=subspace_refresh) for subspace_refresh in (False, True))
     assert np.abs(iterated.q - full.q).max() <= 1e-9
     assert np.abs(iterated.qd - full.qd).max() <= 1e-7
 
