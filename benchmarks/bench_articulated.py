@@ -108,6 +108,13 @@ def _repeat_dense_solve(factor, r, n):
     return total
 
 
+def cost(repeat: int, function, *arguments) -> float:
+    """[s] of one call of the compiled loop ``function(*arguments, n)``: n = ``repeat`` calls, median of a run, best of
+    5 (after a warm-up of 2)."""
+    function(*arguments, 2)
+    return min(call_seconds(lambda: function(*arguments, repeat), 1, median=True) for _ in range(5)) / repeat
+
+
 def crane(n_rfe: int, states: int, repeat: int) -> None:
     """The check and the costs for the flexible crane with ``n_rfe`` elements per flexible link."""
     scenario = Scenario(load_config().with_rfe_count(n_rfe), "flexible")
@@ -131,16 +138,12 @@ def crane(n_rfe: int, states: int, repeat: int) -> None:
                                   ExactFrequencyTrapezoidal(motion).settings)
     dense_factor = iteration_factor(case.M, case.B, h, correction, drive, partition, chain)
 
-    def cost(function, *arguments) -> float:
-        function(*arguments, 10)
-        return min(call_seconds(lambda: function(*arguments, repeat), 1, median=True) for _ in range(5)) / repeat
-
-    factor_cost = cost(_repeat_articulated, case.S, case.Hw, case.A, *weights, weights[0] * drive[1], chain)
+    factor_cost = cost(repeat, _repeat_articulated, case.S, case.Hw, case.A, *weights, weights[0] * drive[1], chain)
     rank = correction.resolved
-    solve_cost = cost(_repeat_reduced_solve, factor, independent, r)
-    columns_cost = cost(_repeat_reduced_solve, factor, independent, rng.normal(size=(independent.size, rank)))
-    dense_cost = cost(_repeat_dense, case.S, case.Hw, case.B, correction, drive, partition, chain, h)
-    dense_solve_cost = cost(_repeat_dense_solve, dense_factor, r[:, 0].copy())
+    solve_cost = cost(repeat, _repeat_reduced_solve, factor, independent, r)
+    columns_cost = cost(repeat, _repeat_reduced_solve, factor, independent, rng.normal(size=(independent.size, rank)))
+    dense_cost = cost(repeat, _repeat_dense, case.S, case.Hw, case.B, correction, drive, partition, chain, h)
+    dense_solve_cost = cost(repeat, _repeat_dense_solve, dense_factor, r[:, 0].copy())
     print(f"n_rfe={n_rfe:2d} dof={chain.kinds.size:3d} n_ic={independent.size:3d} root block {chain.root_size}: "
           f"articulated against dense {worst:.1e} (largest, relative, {states} random states); ABA {aba * 1e6:.2f} us; "
           f"in ABA: articulated factor with the constraints {factor_cost / aba:.2f}, a reduced solve "
@@ -202,12 +205,8 @@ def refresh(n_rfe: int, duration: float, repeat: int) -> None:
         change = max(change, _relative(previous.inertia, full.inertia), _relative(previous.damping, full.damping))
     aba = aba_time(scenario)
 
-    def cost(function, *arguments) -> float:
-        function(*arguments, 2)
-        return min(call_seconds(lambda: function(*arguments, repeat), 1, median=True) for _ in range(5)) / repeat
-
-    full_cost = cost(_repeat_full, reduced_mass, h, drive, partition, chain, settings)
-    iterated_cost = cost(_repeat_refreshed, *arguments)
+    full_cost = cost(repeat, _repeat_full, reduced_mass, h, drive, partition, chain, settings)
+    iterated_cost = cost(repeat, _repeat_refreshed, *arguments)
     print(f"[refresh] n_rfe={n_rfe:2d} n_ic={partition.independent.size:3d} resolved={full.resolved}: iterated "
           f"against the full eigenproblem {difference:.1e} (largest, relative, {refreshes} refreshes over "
           f"{duration:g} s; the full terms change by up to {change:.1e} over {REFRESH_INTERVAL * 1e3:g} ms); "

@@ -23,13 +23,13 @@ def errors_against_dop853(motion: ProgrammedMotion, q0: np.ndarray, duration: fl
     return errors
 
 
-def second_of_steps(scenario: Scenario, **integrator: object):
-    """The state after 1 s at the node's step from the scenario's static equilibrium at rest (the drive's jump at
-    1 s included), with the integrator's attributes set as ``integrator`` gives them."""
+def second_of_steps(scenario: Scenario, end: float = 1.0, **integrator: object):
+    """The state after ``end`` seconds (1 s: the drive's jump at 1 s included) at the node's step from the scenario's
+    static equilibrium at rest, with the integrator's attributes set as ``integrator`` gives them."""
     q0 = scenario.equilibrium.q
     stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), ONLINE_STEP)
     for name, value in integrator.items():
         setattr(stepper.integrator, name, value)
-    stepper.advance_until(1.0)
-    assert stepper.state.t == 1.0
+    stepper.advance_until(end)
+    assert stepper.state.t == end
     return stepper.state

@@ -27,6 +27,7 @@ import threading
 import numpy as np
 import pytest
 from convergence import second_of_steps
+from cranes import CONFIG
 from scipy.linalg import eigh
 from scipy.signal import butter, sosfiltfilt
 from velocity_map import random_velocity_map
@@ -178,8 +179,10 @@ def test_refreshed_modes_reach_scipys_across_a_rotating_near_degenerate_pair(ref
     b), where the near-degenerate pair near 451 Hz turns within its plane by more than 0.1 rad (scipy's modes;
     asserted). The modal terms of a, refreshed at b by subspace iteration (``refreshed_correction``: the articulated
     solves, not the full eigenproblem: the modes beyond the iterated ones are left zero), equal the exact-frequency
-    terms of scipy's modes at b: Delta M_r to 1e-6 of its largest entry, and D_u, the unresolved modes' damping
-    (scipy's modes at b, e_u = 2 zeta omega_u^2 h / cutoff), likewise; 1000 times closer than a's terms were."""
+    terms of scipy's modes at b: Delta M_r to 1e-6 of its largest entry, 1000 times closer than a's was; and D_u,
+    the unresolved modes' damping (scipy's modes at b, e_u = 2 zeta omega_u^2 h / cutoff), to 1e-6 of the resolved
+    modes' part of it, -beta M_r Phi_r diag(omega_r^2) Phi_r^T M_r (D_u = beta K_r less that part, and beta K_r does
+    not depend on the modes)."""
     motion, q0, h = refined.motion, refined.equilibrium.q, ONLINE_STEP
     stepper = MotionStepper(motion, 0.0, q0, np.zeros_like(q0), h)
     states = []
@@ -205,17 +208,54 @@ def test_refreshed_modes_reach_scipys_across_a_rotating_near_degenerate_pair(ref
     refreshed = refreshed_correction(mass_b, S, world_pseudo_inertias(T, chain.body_joint, chain.body_H), B, at_a, h,
                                      states[1].t, drive, partition, chain, settings)
     assert refreshed.resolved == resolved and not np.any(refreshed.modes[:, resolved + GUARD_MODES:])
-    inertia_scale, damping_scale = np.abs(expected_inertia).max(), np.abs(expected_damping).max()
+    on_resolved = mass_b @ phi_b[:, :resolved]
+    resolved_part = on_resolved @ np.diag(2.0 * UNRESOLVED_DAMPING * squared_b[:resolved] * h / settings.cutoff) \
+        @ on_resolved.T
+    inertia_scale, damping_scale = np.abs(expected_inertia).max(), np.abs(resolved_part).max()
     assert np.abs(refreshed.inertia - expected_inertia).max() <= 1e-6 * inertia_scale
     assert np.abs(refreshed.damping - expected_damping).max() <= 1e-6 * damping_scale
     assert np.abs(refreshed.inertia - expected_inertia).max() <= 1e-3 * np.abs(at_a.inertia - expected_inertia).max()
 
 
+def test_refreshed_modes_reach_scipys_with_a_spring_drive():
+    """The knuckle-boom crane with 12 RFEs per flexible link, whose column drive is a spring (s_dr = 2e6 N m / rad on
+    psi2, an independent coordinate: K_r holds it, and so does the refresh's shifted solve), at t = 1 s and 10 ms
+    later: the modal terms of the first, refreshed at the second by subspace iteration (not falling back), equal the
+    exact-frequency terms of scipy's modes there, Delta M_r to 1e-6 of its largest entry (the terms of the chain
+    without its dampers, for which c has the closed form of the undamped mode)."""
+    scenario = Scenario(load_config(CONFIG / "knuckle_boom_crane.yaml").with_rfe_count(12), "flexible")
+    motion, q0, h = scenario.motion, scenario.equilibrium.q, ONLINE_STEP
+    chain = motion.dynamics.chain._replace(damping=np.zeros_like(motion.dynamics.chain.damping), damped=False)
+    partition = motion.partition
+    drive = motion.dynamics.drive.kernel_parameters(0.0)
+    assert drive[1] > 0.0 and chain.drive_joint in partition.independent
+    stepper = MotionStepper(motion, 0.0, q0, np.zeros_like(q0), h)
+    states = []
+    for t in (1.0, 1.01):
+        stepper.advance_until(t)
+        states.append(stepper.state)
+    settings = stepper.integrator.settings
+    (mass_a, _, _), (mass_b, squared_b, phi_b) = (_scipy_modes(scenario, state.q) for state in states)
+    resolved = int(np.sum(np.sqrt(squared_b) * h < settings.cutoff))
+    assert resolved + GUARD_MODES < partition.independent.size
+    at_a = modal_correction(mass_a, h, states[0].t, drive, partition, chain, settings)
+    T, S = forward_kinematics(states[1].q, chain.kinds, chain.axes, chain.origins)
+    B = motion.solve(states[1].t, states[1].q, np.zeros_like(q0)).velocity_map
+    refreshed = refreshed_correction(mass_b, S, world_pseudo_inertias(T, chain.body_joint, chain.body_H), B, at_a, h,
+                                     states[1].t, drive, partition, chain, settings)
+    assert refreshed.resolved == resolved and not np.any(refreshed.modes[:, resolved + GUARD_MODES:])
+    expected = _exact_frequency_inertia(mass_b, squared_b, phi_b, resolved, h)
+    assert np.abs(refreshed.inertia - expected).max() <= 1e-6 * np.abs(expected).max()
+
+
 def test_a_second_of_steps_with_the_refresh_iterated_is_the_full_eigenproblems(refined):
     """n_rfe = 12 from its static equilibrium over 1 s at the node's step (the drive's jump at 1 s included): the
-    motion with every refresh iterated from the last modes and with the full eigenproblem at every refresh agree to
-    1e-9 in q and 1e-7 in qd."""
+    motion with the refresh iterated from the last modes (the last one before the jump did not fall back: the modes
+    beyond its guard modes are zero) and with the full eigenproblem at every refresh agree to 1e-9 in q and 1e-7 in
+    qd."""
     full, iterated = (second_of_steps(refined, subspace_refresh=subspace_refresh) for subspace_refresh in (False, True))
+    last = second_of_steps(refined, 0.995, subspace_refresh=True).correction  # refreshed at 0.99 s (the jump at 1 s
+    assert last.resolved > 0 and not np.any(last.modes[:, last.resolved + GUARD_MODES:])  # starts a new equation)
     assert np.abs(iterated.q - full.q).max() <= 1e-9
     assert np.abs(iterated.qd - full.qd).max() <= 1e-7
 
