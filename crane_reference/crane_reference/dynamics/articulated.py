@@ -13,7 +13,9 @@ so the entries m_ij = tr(S_i Hc_max(i,j) S_j^T) of :mod:`crane_reference.dynamic
 
 The task constraints A qdd = c (A the m x n constraint Jacobian of (7), B spanning its null space with B[ic] = I)
 enter by a Schur complement: B^T X B a = r is the KKT system [X A^T; A 0] [y; lambda] = [E_ic r; 0] with a = y[ic],
-so y = X^-1 (E_ic r - A^T lambda), (A X^-1 A^T) lambda = A X^-1 E_ic r: m + 1 articulated solves.
+so y = X^-1 (E_ic r - A^T lambda), (A X^-1 A^T) lambda = A X^-1 E_ic r: the factor solves the m columns of A^T
+once, and each solve is one articulated solve.  A solve takes the columns of a matrix, each joint's arrays read once
+for all of them.
 """
 
 from __future__ import annotations
@@ -116,16 +118,16 @@ def articulated_factor(S, Hw, spring_weight, damper_weight, drive_spring, chain:
 
 @njit(cache=True, nogil=True)
 def articulated_solve(factor: ArticulatedFactor, tau):
-    """X^-1 tau for the columns of tau (n, k): the bias of the joints beyond the root block gathered inward
+    """X^-1 tau for the columns of tau (n, columns): the bias of the joints beyond the root block gathered inward
     (u_k = tau_k - s_k^T p, p += U_k u_k / D_k), the root block solved, then outward x_k = (u_k - U_k^T alpha) / D_k,
     alpha += s_k x_k (alpha the spatial acceleration of the body before joint k); each joint's arrays read once for
     all the columns."""
     s, U, D, root = factor
-    n, b, k = tau.shape[0], root.shape[0], tau.shape[1]
-    u = np.empty((n, k))
-    p = np.zeros((k, 6))
+    n, b, columns = tau.shape[0], root.shape[0], tau.shape[1]
+    u = np.empty((n, columns))
+    p = np.zeros((columns, 6))
     for j in range(n - 1, b - 1, -1):
-        for m in range(k):
+        for m in range(columns):
             total = tau[j, m]
             for a in range(6):
                 total -= s[j, a] * p[m, a]
@@ -133,23 +135,23 @@ def articulated_solve(factor: ArticulatedFactor, tau):
             scaled = total / D[j]
             for a in range(6):
                 p[m, a] += U[j, a] * scaled
-    rhs = np.empty((b, k))
+    rhs = np.empty((b, columns))
     for i in range(b):
-        for m in range(k):
+        for m in range(columns):
             total = tau[i, m]
             for a in range(6):
                 total -= s[i, a] * p[m, a]
             rhs[i, m] = total
-    x = np.empty((n, k))
+    x = np.empty((n, columns))
     root_solution = cholesky_solve_columns(root, rhs)
-    alpha = np.zeros((k, 6))
+    alpha = np.zeros((columns, 6))
     for i in range(b):
-        for m in range(k):
+        for m in range(columns):
             x[i, m] = root_solution[i, m]
             for a in range(6):
                 alpha[m, a] += s[i, a] * x[i, m]
     for j in range(b, n):
-        for m in range(k):
+        for m in range(columns):
             total = u[j, m]
             for a in range(6):
                 total -= U[j, a] * alpha[m, a]

@@ -5,10 +5,11 @@ The iteration matrix is J = B^T (M + h^2/4 K + h/2 D) B - Delta M_r + h/2 D_u (K
 psi2; :func:`~crane_reference.dynamics.modal_correction.iteration_factor` forms and factors it).  With the resolved
 modes' U = M_r Phi_r and the unresolved modes' damping beta omega^2 (:class:`ModalCorrection`), -Delta M_r +
 h/2 D_u = U diag(W) U^T + h/2 beta K_r with W = -c + h/2 (e - beta omega^2), so J = Y + U diag(W) U^T with
-Y = B^T X' B, X' = M + (h^2/4 + beta h/2) (K + s_dr on psi2) + h/2 D: Y is solved by
+Y = B^T X' B, X' = M + (h^2/4 + beta h/2) K + h/2 D + (h^2/4 + beta h/2) s_dr on psi2 (h^2/4 s_dr where psi2 is
+dependent: K_r, and so beta K_r, holds the drive's spring only on an independent psi2): Y is solved by
 :mod:`~crane_reference.dynamics.articulated` (the task constraints as rows A with A B = 0), and
-J^-1 = Y^-1 - Y^-1 U (I + diag(W) U^T Y^-1 U)^-1 diag(W) U^T Y^-1 (r more solves to factor; diag(W) is not
-inverted, so a weight may be zero).
+J^-1 = Y^-1 - Y^-1 U (I + diag(W) U^T Y^-1 U)^-1 diag(W) U^T Y^-1 (U's r columns solved once to factor; diag(W) is
+not inverted, so a weight may be zero).
 """
 
 from __future__ import annotations

@@ -167,8 +167,9 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
 
 
 GUARD_MODES = 8
-"""Modes iterated beyond the resolved ones by :func:`refreshed_correction`: the lowest shows a mode that comes
-below the cutoff, and together they set how fast the resolved ones converge."""
+"""Modes iterated beyond the resolved ones by :func:`refreshed_correction`: a mode that comes below the cutoff from
+among them is seen (the count changes, and the full eigenproblem counts again), one from beyond them would not be;
+together they set how fast the resolved ones converge."""
 
 REFRESH_SHIFT = 0.3
 """The shift s of :func:`refreshed_correction`'s iteration as a fraction of omega_c^2 (omega_c = cutoff / h)."""
@@ -198,8 +199,10 @@ def refreshed_correction(reduced_mass, S, Hw, B, correction: ModalCorrection, h,
     :func:`tracked_correction` (Y^T M_r Y = L L^T with Y's columns of M_r-norm 1, then Jacobi rotations: after the
     first iteration the projected pencil is nearly diagonal).  The full eigenproblem is solved instead when the
     iteration does not stop within :data:`REFRESH_ITERATIONS`, when the number of modes below the cutoff changes (a
-    mode crossed it: the guard modes are counted again), when no guard mode fits (r + :data:`GUARD_MODES` >= n_ic)
-    or when the span degenerates (a squared pivot of L below 1e-10, or one not positive)."""
+    mode crossed it: the guard modes are counted again), when no guard mode fits (r + :data:`GUARD_MODES` >= n_ic),
+    when the span degenerates (a squared pivot of L below 1e-10, or one not positive), when no mode is resolved, for
+    servo-constraints and without ``settings.modal``; a fallback after iterating costs its iterations on top of the
+    eigenproblem."""
     n_ic, r, independent = partition.independent.size, correction.resolved, partition.independent
     count = r + GUARD_MODES
     if r == 0 or count >= n_ic or partition.servo or not settings.modal:
@@ -210,33 +213,24 @@ def refreshed_correction(reduced_mass, S, Hw, B, correction: ModalCorrection, h,
                                 reduced_drive_spring(drive, partition, chain) / shift, chain)
     X = np.ascontiguousarray(correction.modes[:, :count])
     on_X = reduced_mass @ X
-    springs = np.empty((n_ic, count))
     for _ in range(REFRESH_ITERATIONS):
         Y = reduced_solve(factor, independent, on_X)
         on_Y = reduced_mass @ Y
+        springs = np.empty((n_ic, count))
         for m in range(count):
             springs[:, m] = stiffness_product(Y[:, m].copy(), drive, partition, chain)
-        for m in range(count):  # each column scaled to M_r-norm 1
-            scale = 1.0 / np.sqrt(np.dot(Y[:, m], on_Y[:, m]))
-            Y[:, m] *= scale
-            on_Y[:, m] *= scale
-            springs[:, m] *= scale
-        L, positive = cholesky_or_stop(_symmetric(Y.T @ on_Y))  # Y^T M_r Y = L L^T: the Ritz vectors Y L^-T W
-        if not positive or not np.min(np.diag(L)) ** 2 > 1e-10:
+        spanned, omega_squared, X, on_X, springs = _ritz_modes(Y, on_Y, springs, 1e-10)
+        if not spanned:
             break
-        inverse = lower_inverse(L)
-        omega_squared, W = jacobi_eigh(_symmetric(inverse @ (Y.T @ springs) @ inverse.T))
-        rotation = inverse.T @ W
-        X, on_X, springs = Y @ rotation, on_Y @ rotation, springs @ rotation
         if omega_squared[r - 1] >= cutoff_squared or omega_squared[r] < cutoff_squared:
             break
         largest = 0.0
         for m in range(r + 1):
-            residual, scale = 0.0, 0.0
+            residual, norm_squared = 0.0, 0.0
             for i in range(n_ic):
                 residual += (springs[i, m] - omega_squared[m] * on_X[i, m]) ** 2
-                scale += on_X[i, m] ** 2
-            largest = max(largest, np.sqrt(residual / scale) / (omega_squared[m] + shift))
+                norm_squared += on_X[i, m] ** 2
+            largest = max(largest, np.sqrt(residual / norm_squared) / (omega_squared[m] + shift))
         if largest <= REFRESH_TOLERANCE:
             modes = np.zeros((n_ic, n_ic))
             modes[:, :count] = X
@@ -301,30 +295,45 @@ def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, part
     r = correction.resolved
     if r == 0:
         return correction
-    n, h = reduced_mass.shape[0], correction.step
+    h = correction.step
     stiffness = reduced_stiffness(drive, partition, chain)
     driving = reduced_mass @ np.ascontiguousarray(correction.modes[:, :r])
     X = cholesky_solve_columns(cholesky(stiffness + SHIFT * reduced_mass), driving)
     MX = reduced_mass @ X
-    KX = np.empty((n, r))  # K_r X = M_r Phi_r - s M_r X
-    for m in range(r):  # each column scaled to M_r-norm 1
-        norm = 0.0
-        for i in range(n):
-            norm += X[i, m] * MX[i, m]
-        scale = 1.0 / np.sqrt(norm)
-        for i in range(n):
-            KX[i, m] = (driving[i, m] - SHIFT * MX[i, m]) * scale
-            X[i, m] *= scale
-            MX[i, m] *= scale
-    inverse = lower_inverse(cholesky(_symmetric(X.T @ MX)))  # X^T M_r X = L L^T: the Ritz vectors X L^-T W
-    omega_squared, W = jacobi_eigh(_symmetric(inverse @ (X.T @ KX) @ inverse.T))
-    rotation = inverse.T @ W
-    phi_r, on_resolved = X @ rotation, MX @ rotation
+    springs = driving - SHIFT * MX  # K_r X = M_r Phi_r - s M_r X
+    spanned, omega_squared, phi_r, on_resolved, _ = _ritz_modes(X, MX, springs, 0.0)
+    if not spanned:
+        raise np.linalg.LinAlgError("the tracked modes' Gram matrix is not positive definite")
     modes = correction.modes.copy()
     modes[:, :r] = phi_r
     c, e = _resolved_terms(omega_squared, _modal_damping(phi_r, r, partition, chain), h)
     return _terms_of_resolved_modes(on_resolved, omega_squared, c, e, correction.unresolved_beta, stiffness, modes,
                                     correction.time, h, t)
+
+
+@njit(cache=True, nogil=True)
+def _ritz_modes(Y, on_Y, springs, smallest_pivot):
+    """The Rayleigh-Ritz step on the span of Y's columns (on_Y = M_r Y and springs = K_r Y; the three scaled in place
+    so that Y's columns have M_r-norm 1): Y^T M_r Y = L L^T and the modes of L^-1 Y^T K_r Y L^-T by Jacobi rotations
+    (nearly diagonal when Y is near the modes).  (True, omega^2 ascending, Phi = Y L^-T W, M_r Phi, K_r Phi), or False
+    first when L has a squared pivot not above ``smallest_pivot`` (the span degenerates; 0: not positive)."""
+    n = Y.shape[0]
+    for m in range(Y.shape[1]):
+        norm_squared = 0.0
+        for i in range(n):
+            norm_squared += Y[i, m] * on_Y[i, m]
+        scale = 1.0 / np.sqrt(norm_squared)
+        for i in range(n):
+            Y[i, m] *= scale
+            on_Y[i, m] *= scale
+            springs[i, m] *= scale
+    L, positive = cholesky_or_stop(_symmetric(Y.T @ on_Y))
+    if not positive or not np.min(np.diag(L)) ** 2 > smallest_pivot:
+        return False, np.empty(0), Y, on_Y, springs
+    inverse = lower_inverse(L)
+    omega_squared, W = jacobi_eigh(_symmetric(inverse @ (Y.T @ springs) @ inverse.T))
+    rotation = inverse.T @ W
+    return True, omega_squared, Y @ rotation, on_Y @ rotation, springs @ rotation
 
 
 @njit(cache=True, nogil=True)

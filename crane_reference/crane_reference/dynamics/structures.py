@@ -102,7 +102,8 @@ class ModalCorrection(NamedTuple):
     the resolved modes Phi_r (Phi_r^T M_r Phi_r = I, ascending in frequency) at the configuration of the terms, and
     whose next columns are the modes above them as the last refresh computed them (all of them by the full
     eigenproblem; :data:`~crane_reference.dynamics.modal_correction.GUARD_MODES` of them by subspace iteration,
-    zeros beyond, which is where the next iterated refresh starts); ``tracked`` [s], when the modes were
+    then zeros): the next iterated refresh starts from the resolved and those guard columns; ``tracked`` [s], when
+    the modes were
     last tracked or computed; and the same terms by the resolved modes alone, which the residual and the articulated
     iteration matrix use: ``on_resolved`` U = M_r Phi_r (its first ``resolved`` columns; zeros beyond),
     ``inertia_weights`` c and ``damping_weights`` e - beta omega^2 (the first ``resolved`` entries) and
