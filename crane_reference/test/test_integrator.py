@@ -121,6 +121,29 @@ def test_modal_terms_are_the_exact_frequency_correction_of_scipys_modes(scenario
                        atol=1e-9 * np.abs(springs).max())
 
 
+def _states(scenario, times):
+    """The states of the scenario's task at ``times`` (at the node's step from its static equilibrium at rest), and the
+    integrator's settings."""
+    q0 = scenario.equilibrium.q
+    stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), ONLINE_STEP)
+    states = []
+    for t in times:
+        stepper.advance_until(t)
+        states.append(stepper.state)
+    return states, stepper.integrator.settings
+
+
+def _refreshed(scenario, state, correction, drive, chain, settings):
+    """``refreshed_correction`` of ``correction`` (the node's step) at ``state``: its reduced mass, frames and velocity
+    map."""
+    motion = scenario.motion
+    T, S = forward_kinematics(state.q, chain.kinds, chain.axes, chain.origins)
+    B = motion.solve(state.t, state.q, np.zeros_like(state.q)).velocity_map
+    return refreshed_correction(_reduced_mass(scenario, state.q), S, world_pseudo_inertias(T, chain.body_joint,
+                                chain.body_H), B, correction, ONLINE_STEP, state.t, drive, motion.partition, chain,
+                                settings)
+
+
 def _exact_frequency_inertia(mass, omega_squared, phi, resolved, h):
     """Delta M_r = M_r Phi_r diag(c) Phi_r^T M_r, c = 1 - ((omega h / 2) / tan(omega h / 2))^2 (undamped)."""
     half = 0.5 * np.sqrt(omega_squared[:resolved]) * h
@@ -183,13 +206,8 @@ def test_refreshed_modes_reach_scipys_across_a_rotating_near_degenerate_pair(ref
     the unresolved modes' damping (scipy's modes at b, e_u = 2 zeta omega_u^2 h / cutoff), to 1e-6 of the resolved
     modes' part of it, -beta M_r Phi_r diag(omega_r^2) Phi_r^T M_r (D_u = beta K_r less that part, and beta K_r does
     not depend on the modes)."""
-    motion, q0, h = refined.motion, refined.equilibrium.q, ONLINE_STEP
-    stepper = MotionStepper(motion, 0.0, q0, np.zeros_like(q0), h)
-    states = []
-    for t in (1.39, 1.40):
-        stepper.advance_until(t)
-        states.append(stepper.state)
-    settings = stepper.integrator.settings
+    motion, h = refined.motion, ONLINE_STEP
+    states, settings = _states(refined, (1.39, 1.40))
     drive, partition, chain = motion.dynamics.drive.kernel_parameters(0.0), motion.partition, motion.dynamics.chain
     (mass_a, squared_a, phi_a), (mass_b, squared_b, phi_b) = (_scipy_modes(refined, state.q) for state in states)
     resolved = int(np.sum(np.sqrt(squared_b) * h < settings.cutoff))
@@ -203,10 +221,7 @@ def test_refreshed_modes_reach_scipys_across_a_rotating_near_degenerate_pair(ref
     e_u = 2.0 * UNRESOLVED_DAMPING * squared_b[resolved:] * h / settings.cutoff
     expected_damping = on_unresolved @ np.diag(e_u) @ on_unresolved.T
     at_a = modal_correction(mass_a, h, states[0].t, drive, partition, chain, settings)
-    T, S = forward_kinematics(states[1].q, chain.kinds, chain.axes, chain.origins)
-    B = motion.solve(0.0, states[1].q, np.zeros_like(q0)).velocity_map
-    refreshed = refreshed_correction(mass_b, S, world_pseudo_inertias(T, chain.body_joint, chain.body_H), B, at_a, h,
-                                     states[1].t, drive, partition, chain, settings)
+    refreshed = _refreshed(refined, states[1], at_a, drive, chain, settings)
     assert refreshed.resolved == resolved and not np.any(refreshed.modes[:, resolved + GUARD_MODES:])
     on_resolved = mass_b @ phi_b[:, :resolved]
     resolved_part = on_resolved @ np.diag(2.0 * UNRESOLVED_DAMPING * squared_b[:resolved] * h / settings.cutoff) \
@@ -224,25 +239,17 @@ def test_refreshed_modes_reach_scipys_with_a_spring_drive():
     exact-frequency terms of scipy's modes there, Delta M_r to 1e-6 of its largest entry (the terms of the chain
     without its dampers, for which c has the closed form of the undamped mode)."""
     scenario = Scenario(load_config(CONFIG / "knuckle_boom_crane.yaml").with_rfe_count(12), "flexible")
-    motion, q0, h = scenario.motion, scenario.equilibrium.q, ONLINE_STEP
+    motion, h = scenario.motion, ONLINE_STEP
     chain = motion.dynamics.chain._replace(damping=np.zeros_like(motion.dynamics.chain.damping), damped=False)
     partition = motion.partition
     drive = motion.dynamics.drive.kernel_parameters(0.0)
     assert drive[1] > 0.0 and chain.drive_joint in partition.independent
-    stepper = MotionStepper(motion, 0.0, q0, np.zeros_like(q0), h)
-    states = []
-    for t in (1.0, 1.01):
-        stepper.advance_until(t)
-        states.append(stepper.state)
-    settings = stepper.integrator.settings
+    states, settings = _states(scenario, (1.0, 1.01))
     (mass_a, _, _), (mass_b, squared_b, phi_b) = (_scipy_modes(scenario, state.q) for state in states)
     resolved = int(np.sum(np.sqrt(squared_b) * h < settings.cutoff))
     assert resolved + GUARD_MODES < partition.independent.size
     at_a = modal_correction(mass_a, h, states[0].t, drive, partition, chain, settings)
-    T, S = forward_kinematics(states[1].q, chain.kinds, chain.axes, chain.origins)
-    B = motion.solve(states[1].t, states[1].q, np.zeros_like(q0)).velocity_map
-    refreshed = refreshed_correction(mass_b, S, world_pseudo_inertias(T, chain.body_joint, chain.body_H), B, at_a, h,
-                                     states[1].t, drive, partition, chain, settings)
+    refreshed = _refreshed(scenario, states[1], at_a, drive, chain, settings)
     assert refreshed.resolved == resolved and not np.any(refreshed.modes[:, resolved + GUARD_MODES:])
     expected = _exact_frequency_inertia(mass_b, squared_b, phi_b, resolved, h)
     assert np.abs(refreshed.inertia - expected).max() <= 1e-6 * np.abs(expected).max()
