@@ -46,7 +46,7 @@ from crane_reference.dynamics.modal_correction import (
     reduced_mass_matrix,
     refreshed_correction,
 )
-from crane_reference.dynamics.step import mass_at
+from crane_reference.dynamics.step import mass_at, refresh_inputs
 from crane_reference.model.config import load_config
 from crane_reference.motion.integration import REFRESH_INTERVAL, ExactFrequencyTrapezoidal
 from crane_reference.motion.simulation import MotionStepper, Scenario
@@ -186,10 +186,8 @@ def refresh(n_rfe: int, duration: float, repeat: int) -> None:
     for t in np.arange(1, round(duration / REFRESH_INTERVAL) + 1) * REFRESH_INTERVAL:
         stepper.advance_until(float(t))
         state, drive = stepper.state, motion.dynamics.drive.kernel_parameters(float(t))
-        T, S = forward_kinematics(state.q, chain.kinds, chain.axes, chain.origins)
-        Hw = world_pseudo_inertias(T, chain.body_joint, chain.body_H)
         B = state.solution.velocity_map
-        reduced_mass = reduced_mass_matrix(mass_at(S, Hw, chain), B, partition)
+        reduced_mass, S, Hw = refresh_inputs(state.q, B, partition, chain)
         previous, full = full, modal_correction(reduced_mass, h, float(t), drive, partition, chain, settings)
         if previous is None:
             iterated = full

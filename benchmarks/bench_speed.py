@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -40,7 +41,6 @@ from numba import njit
 
 from crane_reference.dynamics.evaluation import accelerations_at, evaluate
 from crane_reference.dynamics.inertia import world_pseudo_inertias
-from crane_reference.dynamics.kinematics import forward_kinematics
 from crane_reference.dynamics.modal_correction import (
     iteration_factor,
     modal_correction,
@@ -50,7 +50,7 @@ from crane_reference.dynamics.modal_correction import (
 )
 from crane_reference.dynamics.projection import project_positions
 from crane_reference.dynamics.runs import evaluated_rows, integration_run
-from crane_reference.dynamics.step import newton_residual
+from crane_reference.dynamics.step import newton_residual, refresh_inputs
 from crane_reference.dynamics.structures import Coefficients, StepSettings, StepStart
 from crane_reference.dynamics.terms import chain_terms, end_effector_jacobian, position_terms
 from crane_reference.model.config import load_config
@@ -262,18 +262,15 @@ def _refresh_arguments(scenario: Scenario, drive: np.ndarray, settings: StepSett
     chain, partition, states = motion.dynamics.chain, motion.partition, []
     for t in (1.0, 1.0 + REFRESH_INTERVAL):
         stepper.advance_until(t)
-        state = stepper.state
-        T, S = forward_kinematics(state.q, chain.kinds, chain.axes, chain.origins)
-        solution = motion.solve(state.t, state.q, state.qd)
-        B = solution.velocity_map
-        states.append((B.T @ solution.dynamics.M @ B, S, world_pseudo_inertias(T, chain.body_joint, chain.body_H), B))
+        B = stepper.state.solution.velocity_map
+        states.append((*refresh_inputs(stepper.state.q, B, partition, chain), B))
     old = modal_correction(states[0][0], ONLINE_STEP, 0.0, drive, partition, chain, settings)
     return (*states[1], old, drive, partition, chain, settings)
 
 
-def part_times(scenario: Scenario, repeat: int) -> dict[str, float]:
-    """The compiled cost [s] of each part of :data:`PART_NAMES` on the flexible ``scenario``, each timed in a
-    compiled loop of ``repeat`` calls (no Python call overhead), best of 5."""
+def part_calls(scenario: Scenario) -> list[tuple[str, Callable, tuple]]:
+    """Each part of :data:`PART_NAMES` on the flexible ``scenario`` as (name, its compiled loop, the loop's arguments
+    but the count of calls)."""
     motion = scenario.motion
     q, chain, partition = scenario.equilibrium.q, motion.dynamics.chain, motion.partition
     qd = np.full_like(q, 0.01)
@@ -285,21 +282,26 @@ def part_times(scenario: Scenario, repeat: int) -> dict[str, float]:
     B = acc.velocity_map
     reduced_mass = B.T @ acc.M @ B
     correction = modal_correction(reduced_mass, ONLINE_STEP, 0.0, drive, partition, chain, settings)
-    parts = (("position_terms", _repeat_position_terms, (q, chain)),
-             ("kinematics", _repeat_end_effector, (q, chain)),
-             ("projection", _repeat_projection, (off, k, motion.holonomic_dependent, chain)),
-             ("residual", _repeat_residual, (q, qd, acc.qdd[partition.integrated], k, drive, partition, chain)),
-             ("correction", _repeat_correction, (reduced_mass, drive, partition, chain, settings)),
-             ("refresh", _repeat_refresh, _refresh_arguments(scenario, drive, settings)),
-             ("tracking", _repeat_tracking, (reduced_mass, correction, drive, partition, chain)),
-             ("factor", _repeat_factor, (acc.M, acc.velocity_map, correction, drive, partition, chain)),
-             ("accelerations", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
-             ("evaluation", _repeat_evaluation, (q, qd, k, drive, partition, chain)),
-             ("read_row", _repeat_read_row,
-              (q[None], qd[None], acc.qdd[None], Coefficients(k.Q[None], k.g[None], k.c[None], k.order),
-               drive[None], partition, chain)))
+    return [("position_terms", _repeat_position_terms, (q, chain)),
+            ("kinematics", _repeat_end_effector, (q, chain)),
+            ("projection", _repeat_projection, (off, k, motion.holonomic_dependent, chain)),
+            ("residual", _repeat_residual, (q, qd, acc.qdd[partition.integrated], k, drive, partition, chain)),
+            ("correction", _repeat_correction, (reduced_mass, drive, partition, chain, settings)),
+            ("refresh", _repeat_refresh, _refresh_arguments(scenario, drive, settings)),
+            ("tracking", _repeat_tracking, (reduced_mass, correction, drive, partition, chain)),
+            ("factor", _repeat_factor, (acc.M, acc.velocity_map, correction, drive, partition, chain)),
+            ("accelerations", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
+            ("evaluation", _repeat_evaluation, (q, qd, k, drive, partition, chain)),
+            ("read_row", _repeat_read_row,
+             (q[None], qd[None], acc.qdd[None], Coefficients(k.Q[None], k.g[None], k.c[None], k.order),
+              drive[None], partition, chain))]
+
+
+def part_times(scenario: Scenario, repeat: int) -> dict[str, float]:
+    """The compiled cost [s] of each part of :data:`PART_NAMES` on the flexible ``scenario`` (:func:`part_calls`),
+    each timed in a compiled loop of ``repeat`` calls (no Python call overhead), best of 5."""
     times = {}
-    for name, function, arguments in parts:
+    for name, function, arguments in part_calls(scenario):
         function(*arguments, 10)
         timed = lambda f=function, a=arguments: f(*a, repeat)  # noqa: E731 (one compiled loop of repeat calls)
         times[name] = min(call_seconds(timed, 1, median=True) for _ in range(5)) / repeat

@@ -32,8 +32,6 @@ from scipy.linalg import eigh
 from scipy.signal import butter, sosfiltfilt
 from velocity_map import random_velocity_map
 
-from crane_reference.dynamics.inertia import world_pseudo_inertias
-from crane_reference.dynamics.kinematics import forward_kinematics
 from crane_reference.dynamics.modal_correction import (
     GUARD_MODES,
     iteration_factor,
@@ -43,7 +41,13 @@ from crane_reference.dynamics.modal_correction import (
     tracked_correction,
 )
 from crane_reference.dynamics.runs import integration_run
-from crane_reference.dynamics.step import add_modal_terms, first_iterate, predicted_accelerations, step_residual
+from crane_reference.dynamics.step import (
+    add_modal_terms,
+    first_iterate,
+    predicted_accelerations,
+    refresh_inputs,
+    step_residual,
+)
 from crane_reference.dynamics.structures import ACCOUNTS, ModalCorrection, Partition
 from crane_reference.model.config import load_config
 from crane_reference.motion.integration import CUTOFF, UNRESOLVED_DAMPING, ExactFrequencyTrapezoidal, stop_flag
@@ -137,11 +141,9 @@ def _refreshed(scenario, state, correction, drive, chain, settings):
     """``refreshed_correction`` of ``correction`` (the node's step) at ``state``: its reduced mass, frames and velocity
     map."""
     motion = scenario.motion
-    T, S = forward_kinematics(state.q, chain.kinds, chain.axes, chain.origins)
     B = motion.solve(state.t, state.q, np.zeros_like(state.q)).velocity_map
-    return refreshed_correction(_reduced_mass(scenario, state.q), S, world_pseudo_inertias(T, chain.body_joint,
-                                chain.body_H), B, correction, ONLINE_STEP, state.t, drive, motion.partition, chain,
-                                settings)
+    return refreshed_correction(*refresh_inputs(state.q, B, motion.partition, chain), B, correction, ONLINE_STEP,
+                                state.t, drive, motion.partition, chain, settings)
 
 
 def _exact_frequency_inertia(mass, omega_squared, phi, resolved, h):

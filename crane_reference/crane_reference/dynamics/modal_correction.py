@@ -191,8 +191,8 @@ def refreshed_correction(reduced_mass, S, Hw, B, correction: ModalCorrection, h,
     :data:`REFRESH_SHIFT` omega_c^2), and X = the Rayleigh-Ritz modes of the pencil (K_r, M_r) on the span of Y
     (those of (Y^T K_r Y, Y^T M_r Y)).  Each iteration shrinks a mode's error by (omega^2 + s) / (omega_g^2 + s),
     omega_g the lowest mode beyond the iterated ones: the shift near the cutoff amplifies the resolved modes alike,
-    and keeps a guard mode's direction (with s = 0 a guard mode of omega^2 = 1e9 is lost under the resolved ones'
-    round-off).  (K_r + s M_r)^-1 = s^-1 (B^T (M + K / s) B)^-1 by the articulated-body solve (K with the drive's
+    and keeps a guard mode's direction (with s = 0 a guard mode far above the cutoff is lost under the resolved
+    ones' round-off).  (K_r + s M_r)^-1 = s^-1 (B^T (M + K / s) B)^-1 by the articulated-body solve (K with the drive's
     spring where K_r holds it; :func:`~crane_reference.dynamics.articulated.reduced_solve`), O(n) per mode.  The
     iteration stops when the residual ||K_r phi - omega^2 M_r phi|| / ((omega^2 + s) ||M_r phi||) of every resolved
     mode and of the lowest guard is at most :data:`REFRESH_TOLERANCE`.  The Rayleigh-Ritz step is done as in
@@ -312,11 +312,12 @@ def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, part
 
 
 @njit(cache=True, nogil=True)
-def _ritz_modes(Y, on_Y, springs, smallest_pivot):
+def _ritz_modes(Y, on_Y, springs, smallest_squared_pivot):
     """The Rayleigh-Ritz step on the span of Y's columns (on_Y = M_r Y and springs = K_r Y; the three scaled in place
     so that Y's columns have M_r-norm 1): Y^T M_r Y = L L^T and the modes of L^-1 Y^T K_r Y L^-T by Jacobi rotations
     (nearly diagonal when Y is near the modes).  (True, omega^2 ascending, Phi = Y L^-T W, M_r Phi, K_r Phi), or False
-    first when L has a squared pivot not above ``smallest_pivot`` (the span degenerates; 0: not positive)."""
+    first when L has a squared pivot not above ``smallest_squared_pivot`` (the span degenerates; 0: not
+    positive)."""
     n = Y.shape[0]
     for m in range(Y.shape[1]):
         norm_squared = 0.0
@@ -328,7 +329,7 @@ def _ritz_modes(Y, on_Y, springs, smallest_pivot):
             on_Y[i, m] *= scale
             springs[i, m] *= scale
     L, positive = cholesky_or_stop(_symmetric(Y.T @ on_Y))
-    if not positive or not np.min(np.diag(L)) ** 2 > smallest_pivot:
+    if not positive or not np.min(np.diag(L)) ** 2 > smallest_squared_pivot:
         return False, np.empty(0), Y, on_Y, springs
     inverse = lower_inverse(L)
     omega_squared, W = jacobi_eigh(_symmetric(inverse @ (Y.T @ springs) @ inverse.T))

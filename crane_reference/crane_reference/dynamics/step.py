@@ -31,6 +31,7 @@ from .structures import (
     ModalCorrection,
     Partition,
     Projection,
+    RefreshInputs,
     StepEnd,
     StepSettings,
     StepStart,
@@ -206,6 +207,15 @@ def mass_at(S, Hw, chain: ChainData):
 
 
 @njit(cache=True, nogil=True)
+def refresh_inputs(q, B, partition: Partition, chain: ChainData):
+    """What a refresh of the modal correction reads at q with the velocity map B (:class:`RefreshInputs`: M_r =
+    B^T M B, the twists and the world pseudo-inertias)."""
+    T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
+    Hw = world_pseudo_inertias(T, chain.body_joint, chain.body_H)
+    return RefreshInputs(reduced_mass_matrix(mass_at(S, Hw, chain), B, partition), S, Hw)
+
+
+@njit(cache=True, nogil=True)
 def step_residual(a1, q0, qd0, a0, correction: ModalCorrection, h, k: Coefficients, drive, partition: Partition,
                   chain: ChainData, settings: StepSettings):
     """The residual of the step's equation (:func:`_step_residual_at`) as a function of the accelerations a1 of
@@ -256,16 +266,14 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
     x0, v0, a0 = q0[integrated], qd0[integrated], qdd0[integrated].copy()
     new_step = abs(h - correction.step) > 1e-9 * h
     if new_step or t0 - correction.time >= settings.refresh_interval - 0.5 * h:
-        T0, S0 = forward_kinematics(q0, chain.kinds, chain.axes, chain.origins)
-        Hw0 = world_pseudo_inertias(T0, chain.body_joint, chain.body_H)
-        reduced_mass = reduced_mass_matrix(mass_at(S0, Hw0, chain), B0, partition)
+        at_start = refresh_inputs(q0, B0, partition, chain)
         if settings.subspace_refresh and not new_step:
-            fresh = refreshed_correction(reduced_mass, S0, Hw0, B0, correction, h, t0, drive, partition, chain,
-                                         settings)
+            fresh = refreshed_correction(at_start.reduced_mass, at_start.S, at_start.Hw, B0, correction, h, t0, drive,
+                                         partition, chain, settings)
         else:
-            fresh = modal_correction(reduced_mass, h, t0, drive, partition, chain, settings)
+            fresh = modal_correction(at_start.reduced_mass, h, t0, drive, partition, chain, settings)
         if new_step and not servo:
-            a0[:n_ic] = converted_accelerations(reduced_mass, a0[:n_ic], v0[:n_ic], correction, fresh)
+            a0[:n_ic] = converted_accelerations(at_start.reduced_mass, a0[:n_ic], v0[:n_ic], correction, fresh)
         correction = fresh
     if new_step:  # the earlier accelerations are of another equation
         earlier = np.full(earlier.shape, np.nan)

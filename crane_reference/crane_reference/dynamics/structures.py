@@ -148,6 +148,15 @@ class Projection(NamedTuple):
     solved: bool
 
 
+class RefreshInputs(NamedTuple):
+    """What a refresh of the modal correction reads at a configuration q with velocity map B: the reduced mass
+    M_r = B^T M B, the twists S and the world pseudo-inertias Hw."""
+
+    reduced_mass: np.ndarray
+    S: np.ndarray
+    Hw: np.ndarray
+
+
 class TrialState(NamedTuple):
     """A state the integrator tries: q (on the position constraints, or with q_hd as predicted), qd with
     qd_dc from the velocity constraints, the frames T and twists S, E's position and Jacobian, and whether
