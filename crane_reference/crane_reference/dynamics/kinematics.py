@@ -43,8 +43,19 @@ def forward_kinematics(q: np.ndarray, kinds: np.ndarray, axes: np.ndarray, origi
     Elements are addressed by index throughout (no array views: each would cost a reference count).
     """
     n = q.size
-    T = np.empty((n, 4, 4))
-    S = np.zeros((n, 4, 4))
+    T, S = np.empty((n, 4, 4)), np.zeros((n, 4, 4))
+    forward_kinematics_into(q, kinds, axes, origins, T, S)
+    return T, S
+
+
+@njit(cache=True)
+def forward_kinematics_into(q: np.ndarray, kinds: np.ndarray, axes: np.ndarray, origins: np.ndarray, T: np.ndarray,
+                            S: np.ndarray):
+    """:func:`forward_kinematics` into T and S (n, 4, 4), for a caller that computes them again and again (no
+    allocation).  It writes every entry of T and the entries of S a joint of its kind sets; the others stay as
+    they are: S must be zero there, as :func:`forward_kinematics` makes it or a call before for the same chain
+    left it."""
+    n = q.size
     for k in range(n):
         # T[k] = T[k - 1] origin_k (the frame before the joint; T[-1] = I)
         if k == 0:
@@ -84,7 +95,6 @@ def forward_kinematics(q: np.ndarray, kinds: np.ndarray, axes: np.ndarray, origi
             fi, fj = T[k, r, i], T[k, r, j]
             T[k, r, i] = c * fi + s * fj
             T[k, r, j] = c * fj - s * fi
-    return T, S
 
 
 @njit(cache=True)
@@ -95,7 +105,7 @@ def velocity_terms(qd: np.ndarray, S: np.ndarray):
     [X1, X2] = (w1 x w2, w1 x v2 - w2 x v1), and V V = [[w^ w^, w x v], [0, 0]].
     """
     n = qd.size
-    B = np.zeros((n, 4, 4))
+    B = np.empty((n, 4, 4))
     wx = wy = wz = vx = vy = vz = 0.0
     awx = awy = awz = avx = avy = avz = 0.0
     for k in range(n):
@@ -123,6 +133,7 @@ def velocity_terms(qd: np.ndarray, S: np.ndarray):
         B[k, 0, 3] = avx + wy * vz - wz * vy
         B[k, 1, 3] = avy + wz * vx - wx * vz
         B[k, 2, 3] = avz + wx * vy - wy * vx
+        B[k, 3, 0] = B[k, 3, 1] = B[k, 3, 2] = B[k, 3, 3] = 0.0
     return B
 
 
@@ -130,22 +141,34 @@ def velocity_terms(qd: np.ndarray, S: np.ndarray):
 def point_position(F: np.ndarray, point: np.ndarray) -> np.ndarray:
     """World position F [point; 1] of a point given in the frame F (4x4)."""
     p = np.empty(3)
+    point_position_into(F, point, p)
+    return p
+
+
+@njit(cache=True)
+def point_position_into(F: np.ndarray, point: np.ndarray, p: np.ndarray):
+    """:func:`point_position` into p (3,)."""
     for r in range(3):
         p[r] = F[r, 0] * point[0] + F[r, 1] * point[1] + F[r, 2] * point[2] + F[r, 3]
-    return p
 
 
 @njit(cache=True)
 def point_jacobian(T: np.ndarray, S: np.ndarray, joint: int, point: np.ndarray):
     """World position p of a point fixed after ``joint`` and its Jacobian C = J [S_1 p ... S_n p] (3, n)
     (the paper's C = J [T_1 r ... T_n r])."""
-    n = S.shape[0]
-    p = point_position(T[joint], point)
-    C = np.zeros((3, n))
+    p, C = np.empty(3), np.zeros((3, S.shape[0]))
+    point_jacobian_into(T, S, joint, point, p, C)
+    return p, C
+
+
+@njit(cache=True)
+def point_jacobian_into(T: np.ndarray, S: np.ndarray, joint: int, point: np.ndarray, p: np.ndarray, C: np.ndarray):
+    """:func:`point_jacobian` into p (3,) and C (3, n) (no allocation): it writes C's columns up to ``joint``; the
+    others must be zero, as :func:`point_jacobian` makes them or a call before for the same joint left them."""
+    point_position_into(T[joint], point, p)
     for i in range(joint + 1):
         for r in range(3):
             C[r, i] = S[i, r, 0] * p[0] + S[i, r, 1] * p[1] + S[i, r, 2] * p[2] + S[i, r, 3]
-    return p, C
 
 
 @njit(cache=True)

@@ -11,7 +11,7 @@ from numba import njit
 @njit(cache=True, nogil=True)
 def matvec(A, x):
     """A x for a 2-D A (loops: no BLAS call)."""
-    out = np.zeros(A.shape[0])
+    out = np.empty(A.shape[0])
     for i in range(A.shape[0]):
         total = 0.0
         for j in range(A.shape[1]):
@@ -24,7 +24,7 @@ def matvec(A, x):
 def matmul(A, B, columns=None):
     """A B (or A B[:, columns]) for small 2-D arrays (loops: no BLAS call, no copy of the columns)."""
     count = B.shape[1] if columns is None else columns.size
-    out = np.zeros((A.shape[0], count))
+    out = np.empty((A.shape[0], count))
     for j in range(count):
         column = j if columns is None else columns[j]
         for i in range(A.shape[0]):

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .kinematics import forward_kinematics, point_jacobian
+from .kinematics import forward_kinematics_into, point_jacobian_into
 from .linalg import largest_magnitude, matmul, matvec, smallest_singular_value, solve_small_in_place
 from .quadrics import holonomic_values, velocity_residual
 from .structures import ChainData, Coefficients, Projection
@@ -65,9 +65,11 @@ def project_positions(q, k: Coefficients, holonomic_dependent, chain: ChainData,
     at the returned q itself, or with ``exact_frames`` False those before the last correction (off by at most
     ``tolerance``, one forward kinematics less: enough for the Newton iterates of a step)."""
     q = q.copy()
+    n = q.size
+    T, S, p, C = np.empty((n, 4, 4)), np.zeros((n, 4, 4)), np.empty(3), np.zeros((3, n))  # filled at each iterate
     for _ in range(max_iterations):
-        T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
-        p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
+        forward_kinematics_into(q, chain.kinds, chain.axes, chain.origins, T, S)
+        point_jacobian_into(T, S, chain.ee_joint, chain.ee_point, p, C)
         if holonomic_dependent.size == 0:
             return Projection(q, T, S, p, C, True)
         step, grads = holonomic_values(p, k)  # the residual, solved in place for the Newton step
@@ -79,8 +81,8 @@ def project_positions(q, k: Coefficients, holonomic_dependent, chain: ChainData,
             q[holonomic_dependent[i]] -= step[i]
         if size <= tolerance:
             if exact_frames:
-                T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
-                p, C = point_jacobian(T, S, chain.ee_joint, chain.ee_point)
+                forward_kinematics_into(q, chain.kinds, chain.axes, chain.origins, T, S)
+                point_jacobian_into(T, S, chain.ee_joint, chain.ee_point, p, C)
             return Projection(q, T, S, p, C, True)
     return Projection(q, T, S, p, C, False)
 

@@ -29,6 +29,22 @@ from .linalg import matvec
 from .structures import ChainData, ChainTerms
 
 
+@njit(cache=True, nogil=True)
+def joint_matrix_product(X, x, chain: ChainData):
+    """X x for the chain's stiffness K or damping D (n, n) in O(n): dense on the root block of the first
+    ``chain.root_size`` joints, diagonal beyond it (no other joint is coupled, :class:`ChainData`)."""
+    n, root_size = x.size, chain.root_size
+    out = np.empty(n)
+    for i in range(root_size):
+        total = 0.0
+        for j in range(root_size):
+            total += X[i, j] * x[j]
+        out[i] = total
+    for i in range(root_size, n):
+        out[i] = X[i, i] * x[i]
+    return out
+
+
 @njit(cache=True)
 def position_terms(q, chain: ChainData):
     """What depends on q alone: frames T, twists S and the terms of :func:`frame_terms`."""
@@ -109,9 +125,9 @@ def generalized_forces(q, qd, gravity, chain: ChainData, drive):
     """Q = Q_g - K q - D qd + t_dr e_psi2 + tau_a with the gravity forces Q_g (the sign convention above) and
     the actuators' generalized forces tau_a = ``drive[4:]`` if ``drive`` carries them (see
     :data:`DRIVE_PARAMETERS`)."""
-    forces = gravity - matvec(chain.stiffness, q)
+    forces = gravity - joint_matrix_product(chain.stiffness, q, chain)
     if chain.damped:
-        forces -= matvec(chain.damping, qd)
+        forces -= joint_matrix_product(chain.damping, qd, chain)
     forces[chain.drive_joint] += drive_torque(drive, q[chain.drive_joint])
     if drive.size > DRIVE_PARAMETERS:
         forces += drive[DRIVE_PARAMETERS:]
@@ -136,6 +152,6 @@ def energy_accounts(q, qd, M, gravity_potential, chain: ChainData, drive):
     if drive.size > DRIVE_PARAMETERS:
         power += drive[DRIVE_PARAMETERS:] @ qd
     return np.array([0.5 * (qd @ matvec(M, qd)),
-                     gravity_potential + 0.5 * (q @ matvec(K, q)) + 0.5 * drive[1] * stretch**2,
+                     gravity_potential + 0.5 * (q @ joint_matrix_product(K, q, chain)) + 0.5 * drive[1] * stretch**2,
                      drive_torque(drive, q[j]), power,
-                     -(qd @ matvec(D, qd))])
+                     -(qd @ joint_matrix_product(D, qd, chain))])
