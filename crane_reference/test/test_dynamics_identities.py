@@ -30,7 +30,7 @@ from scipy.integrate import solve_ivp
 from crane_reference.dynamics.chain_dynamics import CraneDynamics
 from crane_reference.dynamics.inertia import world_pseudo_inertias
 from crane_reference.dynamics.kinematics import forward_kinematics, velocity_terms
-from crane_reference.dynamics.terms import inverse_dynamics, joint_matrix_product
+from crane_reference.dynamics.terms import add_joint_matrix_product, inverse_dynamics
 from crane_reference.model.chain import VARIANTS, ChainModel, build_model
 from crane_reference.model.config import load_config
 from crane_reference.model.parameters import Damping
@@ -85,8 +85,9 @@ def test_mass_matrix_symmetric_positive_definite(models, variant):
 
 @pytest.mark.parametrize("name", EXAMPLES)
 def test_joint_matrix_products_equal_the_dense_ones(name):
-    """K x and D x in O(n) (dense on the root block, diagonal beyond) against numpy's dense products, on each
-    packaged crane with Rayleigh damping on its supports and boom and a damper on every joint."""
+    """1 - 2.5 K x and 1 - 2.5 D x, added in place in O(n) (dense on the root block, diagonal beyond), against numpy's
+    dense products, on each packaged crane with Rayleigh damping on its supports and boom and a damper on every
+    joint."""
     model = build_model(load_config(CONFIG / name), "flexible")
     D = 1e-3 * model.support_stiffness + 1e-4 * model.beam_stiffness
     dynamics = CraneDynamics(dataclasses.replace(model, damping=D), NO_DRIVE,
@@ -95,8 +96,10 @@ def test_joint_matrix_products_equal_the_dense_ones(name):
     assert chain.root_size < model.dof
     x = np.random.default_rng(SEED + 5).normal(size=model.dof)
     for X in (chain.stiffness, chain.damping):
-        dense = X @ x
-        assert np.max(np.abs(joint_matrix_product(X, x, chain) - dense)) <= 1e-13 * np.max(np.abs(dense))
+        dense = 1.0 - 2.5 * (X @ x)
+        ours = np.ones(model.dof)
+        add_joint_matrix_product(ours, X, x, -2.5, chain)
+        assert np.max(np.abs(ours - dense)) <= 1e-13 * np.max(np.abs(dense))
 
 
 @pytest.mark.parametrize("variant", VARIANTS)

@@ -24,7 +24,14 @@ from .linalg import (
 from .projection import constraint_map
 from .quadrics import acceleration_terms, constraint_values
 from .structures import Accelerations, ChainData, Coefficients, Evaluation, Partition, StateTerms
-from .terms import energy_accounts, frame_terms, generalized_forces, inverse_dynamics, velocity_products
+from .terms import (
+    add_applied_forces,
+    energy_accounts,
+    frame_terms,
+    generalized_forces,
+    inverse_dynamics,
+    velocity_products,
+)
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -146,8 +153,9 @@ def forces_jumped(s: Accelerations, q, qd, k: Coefficients, drive, partition: Pa
 def imbalance_from_terms(q, qd, qdd, S, Hw, velocity_term, chain: ChainData, drive):
     """M qdd + h - Q at (q, qd) by O(n) inverse dynamics (no M), from the twists S, world pseudo-inertias Hw
     and velocity terms there: inverse dynamics with gravity, less the other generalized forces."""
-    return inverse_dynamics(S, Hw, velocity_term, qdd, chain) - generalized_forces(q, qd, np.zeros(q.size), chain,
-                                                                                   drive)
+    imbalance = inverse_dynamics(S, Hw, velocity_term, qdd, chain)
+    add_applied_forces(imbalance, q, qd, chain, drive, -1.0)
+    return imbalance
 
 
 @njit(cache=True, nogil=True)

@@ -33,8 +33,8 @@ from .structures import (
 @njit(cache=True, nogil=True)
 def dense_iteration_factor(M, B, h, correction: ModalCorrection, drive, partition: Partition, chain: ChainData):
     """J formed and factored by :func:`~crane_reference.dynamics.modal_correction.iteration_factor`."""
-    none, empty = np.empty((0, 0)), np.empty(0)
-    articulated = ArticulatedFactor(np.empty((0, 6)), np.empty((0, 6)), empty, none)
+    none, empty, no_joints = np.empty((0, 0)), np.empty(0), np.empty((0, 6))
+    articulated = ArticulatedFactor(no_joints, no_joints, empty, none)
     return IterationFactor(np.ascontiguousarray(iteration_factor(M, B, h, correction, drive, partition, chain)),
                            ConstrainedFactor(articulated, none, none, none), none, none, none, empty)
 

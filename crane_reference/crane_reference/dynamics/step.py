@@ -183,9 +183,14 @@ def predicted_accelerations(a0, earlier):
     2 a0 - a_-1, with one known; a0 with none."""
     if np.isnan(earlier[0, 0]):
         return a0.copy()
+    out = np.empty(a0.size)
     if np.isnan(earlier[1, 0]):
-        return 2.0 * a0 - earlier[0]
-    return 3.0 * a0 - 3.0 * earlier[0] + earlier[1]
+        for i in range(a0.size):
+            out[i] = 2.0 * a0[i] - earlier[0, i]
+        return out
+    for i in range(a0.size):
+        out[i] = 3.0 * a0[i] - 3.0 * earlier[0, i] + earlier[1, i]
+    return out
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -196,8 +201,11 @@ def first_iterate(q0, qd0, qdd0, a0, a1, h, k: Coefficients, partition: Partitio
     starting from the Taylor polynomial q0 + h qd0 + h^2/2 qdd0 (off by O(h^3): one correction reaches the
     tolerance)."""
     integrated = partition.integrated
-    return _state_at(a1, q0[integrated], qd0[integrated], a0, q0 + h * qd0 + (0.5 * h * h) * qdd0, q0.size, h, k,
-                     partition, chain, settings, PROJECTED)
+    taylor = np.empty(q0.size)
+    for i in range(q0.size):
+        taylor[i] = q0[i] + h * qd0[i] + (0.5 * h * h) * qdd0[i]
+    return _state_at(a1, q0[integrated], qd0[integrated], a0, taylor, q0.size, h, k, partition, chain, settings,
+                     PROJECTED)
 
 
 @njit(cache=True, nogil=True)
@@ -263,7 +271,7 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
     t0, q0, qd0, qdd0, B0, earlier, correction = start
     independent, integrated, servo = partition.independent, partition.integrated, partition.servo
     n_ic = independent.size
-    x0, v0, a0 = q0[integrated], qd0[integrated], qdd0[integrated].copy()
+    x0, v0, a0 = q0[integrated], qd0[integrated], qdd0[integrated]  # copies (integer indices)
     new_step = abs(h - correction.step) > 1e-9 * h
     if new_step or t0 - correction.time >= settings.refresh_interval - 0.5 * h:
         at_start = refresh_inputs(q0, B0, partition, chain)

@@ -30,19 +30,17 @@ from .structures import ChainData, ChainTerms
 
 
 @njit(cache=True, nogil=True)
-def joint_matrix_product(X, x, chain: ChainData):
-    """X x for the chain's stiffness K or damping D (n, n) in O(n): dense on the root block of the first
-    ``chain.root_size`` joints, diagonal beyond it (no other joint is coupled, :class:`ChainData`)."""
-    n, root_size = x.size, chain.root_size
-    out = np.empty(n)
+def add_joint_matrix_product(out, X, x, weight, chain: ChainData):
+    """out += weight X x for the chain's stiffness K or damping D (n, n), in place and O(n): dense on the root block
+    of the first ``chain.root_size`` joints, diagonal beyond it (no other joint is coupled, :class:`ChainData`)."""
+    root_size = chain.root_size
     for i in range(root_size):
         total = 0.0
         for j in range(root_size):
             total += X[i, j] * x[j]
-        out[i] = total
-    for i in range(root_size, n):
-        out[i] = X[i, i] * x[i]
-    return out
+        out[i] += weight * total
+    for i in range(root_size, x.size):
+        out[i] += weight * X[i, i] * x[i]
 
 
 @njit(cache=True)
@@ -125,13 +123,21 @@ def generalized_forces(q, qd, gravity, chain: ChainData, drive):
     """Q = Q_g - K q - D qd + t_dr e_psi2 + tau_a with the gravity forces Q_g (the sign convention above) and
     the actuators' generalized forces tau_a = ``drive[4:]`` if ``drive`` carries them (see
     :data:`DRIVE_PARAMETERS`)."""
-    forces = gravity - joint_matrix_product(chain.stiffness, q, chain)
-    if chain.damped:
-        forces -= joint_matrix_product(chain.damping, qd, chain)
-    forces[chain.drive_joint] += drive_torque(drive, q[chain.drive_joint])
-    if drive.size > DRIVE_PARAMETERS:
-        forces += drive[DRIVE_PARAMETERS:]
+    forces = gravity.copy()
+    add_applied_forces(forces, q, qd, chain, drive, 1.0)
     return forces
+
+
+@njit(cache=True, inline='always')
+def add_applied_forces(out, q, qd, chain: ChainData, drive, sign):
+    """out += sign (-K q - D qd + t_dr e_psi2 + tau_a), in place: Q without its gravity forces
+    (:func:`generalized_forces`)."""
+    add_joint_matrix_product(out, chain.stiffness, q, -sign, chain)
+    if chain.damped:
+        add_joint_matrix_product(out, chain.damping, qd, -sign, chain)
+    out[chain.drive_joint] += sign * drive_torque(drive, q[chain.drive_joint])
+    for i in range(drive.size - DRIVE_PARAMETERS):
+        out[i] += sign * drive[DRIVE_PARAMETERS + i]
 
 
 @njit(cache=True, inline='always')
@@ -146,12 +152,14 @@ def energy_accounts(q, qd, M, gravity_potential, chain: ChainData, drive):
 
     Returns the array (E_k, E_p, t_dr, P_dr, P_D)."""
     j = chain.drive_joint
-    K, D = chain.stiffness, chain.damping
+    springs, dampers = np.zeros(q.size), np.zeros(q.size)  # K q and D qd
+    add_joint_matrix_product(springs, chain.stiffness, q, 1.0, chain)
+    add_joint_matrix_product(dampers, chain.damping, qd, 1.0, chain)
     stretch = drive[2] - q[j]
     power = drive[0] * qd[j] + drive[1] * stretch * drive[3]
     if drive.size > DRIVE_PARAMETERS:
         power += drive[DRIVE_PARAMETERS:] @ qd
     return np.array([0.5 * (qd @ matvec(M, qd)),
-                     gravity_potential + 0.5 * (q @ joint_matrix_product(K, q, chain)) + 0.5 * drive[1] * stretch**2,
+                     gravity_potential + 0.5 * (q @ springs) + 0.5 * drive[1] * stretch**2,
                      drive_torque(drive, q[j]), power,
-                     -(qd @ joint_matrix_product(D, qd, chain))])
+                     -(qd @ dampers)])
