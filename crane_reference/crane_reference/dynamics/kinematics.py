@@ -36,12 +36,8 @@ def _is_identity(origins, k):
 
 @njit(cache=True)
 def forward_kinematics(q: np.ndarray, kinds: np.ndarray, axes: np.ndarray, origins: np.ndarray):
-    """World transforms T_k (n,4,4) of the frames after each joint and the joint twists S_k (n,4,4).
-
-    The joint motion is applied column-wise (a rotation about local axis a mixes the two other
-    columns; a translation adds q times column a to the position), and identity offsets are skipped.
-    Elements are addressed by index throughout (no array views: each would cost a reference count).
-    """
+    """World transforms T_k (n,4,4) of the frames after each joint and the joint twists S_k (n,4,4)
+    (:func:`forward_kinematics_into` new arrays)."""
     n = q.size
     T, S = np.empty((n, 4, 4)), np.zeros((n, 4, 4))
     forward_kinematics_into(q, kinds, axes, origins, T, S)
@@ -54,7 +50,11 @@ def forward_kinematics_into(q: np.ndarray, kinds: np.ndarray, axes: np.ndarray, 
     """:func:`forward_kinematics` into T and S (n, 4, 4), for a caller that computes them again and again (no
     allocation).  It writes every entry of T and the entries of S a joint of its kind sets; the others stay as
     they are: S must be zero there, as :func:`forward_kinematics` makes it or a call before for the same chain
-    left it."""
+    left it.
+
+    The joint motion is applied column-wise (a rotation about local axis a mixes the two other
+    columns; a translation adds q times column a to the position), and identity offsets are skipped.
+    Elements are addressed by index throughout (no array views: each would cost a reference count)."""
     n = q.size
     for k in range(n):
         # T[k] = T[k - 1] origin_k (the frame before the joint; T[-1] = I)
