@@ -23,8 +23,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .factors import ArticulatedFactor, ConstrainedFactor
 from .linalg import cholesky, cholesky_solve_columns
-from .structures import ArticulatedFactor, ChainData, ConstrainedFactor, Partition
+from .structures import ChainData, Partition
 
 
 @njit(cache=True, nogil=True, inline='always')

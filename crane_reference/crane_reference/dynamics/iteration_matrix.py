@@ -18,16 +18,10 @@ import numpy as np
 from numba import njit
 
 from .articulated import constrained_factor, constraint_rows, reduced_solve
+from .factors import ArticulatedFactor, ConstrainedFactor, IterationFactor
 from .linalg import cholesky_solve, matvec
 from .modal_correction import iteration_factor, reduced_drive_spring
-from .structures import (
-    ArticulatedFactor,
-    ChainData,
-    ConstrainedFactor,
-    IterationFactor,
-    ModalCorrection,
-    Partition,
-)
+from .structures import ChainData, ModalCorrection, Partition
 
 
 @njit(cache=True, nogil=True)
