@@ -78,7 +78,7 @@ def publish(server: ReferenceServer, start_ns: int, seconds: float) -> list:
         while server.schedule.made_k <= server.schedule.next_k:
             assert time.monotonic() < deadline, "no frame for the next sample"
             time.sleep(0.001)
-        out += server.due(start_ns + i * PERIOD).outgoing
+        out += server.due(lambda now_ns=start_ns + i * PERIOD: now_ns).outgoing
     return out
 
 
@@ -96,7 +96,31 @@ def test_served_samples_are_the_stream_at_consecutive_stamps(server: ReferenceSe
     assert all(k % 10 == 0 for k in previews)  # may pass theirs, the cadence stays
     status = server.status(start + 150 * PERIOD)
     assert status.counters["held_late"] == 0 and status.achieved_rate == pytest.approx(RATE, rel=0.02)
-    assert server.due(start + 150 * PERIOD - 1).next_stamp_ns == start + 150 * PERIOD
+    assert server.due(lambda: start + 150 * PERIOD - 1).next_stamp_ns == start + 150 * PERIOD
+
+
+def test_a_clock_reset_seen_before_it_is_reported_restarts_the_stamps_announced(server: ReferenceServer) -> None:
+    """ROS time goes back 120 s (a looped bag).  The publisher reads the new time before rclpy's jump callback
+    reports it (nothing is due: the clock is behind); once reported, the status announces the restart (not a
+    clock still behind), and publishing goes on sample by sample from the new time, counted as one reset and no
+    leap."""
+    start = 5 * NS
+    server.begin(start)
+    before = publish(server, start, 0.5)
+    back = start + len(before) * PERIOD - 120 * NS
+    assert server.due(lambda: back).outgoing == []
+    assert server.status(back).clock_behind == pytest.approx(120.0, abs=0.02)
+    server.clock_went_back(back)
+    health = serving_health(server.status(back), 0)
+    assert health.level == Level.WARN and "the stamps restart" in health.message, health.message
+    after = publish(server, back, 0.3)
+    assert [o.k for o in after] == list(range(len(before), len(before) + 30))
+    assert [o.stamp_ns for o in after] == [back + i * PERIOD for i in range(30)]
+    truth = ReferenceStream(load_config(), "rigid", STEP, blend_time=0.5, ramp_time=0.3)
+    truth.compute(0.8)
+    np.testing.assert_array_equal([sample(o).q for o in after], [truth.sample(o.k / RATE).q for o in after])
+    counters = server.status(back + 30 * PERIOD).counters
+    assert counters["clock_resets"] == 1 and counters["stamp_leaps"] == 0
 
 
 def test_a_command_takes_effect_at_the_last_sample_within_the_lead(server: ReferenceServer) -> None:
@@ -146,7 +170,7 @@ class Simulation:
         """Publish what is due, a period at a time, until the clock reads ``end_ns``."""
         while self.now < end_ns:
             self.now = min(self.now + PERIOD, end_ns)
-            self.out += self.server.due(self.now).outgoing
+            self.out += self.server.due(lambda: self.now).outgoing
 
     def run_until(self, seconds: float) -> None:
         """Serve until ``seconds`` after publishing began."""

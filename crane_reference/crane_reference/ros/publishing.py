@@ -206,11 +206,11 @@ class SamplePublisher:
             quiet, send = self._quiet, self.send
             with real_time_switching():
                 while not quiet.is_set():
-                    now, read_at = clock(), time.monotonic_ns()
-                    due = server.due(now)
+                    read_at = time.monotonic_ns()
+                    due = server.due(clock)
                     for outgoing in due.outgoing:
                         send(outgoing)
-                    left = due.next_stamp_ns - now - (time.monotonic_ns() - read_at)
+                    left = due.next_stamp_ns - due.now_ns - (time.monotonic_ns() - read_at)
                     if left > SLEEP_LIMIT:  # long (a slow rate, a stalled or reset clock): stopping wakes it
                         quiet.wait(min(left / NANOSECONDS, MAX_WAIT))
                     elif left > 0:  # within a period at 50 Hz or faster: one system call (an Event's wait takes locks)

@@ -44,11 +44,12 @@ class Outgoing(NamedTuple):
 
 
 class Due(NamedTuple):
-    """What :meth:`~.server.ReferenceServer.due` hands the publisher: the samples to publish now, oldest first, and
-    the stamp [ns] of the next one (None while not publishing)."""
+    """What :meth:`~.server.ReferenceServer.due` hands the publisher: the samples to publish now, oldest first, the
+    stamp [ns] of the next one (None while not publishing) and the clock reading they are due by [ns]."""
 
     outgoing: list[Outgoing]
     next_stamp_ns: int | None
+    now_ns: int
 
 
 class Published(NamedTuple):

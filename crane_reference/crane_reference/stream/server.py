@@ -161,18 +161,20 @@ class ReferenceServer:
         with self._lock:
             self._stamps.end()
 
-    def due(self, now_ns: int) -> Due:
-        """Every sample due by the clock reading ``now_ns`` [ns] (normally one), stamped, oldest first, and the
-        stamp of the next one."""
+    def due(self, read_clock: Callable[[], int]) -> Due:
+        """Every sample due by the publisher's clock (``read_clock()`` [ns], read under the server's lock, so that
+        no reading taken before a jump back is used after :meth:`clock_went_back` restarted the stamps: it would
+        look like a leap forward), normally one, stamped, oldest first, and the stamp of the next one."""
         with self._lock:
+            now_ns = read_clock()
             if not self._stamps.publishing:
-                return Due([], None)
+                return Due([], None, now_ns)
             out = [Outgoing(*sent) for sent in self._stamps.due(now_ns, self.schedule)]
             if self._worker.wants_frames():
                 self._lock.notify()
             if self._milestones:
                 self._pass_milestones(out)
-            return Due(out, self._stamps.stamp_ns(self.schedule.next_k))
+            return Due(out, self._stamps.stamp_ns(self.schedule.next_k), now_ns)
 
     def _pass_milestones(self, out: list[Outgoing]) -> None:
         """Stamp the milestones that ``out`` reaches (the server's lock held)."""
