@@ -216,10 +216,10 @@ def _repeat_refresh(reduced_mass, S, Hw, B, correction, drive, partition, chain,
 
 
 @njit
-def _repeat_tracking(reduced_mass, correction, drive, partition, chain, n):
+def _repeat_tracking(reduced_mass, correction, drive, partition, chain, settings, n):
     total = 0.0
     for _ in range(n):
-        total += tracked_correction(reduced_mass, correction, 0.0, drive, partition, chain).inertia[0, 0]
+        total += tracked_correction(reduced_mass, correction, 0.0, drive, partition, chain, settings).inertia[0, 0]
     return total
 
 
@@ -288,7 +288,7 @@ def part_calls(scenario: Scenario) -> list[tuple[str, Callable, tuple]]:
             ("residual", _repeat_residual, (q, qd, acc.qdd[partition.integrated], k, drive, partition, chain)),
             ("correction", _repeat_correction, (reduced_mass, drive, partition, chain, settings)),
             ("refresh", _repeat_refresh, _refresh_arguments(scenario, drive, settings)),
-            ("tracking", _repeat_tracking, (reduced_mass, correction, drive, partition, chain)),
+            ("tracking", _repeat_tracking, (reduced_mass, correction, drive, partition, chain, settings)),
             ("factor", _repeat_factor, (acc.M, acc.velocity_map, correction, drive, partition, chain)),
             ("accelerations", _repeat_accelerations, (q, qd, k, drive, partition, chain)),
             ("evaluation", _repeat_evaluation, (q, qd, k, drive, partition, chain)),

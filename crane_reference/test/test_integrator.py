@@ -94,7 +94,8 @@ def test_modal_terms_are_the_exact_frequency_correction_of_scipys_modes(scenario
     M_r Phi diag(c) Phi^T M_r and D_u = M_r Phi diag(e) Phi^T M_r with c = 1 - ((u / 2) / tan(u / 2))^2, e = 0
     below the cutoff, and c = 0, e = 2 zeta omega^2 h / cutoff (zeta the unresolved modes' damping ratio at the
     cutoff) at or above it; and the step's modal terms D_u v - Delta M_r a (``add_modal_terms``, from the resolved
-    modes and K_r alone) for random v and a, and K_r v (``stiffness_product``) with K_r scipy's."""
+    modes and K_r alone) for random v and a, and K_r V (``stiffness_product``) with K_r scipy's, for v and two random
+    columns at once."""
     q = scenario.equilibrium.q
     reduced_mass, omega_squared, phi = _scipy_modes(scenario, q)
     omega = np.sqrt(omega_squared)
@@ -120,9 +121,11 @@ def test_modal_terms_are_the_exact_frequency_correction_of_scipys_modes(scenario
     computed = np.zeros(independent.size)
     add_modal_terms(computed, qd, a, terms, drive, motion.partition, chain)
     assert np.max(np.abs(computed - terms_expected)) <= 1e-9 * np.max(np.abs(terms_expected))
-    springs = (reduced_mass @ phi) @ np.diag(omega_squared) @ (reduced_mass @ phi).T @ v  # K_r = M_r Phi W^2 Phi^T M_r
-    assert np.allclose(stiffness_product(v, drive, motion.partition, chain), springs, rtol=0.0,
-                       atol=1e-9 * np.abs(springs).max())
+    stiffness = (reduced_mass @ phi) @ np.diag(omega_squared) @ (reduced_mass @ phi).T  # K_r = M_r Phi W^2 Phi^T M_r
+    columns = np.column_stack([v, rng.normal(size=(independent.size, 2))])
+    expected_springs = stiffness @ columns
+    assert np.allclose(stiffness_product(columns, drive, motion.partition, chain), expected_springs, rtol=0.0,
+                       atol=1e-9 * np.abs(expected_springs).max())
 
 
 def _states(scenario, times):
@@ -163,7 +166,8 @@ def test_tracked_modes_follow_scipys_across_a_rotating_near_degenerate_pair(scen
     Phi_r diag(c) Phi_r^T M_r to 1e-9, with c of each mode of the pair its own (the Rayleigh-Ritz step turns the
     pair); the damping is b's unresolved modes' D_u (scipy's modes at b, e_u = 2 zeta omega_u^2 h / cutoff), which
     damps none of the resolved ones; and a single tracking from a to b brings Delta M_r 10 times closer to scipy's
-    at b than a's was."""
+    at b than a's was.  Modes whose span degenerates (two alike) are not tracked: the full eigenproblem at b gives
+    scipy's Delta M_r there."""
     motion, q0, h = scenario.motion, scenario.equilibrium.q, 5e-4
     stepper = MotionStepper(motion, 0.0, q0, np.zeros_like(q0), h)
     states = []
@@ -184,13 +188,19 @@ def test_tracked_modes_follow_scipys_across_a_rotating_near_degenerate_pair(scen
     expected_damping = on_unresolved_b @ np.diag(e_b) @ on_unresolved_b.T
     at_a = modal_correction(mass_a, h, 0.0, drive, partition, chain, settings)
     assert at_a.resolved == resolved
-    tracked = tracked_correction(mass_b, at_a, states[1].t, drive, partition, chain)
+    tracked = tracked_correction(mass_b, at_a, states[1].t, drive, partition, chain, settings)
     scale = np.abs(expected_inertia).max()
     assert np.abs(tracked.inertia - expected_inertia).max() <= 0.1 * np.abs(at_a.inertia - expected_inertia).max()
     for _ in range(40):
-        tracked = tracked_correction(mass_b, tracked, states[1].t, drive, partition, chain)
+        tracked = tracked_correction(mass_b, tracked, states[1].t, drive, partition, chain, settings)
     assert np.abs(tracked.inertia - expected_inertia).max() <= 1e-9 * scale
     assert np.abs(tracked.damping - expected_damping).max() <= 1e-9 * np.abs(expected_damping).max()
+    degenerate = at_a.modes.copy()
+    degenerate[:, 1] = degenerate[:, 0]  # two resolved modes alike: their span degenerates
+    fallback = tracked_correction(mass_b, at_a._replace(modes=degenerate), states[1].t, drive, partition, chain,
+                                  settings)  # the full eigenproblem at b instead, tested against scipy above
+    assert fallback.time == states[1].t and fallback.resolved == resolved
+    assert np.abs(fallback.inertia - expected_inertia).max() <= 1e-9 * scale
 
 
 @pytest.fixture(scope="module")

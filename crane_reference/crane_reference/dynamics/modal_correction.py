@@ -216,9 +216,7 @@ def refreshed_correction(reduced_mass, S, Hw, B, correction: ModalCorrection, h,
     for _ in range(REFRESH_ITERATIONS):
         Y = reduced_solve(factor, independent, on_X)
         on_Y = reduced_mass @ Y
-        springs = np.empty((n_ic, count))
-        for m in range(count):
-            springs[:, m] = stiffness_product(Y[:, m].copy(), drive, partition, chain)
+        springs = stiffness_product(Y, drive, partition, chain)
         spanned, omega_squared, X, on_X, springs = _ritz_modes(Y, on_Y, springs, 1e-10)
         if not spanned:
             break
@@ -264,25 +262,32 @@ def _terms_of_resolved_modes(on_resolved, omega_squared, c, e, beta, stiffness, 
 
 
 @njit(cache=True, nogil=True)
-def stiffness_product(v, drive, partition: Partition, chain: ChainData):
-    """K_r v (:func:`reduced_stiffness`) in O(n): K is diagonal beyond the chain's root block."""
+def stiffness_product(V, drive, partition: Partition, chain: ChainData):
+    """K_r V (:func:`reduced_stiffness`) for the columns of V (n_ic x m), in O(n) a column: K is diagonal beyond
+    the chain's root block; each row of K is read once for all columns."""
     independent, stiffness, root_size = partition.independent, chain.stiffness, chain.root_size
-    out = np.empty(independent.size)
-    for i in range(independent.size):
+    n_ic, columns = V.shape
+    out = np.empty((n_ic, columns))
+    for i in range(n_ic):
         row = independent[i]
-        total = stiffness[row, row] * v[i]
+        diagonal = stiffness[row, row]
+        for m in range(columns):
+            out[i, m] = diagonal * V[i, m]
         if row < root_size:
-            for j in range(independent.size):
+            for j in range(n_ic):
                 if j != i and independent[j] < root_size:
-                    total += stiffness[row, independent[j]] * v[j]
+                    coupling = stiffness[row, independent[j]]
+                    for m in range(columns):
+                        out[i, m] += coupling * V[j, m]
         if row == chain.drive_joint:
-            total += drive[1] * v[i]
-        out[i] = total
+            for m in range(columns):
+                out[i, m] += drive[1] * V[i, m]
     return out
 
 
 @njit(cache=True, nogil=True)
-def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, partition: Partition, chain: ChainData):
+def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, partition: Partition, chain: ChainData,
+                       settings: StepSettings):
     """``correction`` carried to the configuration of ``reduced_mass`` by tracking its resolved modes Phi_r: one
     shift-inverted subspace iteration from them, X = (K_r + s M_r)^-1 M_r Phi_r (s = :data:`SHIFT`), and the
     Rayleigh-Ritz step on X (the modes of the pencil (X^T K_r X, X^T M_r X), by Jacobi rotations: it is nearly
@@ -291,7 +296,8 @@ def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, part
     D_u otherwise damps a resolved mode psi by sum_u e_u (phi_u^T M_r psi)^2); on Ritz vectors that are not yet
     the pencil's modes it is indefinite by the order of their residual, beta (K_r Phi_r - M_r Phi_r diag(omega^2)).  The
     modes stay resolved, and their number stays, until the next full eigenproblem (``time`` is its; ``tracked`` becomes
-    t)."""
+    t).  When the tracked modes' span degenerates (their Gram matrix is not positive definite) the full eigenproblem
+    is solved instead, as :func:`refreshed_correction` does (:func:`modal_correction` at t)."""
     r = correction.resolved
     if r == 0:
         return correction
@@ -303,7 +309,7 @@ def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, part
     springs = driving - SHIFT * MX  # K_r X = M_r Phi_r - s M_r X
     spanned, omega_squared, phi_r, on_resolved, _ = _ritz_modes(X, MX, springs, 0.0)
     if not spanned:
-        raise np.linalg.LinAlgError("the tracked modes' Gram matrix is not positive definite")
+        return modal_correction(reduced_mass, h, t, drive, partition, chain, settings)
     modes = correction.modes.copy()
     modes[:, :r] = phi_r
     c, e = _resolved_terms(omega_squared, _modal_damping(phi_r, r, partition, chain), h)

@@ -146,18 +146,18 @@ def add_modal_terms(residual, qd, a1, correction: ModalCorrection, drive, partit
     modes in O(n r): U (diag(e - beta omega^2) U^T v - diag(c) U^T a) + beta K_r v (:class:`ModalCorrection`)."""
     independent, on_resolved = partition.independent, correction.on_resolved
     n_ic = independent.size
-    v = np.empty(n_ic)
+    v = np.empty((n_ic, 1))
     for i in range(n_ic):
-        v[i] = qd[independent[i]]
+        v[i, 0] = qd[independent[i]]
     if correction.unresolved_beta != 0.0:
         springs = stiffness_product(v, drive, partition, chain)
         for i in range(n_ic):
-            residual[i] += correction.unresolved_beta * springs[i]
+            residual[i] += correction.unresolved_beta * springs[i, 0]
     inertia_weights, damping_weights = correction.inertia_weights, correction.damping_weights
     for m in range(correction.resolved):
         on_velocity, on_acceleration = 0.0, 0.0
         for i in range(n_ic):
-            on_velocity += on_resolved[i, m] * v[i]
+            on_velocity += on_resolved[i, m] * v[i, 0]
             on_acceleration += on_resolved[i, m] * a1[i]
         weight = damping_weights[m] * on_velocity - inertia_weights[m] * on_acceleration
         for i in range(n_ic):
@@ -295,7 +295,7 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
     M = mass_at(it.S, Hw, chain) if tracking or not articulated else np.empty((0, 0))
     if tracking:
         correction = tracked_correction(reduced_mass_matrix(M, B, partition), correction, t0, drive, partition,
-                                        chain)
+                                        chain, settings)
     add_modal_terms(residual, it.qd, a1, correction, drive, partition, chain)
     if articulated:
         factor = articulated_iteration_factor(it.S, Hw, B, h, correction, drive, partition, chain)
