@@ -104,7 +104,7 @@ def test_a_clock_reset_seen_before_it_is_reported_restarts_the_stamps_announced(
     reports it (nothing is due: the clock is behind); once reported, the status announces the restart (not a
     clock still behind), and publishing goes on sample by sample from the new time, counted as one reset and no
     leap."""
-    start = 5 * NS
+    start = 200 * NS
     server.begin(start)
     before = publish(server, start, 0.5)
     back = start + len(before) * PERIOD - 120 * NS
@@ -121,6 +121,32 @@ def test_a_clock_reset_seen_before_it_is_reported_restarts_the_stamps_announced(
     np.testing.assert_array_equal([sample(o).q for o in after], [truth.sample(o.k / RATE).q for o in after])
     counters = server.status(back + 30 * PERIOD).counters
     assert counters["clock_resets"] == 1 and counters["stamp_leaps"] == 0
+
+
+def test_a_clock_reset_reported_while_the_clock_is_read_waits_for_that_reading(server: ReferenceServer) -> None:
+    """The publisher's clock is read under the server's lock: ROS time goes back 120 s while the publisher reads
+    it (the reading from before the jump), and the report of the jump waits until that reading's samples are taken,
+    so the reading is not applied after the restart (where it would be a leap forward of the whole jump): one reset,
+    no leap, and publishing goes on sample by sample from the new time."""
+    start = 200 * NS
+    server.begin(start)
+    before = publish(server, start, 0.3)
+    now = start + len(before) * PERIOD
+    back = now - 120 * NS
+    report = threading.Thread(target=server.clock_went_back, args=(back,))
+
+    def read_clock() -> int:
+        report.start()  # rclpy's jump callback, on the executor's thread
+        report.join(0.05)
+        return now
+
+    assert [o.k for o in server.due(read_clock).outgoing] == [len(before)]
+    report.join(10.0)
+    counters = server.status(back).counters
+    assert counters["clock_resets"] == 1 and counters["stamp_leaps"] == 0
+    after = publish(server, back, 0.2)
+    assert [o.k for o in after] == list(range(len(before) + 1, len(before) + 21))
+    assert [o.stamp_ns for o in after] == [back + i * PERIOD for i in range(20)]
 
 
 def test_a_command_takes_effect_at_the_last_sample_within_the_lead(server: ReferenceServer) -> None:

@@ -266,7 +266,7 @@ def stiffness_product(V, drive, partition: Partition, chain: ChainData):
     """K_r V (:func:`reduced_stiffness`) for the columns of V (n_ic x m), in O(n) a column: K is diagonal beyond
     the chain's root block; each row of K is read once for all columns."""
     independent, stiffness, root_size = partition.independent, chain.stiffness, chain.root_size
-    n_ic, columns = V.shape
+    n_ic, columns = independent.size, V.shape[1]
     out = np.empty((n_ic, columns))
     for i in range(n_ic):
         row = independent[i]
@@ -296,8 +296,9 @@ def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, part
     D_u otherwise damps a resolved mode psi by sum_u e_u (phi_u^T M_r psi)^2); on Ritz vectors that are not yet
     the pencil's modes it is indefinite by the order of their residual, beta (K_r Phi_r - M_r Phi_r diag(omega^2)).  The
     modes stay resolved, and their number stays, until the next full eigenproblem (``time`` is its; ``tracked`` becomes
-    t).  When the tracked modes' span degenerates (their Gram matrix is not positive definite) the full eigenproblem
-    is solved instead, as :func:`refreshed_correction` does (:func:`modal_correction` at t)."""
+    t).  When the tracked modes' span degenerates (a squared pivot of the Cholesky factor of their Gram matrix, the
+    columns of M_r-norm 1, below 1e-10, or one not positive) the full eigenproblem is solved instead, as
+    :func:`refreshed_correction` does (:func:`modal_correction` at t)."""
     r = correction.resolved
     if r == 0:
         return correction
@@ -307,7 +308,7 @@ def tracked_correction(reduced_mass, correction: ModalCorrection, t, drive, part
     X = cholesky_solve_columns(cholesky(stiffness + SHIFT * reduced_mass), driving)
     MX = reduced_mass @ X
     springs = driving - SHIFT * MX  # K_r X = M_r Phi_r - s M_r X
-    spanned, omega_squared, phi_r, on_resolved, _ = _ritz_modes(X, MX, springs, 0.0)
+    spanned, omega_squared, phi_r, on_resolved, _ = _ritz_modes(X, MX, springs, 1e-10)
     if not spanned:
         return modal_correction(reduced_mass, h, t, drive, partition, chain, settings)
     modes = correction.modes.copy()

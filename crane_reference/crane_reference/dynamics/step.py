@@ -260,7 +260,8 @@ def integration_step(start: StepStart, h, k: Coefficients, drive, partition: Par
     :func:`refreshed_correction` from its modes), and for another step size (:func:`modal_correction`); between,
     its resolved modes are carried to the configuration of the first iterate (:func:`tracked_correction` with its M
     and B, before the modal terms enter its residual) at the step nearest ``settings.mode_tracking_interval`` after
-    they last were (``tracked`` counts from the step's start t0).  It is a coefficient
+    they last were (``tracked`` counts from the step's start t0; where the tracked modes' span degenerates, the full
+    eigenproblem there, which counts as a refresh at t0).  It is a coefficient
     of the equation that follows the configuration: the step's end is solved with the new one, its start
     keeps the accelerations of the old one (Delta M_r piecewise constant in time, as the trapezoidal rule
     treats any coefficient; converting them would act on the slow motion's accelerations as on free

@@ -204,10 +204,16 @@ class SamplePublisher:
                 return
             server.begin(clock())
             quiet, send = self._quiet, self.send
+            read_at = 0  # the monotonic time [ns] of the last reading of the clock
+
+            def read_clock() -> int:
+                nonlocal read_at
+                read_at = time.monotonic_ns()
+                return clock()
+
             with real_time_switching():
                 while not quiet.is_set():
-                    read_at = time.monotonic_ns()
-                    due = server.due(clock)
+                    due = server.due(read_clock)
                     for outgoing in due.outgoing:
                         send(outgoing)
                     left = due.next_stamp_ns - due.now_ns - (time.monotonic_ns() - read_at)

@@ -11,11 +11,13 @@ parameters and services, and words their replies (:mod:`crane_reference.ros.serv
 Publishing
     :meth:`ReferenceServer.begin` at a clock reading starts the stamps (sample k stamped
     ``start + k / rate``, :func:`~.schedule.stamp_at`, never before the last stamp sent), then
-    :meth:`ReferenceServer.due` gives every sample due by a clock reading, stamped, and when the next one
-    is.  A frame not ready (the solver late) is the
+    :meth:`ReferenceServer.due` gives every sample due by the publisher's clock (read under the server's lock),
+    stamped, and when the next one is.  A frame not ready (the solver late) is the
     last sample held; a clock that jumps forward makes the stamps leap with it (no sample skipped, the
     motion goes on), one that goes back makes nothing due until it reaches the next stamp again
-    (:meth:`~.schedule.FrameSchedule.anchored`); :meth:`ReferenceServer.status` reports both.
+    (:meth:`~.schedule.FrameSchedule.anchored`), or, beyond the catch-up limit, restarts the stamps from it once
+    when the clock's owner reports the jump (:meth:`ReferenceServer.clock_went_back`); :meth:`ReferenceServer.status`
+    reports each.
 
 Commands
     :meth:`ReferenceServer.command` applies a stream command (``pause``, ``resume``,

@@ -91,6 +91,7 @@ class Stamps:
         self.start_ns = schedule.restamped(now_ns)
         self.last_ns = now_ns - NANOSECONDS // self.rate
         self.behind_ns = 0  # on the new timeline the clock is at the next stamp (a reading may have seen it behind)
+        self._seen = (now_ns, self._clock())  # :meth:`now_ns` goes on from the new time
         self.note = (f"ROS time went back {behind / NANOSECONDS:.3f} s: the stamps restart from it (once), no sample "
                      "skipped")
 
