@@ -2,6 +2,7 @@
 
     python benchmarks/bench_accuracy.py [--duration 10] [--cache results/bench_accuracy] [--hours 1]
                                         [--rfe 6 3 12] [--cutoff 0.8] [--refresh 0.01] [--mode-tracking 0]
+                                        [--evaluations 2]
                                         [--only vibration growth long damped iterations matrix newton first-order
                                                 mechanism sensitivity slow reference drift refined]
 
@@ -51,7 +52,8 @@ The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simula
     articulated-body recursion, integration.ARTICULATED_FROM), at the node's step against the same integrator at a
     quarter of it over ``--duration``: the 40-250 Hz RMS kept per window and the raw and controller-band errors
     (targets: RMS within 10 %, controller band <= 5e-5); then E's controller-band error of both against an eighth of
-    the step (how far the quarter-step reference has converged).
+    the step (how far the quarter-step reference has converged).  ``--evaluations 3``: every run at three Newton
+    evaluations a step.
 11. [slow] The controller-band error at the node's 0.5 ms (ONLINE_STEP) and at 1 ms, undamped
     and damped crane: the integrator with its modal correction computed every step, every 5 ms, every
     REFRESH_INTERVAL (the default) and every 20 ms, and the plain trapezoidal rule; psi2's drift at 3, 5 and
@@ -61,6 +63,7 @@ The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simula
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import time
 from dataclasses import replace
@@ -602,6 +605,8 @@ def main() -> None:
                         "modal correction again (default: integration.REFRESH_INTERVAL, 0.01)")
     parser.add_argument("--mode-tracking", type=float, help="[s] of motion after which every integrator made tracks "
                         "its resolved modes (0: every step; default: integration.MODE_TRACKING_INTERVAL)")
+    parser.add_argument("--evaluations", type=int, help="Newton evaluations a step of every simulate that does not "
+                        "set its own (default: integration.EVALUATIONS, 2)")
     parser.add_argument("--rfe", nargs="+", type=int, default=[6, 3, 12],
                         help="[vibration], [iterations]: the cranes' n_rfe")
     args = parser.parse_args()
@@ -611,6 +616,11 @@ def main() -> None:
         integration.REFRESH_INTERVAL = args.refresh
     if args.mode_tracking is not None:
         integration.MODE_TRACKING_INTERVAL = args.mode_tracking
+    if args.evaluations is not None:
+        if args.evaluations < 1:
+            parser.error(f"--evaluations: {args.evaluations}; a step takes at least 1 Newton evaluation")
+        global simulate  # what every section calls from now on
+        simulate = functools.partial(simulate, evaluations=args.evaluations)
     params = load_config()
     for section, run in (("vibration", lambda: vibration(params, args.duration, args.cache, tuple(args.rfe))),
                          ("growth", lambda: growth(params)),
