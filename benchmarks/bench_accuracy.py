@@ -1,7 +1,8 @@
 """Accuracy of the integrator against converged runs; prints the figures the README and the closing notes quote.
 
     python benchmarks/bench_accuracy.py [--duration 10] [--cache results/bench_accuracy] [--hours 1]
-                                        [--rfe 6 3 12] [--cutoff 0.8] [--refresh 0.01] [--mode-tracking 0]
+                                        [--rfe 6 3 12] [--cutoff 0.8] [--bandwidth 800] [--refresh 0.01]
+                                        [--mode-tracking 0]
                                         [--evaluations 2]
                                         [--only vibration growth long damped iterations matrix newton first-order
                                                 mechanism sensitivity slow reference drift refined]
@@ -43,11 +44,13 @@ The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simula
    +-1 % and its boom's Young's modulus by +-1 % (h = 0.25 ms) against the nominal converged run, beside the
    nominal crane at h = 1, 0.5, 1/3 and 0.25 ms (converged Newton).
 12. [drift] (not by default) 60 s of the default crane at h = 0.5, 0.4, 0.3125, 0.3, 1/3500 s, 0.25 and 0.2 ms: E's
-    largest distance over 10, 30 and 60 s from a converged run at 0.125 ms that resolves every mode (compared every
-    6 ms, on the times both reach: every 30 ms at 0.3125 ms; its own distance from the cached DOP853 run over 10 s
-    printed first), for the integrator as it is, so with the converged Newton iteration, and, when --cutoff or
-    --mode-tracking change it, with the package's default cutoff and mode tracking.  0.3 ms is the one step whose
-    grid misses the drive torque's end at t = 1 s (a cut step there, and a new step size twice).
+    largest distance over 10, 30 and 60 s from two converged runs at 0.125 ms: the full model's, which resolves
+    every mode (its own distance from the cached DOP853 run over 10 s printed first), and the one of the modes the
+    integrator resolves (below the bandwidth: the limit a shrinking step converges to); compared every 6 ms, on the
+    times both reach (every 30 ms at 0.3125 ms); for the integrator as it is, so with the converged Newton
+    iteration, without the resolved bandwidth (the cutoff alone), and, when --cutoff, --mode-tracking or
+    --bandwidth change it, with the package's defaults.  0.3 ms is the one step whose grid misses the drive
+    torque's end at t = 1 s (a cut step there, and a new step size twice).
 13. [refined] (not by default) The refined cranes, n_rfe = 24 and 48 (the iteration matrix solved by the
     articulated-body recursion, integration.ARTICULATED_FROM), at the node's step against the same integrator at a
     quarter of it over ``--duration``: the 40-250 Hz RMS kept per window and the raw and controller-band errors
@@ -75,7 +78,7 @@ from scipy.integrate import quad
 from scipy.signal import butter, sosfiltfilt
 
 from crane_reference.analysis.modal import linearise, modal_analysis, modes_at
-from crane_reference.dynamics.modal_correction import iteration_factor
+from crane_reference.dynamics.modal_correction import cutoff_frequency, iteration_factor
 from crane_reference.dynamics.step import first_iterate, predicted_accelerations, step_residual
 from crane_reference.model.config import load_config
 from crane_reference.model.description import CraneDescription
@@ -513,10 +516,11 @@ DRIFT_STEPS = (0.5e-3, 0.4e-3, 0.3125e-3, 0.3e-3, 1 / 3500, 0.25e-3, 0.2e-3)
 
 
 def drift_run(scenario: Scenario, h: float, duration: float, cutoff: float | None = None,
-              converged: bool = False, mode_tracking: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+              converged: bool = False, mode_tracking: float | None = None,
+              resolved_bandwidth: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """E's positions on the DRIFT_GRID times the steps reach over ``duration`` at step h (and their grid indices),
-    resolving modes below omega h = ``cutoff`` and tracking them every ``mode_tracking`` [s] if given, with the
-    converged Newton iteration if ``converged``."""
+    resolving modes below omega h = ``cutoff`` and ``resolved_bandwidth`` [rad/s] and tracking them every
+    ``mode_tracking`` [s] if given, with the converged Newton iteration if ``converged``."""
     q0 = scenario.equilibrium.q
     stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), h, every_row=False,
                             **({"tolerance": 1e-10} if converged else {}))
@@ -524,6 +528,8 @@ def drift_run(scenario: Scenario, h: float, duration: float, cutoff: float | Non
         stepper.integrator.cutoff = cutoff
     if mode_tracking is not None:
         stepper.integrator.mode_tracking_interval = mode_tracking
+    if resolved_bandwidth is not None:
+        stepper.integrator.resolved_bandwidth = resolved_bandwidth
     grid, positions = [], []
     while stepper.state.t < duration - 1e-9:
         rows = stepper.advance_until(min(stepper.state.t + 1.0, duration))
@@ -535,26 +541,38 @@ def drift_run(scenario: Scenario, h: float, duration: float, cutoff: float | Non
 
 
 PACKAGE_CUTOFF, PACKAGE_MODE_TRACKING = integration.CUTOFF, integration.MODE_TRACKING_INTERVAL
-"""[drift]: the package's defaults, before --cutoff or --mode-tracking change them."""
+PACKAGE_BANDWIDTH = integration.RESOLVED_BANDWIDTH
+"""[drift]: the package's defaults, before --cutoff, --mode-tracking or --bandwidth change them."""
 
 DRIFT_REFERENCE_CUTOFF = 0.8 * math.pi
-"""[drift]: the 0.125 ms run resolves every mode of the default crane below 3.2 kHz, as DOP853 resolves every mode (not
-tracked: its modal correction is computed afresh every REFRESH_INTERVAL)."""
+"""[drift]: the full model's 0.125 ms run resolves every mode of the default crane below 3.2 kHz (no bandwidth), as
+DOP853 resolves every mode (not tracked: its modal correction is computed afresh every REFRESH_INTERVAL)."""
 
 
-def drift_reference(scenario: Scenario, duration: float, cache: Path) -> tuple[np.ndarray, np.ndarray]:
-    """[drift] The converged 0.125 ms run (every mode resolved) on the DRIFT_GRID, and its own distance from the
-    cached DOP853 run over that run's 10 s (errors(): raw and controller band)."""
+def drift_references(scenario: Scenario, duration: float, cache: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """[drift] The converged 0.125 ms runs on the DRIFT_GRID, by name: the full model's (every mode resolved; its own
+    distance from the cached DOP853 run over that run's 10 s printed, errors(): raw and controller band), and the
+    one of the modes the integrator resolves as it is (the bandwidth, the cutoff at 0.125 ms and the mode tracking
+    of this run's integrators: its limit as the step shrinks)."""
     q0 = scenario.equilibrium.q
     stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), 0.125e-3, tolerance=1e-10)
     stepper.integrator.cutoff, stepper.integrator.mode_tracking_interval = DRIFT_REFERENCE_CUTOFF, math.inf
+    stepper.integrator.resolved_bandwidth = math.inf
     check = Trajectory.from_rows("flexible", scenario.model.joint_names, scenario.model.drive_joint,
                                  stepper.advance_until(10.0))
     _, _, ee, ee_slow = errors(reference_run(scenario.params, 10.0, cache, "undamped"), check)
-    print(f"[drift] the 0.125 ms run against DOP853 (rtol 1e-10) over 10 s: E {ee:.1e} m raw, {ee_slow:.1e} m in the "
-          f"controller band", flush=True)
-    return drift_run(scenario, 0.125e-3, duration, cutoff=DRIFT_REFERENCE_CUTOFF, converged=True,
-                     mode_tracking=math.inf)
+    print(f"[drift] the full model's 0.125 ms run against DOP853 (rtol 1e-10) over 10 s: E {ee:.1e} m raw, "
+          f"{ee_slow:.1e} m in the controller band", flush=True)
+    full = drift_run(scenario, 0.125e-3, duration, cutoff=DRIFT_REFERENCE_CUTOFF, converged=True,
+                     mode_tracking=math.inf, resolved_bandwidth=math.inf)
+    limit = drift_run(scenario, 0.125e-3, duration, converged=True)
+    return {"the full model's": full,
+            f"its own limit's (modes below {resolved_below_now(0.125e-3):.0f} Hz)": limit}
+
+
+def resolved_below_now(step: float) -> float:
+    """[Hz] the integrators this run makes resolve below at ``step`` (after --cutoff and --bandwidth)."""
+    return cutoff_frequency(step, integration.CUTOFF, integration.RESOLVED_BANDWIDTH) / (2.0 * math.pi)
 
 
 def _tracking(interval: float) -> str:
@@ -563,28 +581,37 @@ def _tracking(interval: float) -> str:
 
 
 def step_drift(params: CraneDescription, cache: Path, duration: float = 60.0) -> None:
-    """[drift] E's largest distance over 10 / 30 / 60 s from the converged 0.125 ms run (:func:`drift_reference`), per
-    step of DRIFT_STEPS: the integrator as it is (online iteration), so with the converged iteration, and, when
-    --cutoff or --mode-tracking changed it, with the package's default cutoff and mode tracking."""
+    """[drift] E's largest distance over 10 / 30 / 60 s from the converged 0.125 ms runs (:func:`drift_references`),
+    per step of DRIFT_STEPS: the integrator as it is (online iteration), so with the converged iteration, without
+    the resolved bandwidth (the cutoff alone: modes resolved up to omega h = cutoff at every step), and, when
+    --cutoff, --mode-tracking or --bandwidth changed it, with the package's defaults."""
     scenario = Scenario(params, "flexible")
-    reference_grid, reference = drift_reference(scenario, duration, cache)
+    references = drift_references(scenario, duration, cache)
     interval = integration.MODE_TRACKING_INTERVAL
-    variants = [(f"as it is (cutoff {integration.CUTOFF / math.pi:g} pi, modes {_tracking(interval)})", {}),
-                ("as it is, converged Newton", {"converged": True})]
-    if (integration.CUTOFF, interval) != (PACKAGE_CUTOFF, PACKAGE_MODE_TRACKING):
-        variants.append((f"the package's default: cutoff {PACKAGE_CUTOFF / math.pi:g} pi, modes "
-                         f"{_tracking(PACKAGE_MODE_TRACKING)}",
-                         {"cutoff": PACKAGE_CUTOFF, "mode_tracking": PACKAGE_MODE_TRACKING}))
+    variants = [(f"as it is (cutoff {integration.CUTOFF / math.pi:g} pi, bandwidth "
+                 f"{integration.RESOLVED_BANDWIDTH / (2 * math.pi):g} Hz, modes {_tracking(interval)})", {}),
+                ("as it is, converged Newton", {"converged": True}),
+                ("without the bandwidth", {"resolved_bandwidth": math.inf})]
+    if (integration.CUTOFF, interval, integration.RESOLVED_BANDWIDTH) != (PACKAGE_CUTOFF, PACKAGE_MODE_TRACKING,
+                                                                          PACKAGE_BANDWIDTH):
+        variants.append((f"the package's default: cutoff {PACKAGE_CUTOFF / math.pi:g} pi, bandwidth "
+                         f"{PACKAGE_BANDWIDTH / (2 * math.pi):g} Hz, modes {_tracking(PACKAGE_MODE_TRACKING)}",
+                         {"cutoff": PACKAGE_CUTOFF, "mode_tracking": PACKAGE_MODE_TRACKING,
+                          "resolved_bandwidth": PACKAGE_BANDWIDTH}))
     for h in DRIFT_STEPS:
         for name, variant in variants:
             start = time.perf_counter()
             grid, positions = drift_run(scenario, h, duration, **variant)
-            common, here, there = np.intersect1d(grid, reference_grid, return_indices=True)
-            distance = np.linalg.norm(positions[here] - reference[there], axis=1)
-            t = common * DRIFT_GRID
-            worst = " / ".join(f"{distance[t <= span].max():.1e}" for span in (10.0, 30.0, 60.0) if span <= duration)
-            print(f"[drift] h={h * 1e3:.4f} ms, {name}: E's largest distance from the 0.125 ms run over 10 / 30 / 60 s "
-                  f"{worst} m ({time.perf_counter() - start:.0f} s wall)", flush=True)
+            worst = []
+            for reference_grid, reference in references.values():
+                common, here, there = np.intersect1d(grid, reference_grid, return_indices=True)
+                distance = np.linalg.norm(positions[here] - reference[there], axis=1)
+                t = common * DRIFT_GRID
+                worst.append(" / ".join(f"{distance[t <= span].max():.1e}" for span in (10.0, 30.0, 60.0)
+                                        if span <= duration))
+            print(f"[drift] h={h * 1e3:.4f} ms, {name}: E's largest distance over 10 / 30 / 60 s from "
+                  + "; from ".join(f"{label} 0.125 ms run {w} m" for label, w in zip(references, worst, strict=True))
+                  + f" ({time.perf_counter() - start:.0f} s wall)", flush=True)
 
 
 SECTIONS = ("vibration", "growth", "long", "damped", "iterations", "matrix", "newton", "first-order", "mechanism",
@@ -601,6 +628,8 @@ def main() -> None:
     parser.add_argument("--hours", type=float, default=1.0, help="[long]: hours of motion")
     parser.add_argument("--cutoff", type=float, help="omega h [pi rad] from which every integrator made damps a mode "
                         "instead of resolving it (default: integration.CUTOFF, 0.8)")
+    parser.add_argument("--bandwidth", type=float, help="[Hz] from which every integrator made damps a mode at any "
+                        "step (inf: the cutoff alone; default: integration.RESOLVED_BANDWIDTH, 800 Hz)")
     parser.add_argument("--refresh", type=float, help="[s] of motion after which every integrator made computes its "
                         "modal correction again (default: integration.REFRESH_INTERVAL, 0.01)")
     parser.add_argument("--mode-tracking", type=float, help="[s] of motion after which every integrator made tracks "
@@ -612,6 +641,10 @@ def main() -> None:
     args = parser.parse_args()
     if args.cutoff is not None:
         integration.CUTOFF = args.cutoff * math.pi  # what every integrator made from now on resolves below
+    if args.bandwidth is not None:
+        if not args.bandwidth > 0.0:
+            parser.error(f"--bandwidth: {args.bandwidth}; a bandwidth is a frequency above 0 Hz (inf: none)")
+        integration.RESOLVED_BANDWIDTH = 2.0 * math.pi * args.bandwidth
     if args.refresh is not None:
         integration.REFRESH_INTERVAL = args.refresh
     if args.mode_tracking is not None:

@@ -52,7 +52,7 @@ from crane_reference.dynamics.structures import ACCOUNTS, ModalCorrection, Parti
 from crane_reference.model.config import load_config
 from crane_reference.motion.integration import CUTOFF, UNRESOLVED_DAMPING, ExactFrequencyTrapezoidal, stop_flag
 from crane_reference.motion.simulation import MotionStepper, Scenario
-from crane_reference.motion.steps import ONLINE_STEP
+from crane_reference.motion.steps import ANALYSIS_STEP, ONLINE_STEP
 
 STEP = 1e-3  # [s]
 
@@ -69,10 +69,10 @@ def _reduced_mass(scenario, q):
     return B.T @ solution.dynamics.M @ B
 
 
-def _terms(scenario, q, t):
+def _terms(scenario, q, t, h=STEP):
     motion = scenario.motion
     settings = ExactFrequencyTrapezoidal(motion).settings
-    return modal_correction(_reduced_mass(scenario, q), STEP, t, motion.dynamics.drive.kernel_parameters(0.0),
+    return modal_correction(_reduced_mass(scenario, q), h, t, motion.dynamics.drive.kernel_parameters(0.0),
                                     motion.partition, motion.dynamics.chain, settings)
 
 
@@ -89,25 +89,33 @@ def _scipy_modes(scenario, q):
     return reduced_mass, np.maximum(omega_squared, 0.0), phi
 
 
-def test_modal_terms_are_the_exact_frequency_correction_of_scipys_modes(scenario):
+NODE_BANDWIDTH = 2.0 * np.pi * 800.0
+"""[rad/s]: the modes the node's step (0.5 ms) resolves, omega h < 0.8 pi, are those below 800 Hz."""
+
+
+@pytest.mark.parametrize("h", [STEP, ANALYSIS_STEP])
+def test_modal_terms_are_the_exact_frequency_correction_of_scipys_modes(scenario, h):
     """Undamped crane: with K_r phi = omega^2 M_r phi (scipy.linalg.eigh) and u = omega h, Delta M_r =
     M_r Phi diag(c) Phi^T M_r and D_u = M_r Phi diag(e) Phi^T M_r with c = 1 - ((u / 2) / tan(u / 2))^2, e = 0
-    below the cutoff, and c = 0, e = 2 zeta omega^2 h / cutoff (zeta the unresolved modes' damping ratio at the
-    cutoff) at or above it; and the step's modal terms D_u v - Delta M_r a (``add_modal_terms``, from the resolved
-    modes and K_r alone) for random v and a, and K_r V (``stiffness_product``) with K_r scipy's, for v and two random
-    columns at once."""
+    below omega_c = min(cutoff / h, 2 pi 800 Hz) (the cutoff, and the bandwidth the node's step resolves), and
+    c = 0, e = 2 zeta omega^2 / omega_c (zeta the unresolved modes' damping ratio at omega_c) at or above it; and the
+    step's modal terms D_u v - Delta M_r a (``add_modal_terms``, from the resolved modes and K_r alone) for random v
+    and a, and K_r V (``stiffness_product``) with K_r scipy's, for v and two random columns at once.  At 1 ms the
+    cutoff decides; at 0.25 ms the bandwidth, and some modes below the cutoff are damped."""
     q = scenario.equilibrium.q
     reduced_mass, omega_squared, phi = _scipy_modes(scenario, q)
     omega = np.sqrt(omega_squared)
-    resolved = omega * STEP < CUTOFF
+    omega_c = min(CUTOFF / h, NODE_BANDWIDTH)
+    resolved = omega < omega_c
     assert 0 < (~resolved).sum() < omega.size
+    assert (h < ONLINE_STEP) == np.any(~resolved & (omega * h < CUTOFF))
     c, e = np.zeros_like(omega), np.zeros_like(omega)
-    half = 0.5 * omega[resolved] * STEP
+    half = 0.5 * omega[resolved] * h
     ratio = np.ones_like(half)  # (omega h / 2) / tan(omega h / 2) -> 1 for a mode no spring resists (omega = 0)
     ratio[half > 0.0] = half[half > 0.0] / np.tan(half[half > 0.0])
     c[resolved] = 1.0 - ratio**2
-    e[~resolved] = 2.0 * UNRESOLVED_DAMPING * omega[~resolved] ** 2 * STEP / CUTOFF
-    terms = _terms(scenario, q, 0.0)
+    e[~resolved] = 2.0 * UNRESOLVED_DAMPING * omega[~resolved] ** 2 / omega_c
+    terms = _terms(scenario, q, 0.0, h)
     expected = {}
     for name, computed, per_mode in (("inertia", terms.inertia, c), ("damping", terms.damping, e)):
         expected[name] = reduced_mass @ phi @ np.diag(per_mode) @ phi.T @ reduced_mass

@@ -50,7 +50,7 @@ from ..dynamics.deflection import rfe_indices, tip_deflection
 from ..dynamics.structures import ChainData
 from ..model.chain import ChainModel
 from ..model.description import CraneDescription
-from ..motion.integration import CUTOFF
+from ..motion.integration import resolved_below
 from ..motion.programmed_motion import ProgrammedMotion
 from ..motion.simulation import SOLVER_FAILURES, MotionStepper, Scenario
 from ..motion.trajectory import MotionRows, Trajectory
@@ -120,7 +120,7 @@ def spectral_peaks(spec: Spectrum, count: int = 4, min_frequency: float = MIN_FR
 class ModalBands:
     """Constrained natural frequencies (len(times), m) [Hz] at states of a run (sorted per state), their
     characters, and ``resolved_below`` [Hz]: the integrator reproduces a mode below it at its own
-    frequency and damps the modes above it (:data:`crane_reference.motion.integration.CUTOFF`)."""
+    frequency and damps the modes above it (:func:`crane_reference.motion.integration.resolved_below`)."""
 
     times: np.ndarray
     frequencies: np.ndarray
@@ -146,7 +146,7 @@ def modal_bands(motion: ProgrammedMotion, trajectory: Trajectory, interval: floa
         times.append(trajectory.t[i])
         frequencies.append(modes.frequencies)
         characters.append([modes.character(k) for k in range(modes.frequencies.size)])
-    return ModalBands(np.array(times), np.array(frequencies), CUTOFF / (2.0 * np.pi * step), characters)
+    return ModalBands(np.array(times), np.array(frequencies), resolved_below(step), characters)
 
 
 def _distance(frequency: float, values: np.ndarray) -> float:

@@ -13,7 +13,7 @@ import numpy as np
 from ..dynamics.deflection import rfe_indices
 from ..model.chain import VARIANTS
 from ..model.description import CraneDescription
-from ..motion.integration import CUTOFF, METHOD
+from ..motion.integration import METHOD, resolved_below
 from ..motion.programmed_motion import REALISATIONS
 from ..motion.steps import ANALYSIS_STEP
 from .figures import pyplot
@@ -78,7 +78,7 @@ def analyze(params: CraneDescription, out: str | Path, duration: float = 10.0, s
                 + (f" - {r.error}" if r.error else ""))
     summary: dict = {"crane": params.name, "duration_s": duration, "step_s": step, "method": METHOD,
                      "joints": list(params.actuated), "flexible_links": [link.name for link in params.flexible_links],
-                     "resolved_below_hz": CUTOFF / (2.0 * np.pi * step),
+                     "resolved_below_hz": resolved_below(step),
                      "runs": [_run_summary(r) for r in runs.values()], "differences": {}, "spectra": {}}
     first = runs.get((realisations[0], "flexible"))
     if first is not None and first.start_modes is not None:

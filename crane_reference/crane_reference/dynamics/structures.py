@@ -70,8 +70,9 @@ class StepSettings(NamedTuple):
     Newton evaluations per step, then until the last velocity correction is at most ``tolerance`` [rad/s or
     m/s], at most ``max_iterations``; ``projection_tolerance`` [rad] of Newton on the position constraints;
     the modal correction is computed again after ``refresh_interval`` [s] of motion (and for a new step
-    size); modes with omega h at or above ``cutoff`` [rad] are not resolved by the step and get the damping
-    ratio ``unresolved_damping`` omega h / ``cutoff`` (stiffness-proportional: ``unresolved_damping`` at the
+    size); modes at or above omega_c = min(``cutoff`` / h, ``resolved_bandwidth``) [rad/s]
+    (:func:`~crane_reference.dynamics.modal_correction.cutoff_frequency`) are not resolved by the step and get the
+    damping ratio ``unresolved_damping`` omega / omega_c (stiffness-proportional: ``unresolved_damping`` at the
     cutoff); between, the resolved modes are tracked to the configuration after every
     ``mode_tracking_interval`` [s] of motion (:func:`~crane_reference.dynamics.modal_correction.tracked_correction`;
     0: every step, inf: never); without ``modal`` there is no modal correction (the plain trapezoidal rule, for
@@ -86,6 +87,7 @@ class StepSettings(NamedTuple):
     projection_tolerance: float
     refresh_interval: float
     cutoff: float
+    resolved_bandwidth: float
     unresolved_damping: float
     mode_tracking_interval: float
     modal: bool

@@ -36,11 +36,16 @@ roots (:func:`crane_reference.dynamics.modal_correction.modal_correction`): each
 step as the model's does.
 
 Modes with omega h at or above the cutoff (0.8 pi: the output sampled every step cannot show them; at h = 1 ms
-those above 400 Hz) cannot be turned exactly (tan has a pole at pi) and are not resolved.  The velocities of a
-resolved mode come out larger than the exact ones by tan(omega h / 2) / (omega h / 2) (2.4 at 0.8 pi, 1.08 at
-0.3 pi); resolving modes that close to pi makes the slow motion's phase along the task drift over a minute by an
-amount erratic in h, which a cutoff of 0.3 pi removes (docs/performance.md, "Over a minute").  The unresolved modes
-get D_u = M_r Phi_u diag(beta omega^2) Phi_u^T M_r with beta = 2 zeta / omega_c (omega_c = cutoff / h), which damps
+those above 400 Hz) cannot be turned exactly (tan has a pole at pi) and are not resolved, nor are modes above the
+resolved bandwidth (:data:`RESOLVED_BANDWIDTH`: those the node's step resolves, up to 800 Hz): a step h resolves
+the modes below omega_c = min(cutoff / h, bandwidth)
+(:func:`~crane_reference.dynamics.modal_correction.cutoff_frequency`).  The velocities of a resolved mode come out
+larger than the exact ones by tan(omega h / 2) / (omega h / 2) (2.4 at 0.8 pi, 1.08 at 0.3 pi).  With the bandwidth,
+every step below the node's resolves the node's modes, and a finer step converges to the same model of them; with
+the cutoff alone, each finer step resolves new modes close to omega h = pi, which drifts the slow motion's phase
+along the task over a minute by an amount erratic in h (docs/performance.md, "Over a minute, by step").  An infinite
+bandwidth resolves every mode below the cutoff (a study of the model's high modes).  The unresolved modes get
+D_u = M_r Phi_u diag(beta omega^2) Phi_u^T M_r with beta = 2 zeta / omega_c, which damps
 each with the ratio zeta omega / omega_c, zeta = 1 at the cutoff and more above it (they keep their static
 deflection), so that no such mode rings at a frequency it does not have.  Being stiffness-proportional, that part
 is beta (K_r - M_r Phi_r diag(omega_r^2) Phi_r^T M_r): the constant springs less a term of the resolved modes'
@@ -94,7 +99,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..dynamics.modal_correction import corrected_accelerations, no_correction
+from ..dynamics.modal_correction import corrected_accelerations, cutoff_frequency, no_correction
 from ..dynamics.runs import integration_run
 from ..dynamics.structures import (
     CONSTRAINTS_UNSOLVABLE,
@@ -107,6 +112,7 @@ from ..dynamics.structures import (
     StepStart,
 )
 from .programmed_motion import MotionSolution, ProgrammedMotion, ProjectionError
+from .steps import ONLINE_STEP
 
 EVALUATIONS = 2
 """Newton evaluations per step of the online default (benchmarks/bench_accuracy.py, [iterations]): from the
@@ -127,6 +133,9 @@ REFRESH_INTERVAL = 0.01
 CUTOFF = 0.8 * math.pi
 """omega h [rad] from which a mode counts as not resolved by the step (damped, not turned exactly)."""
 
+RESOLVED_BANDWIDTH = CUTOFF / ONLINE_STEP
+"""[rad/s] (2 pi 800 Hz) from which a mode counts as not resolved by any step: those the node's step resolves."""
+
 MODE_TRACKING_INTERVAL = math.inf
 """[s] of motion after which the resolved modes are tracked to the configuration between refreshes
 (:func:`~crane_reference.dynamics.modal_correction.tracked_correction`; 0: every step, inf: never)."""
@@ -142,6 +151,12 @@ UNRESOLVED_DAMPING = 1.0
 
 METHOD = "trapezoidal rule with exact modal frequencies (crane_reference.motion.integration)"
 """How reports name the method."""
+
+
+def resolved_below(step: float) -> float:
+    """[Hz]: the package's integrator at ``step`` [s] turns the modes below this at their own frequencies and damps
+    those above (:data:`CUTOFF`, :data:`RESOLVED_BANDWIDTH`)."""
+    return cutoff_frequency(step, CUTOFF, RESOLVED_BANDWIDTH) / (2.0 * math.pi)
 
 
 class IntegrationError(RuntimeError):
@@ -190,6 +205,8 @@ class ExactFrequencyTrapezoidal:
         """[s] of motion after which the modal correction is computed again."""
         self.cutoff = CUTOFF
         """omega h [rad] from which a mode is not resolved (damped, not turned exactly)."""
+        self.resolved_bandwidth = RESOLVED_BANDWIDTH
+        """[rad/s] from which a mode is not resolved at any step (inf: the cutoff alone decides)."""
         self.mode_tracking_interval = MODE_TRACKING_INTERVAL
         """[s] of motion after which the resolved modes are tracked to the configuration between refreshes."""
         self.articulated = len(motion.independent) >= ARTICULATED_FROM
@@ -206,7 +223,7 @@ class ExactFrequencyTrapezoidal:
     def settings(self) -> StepSettings:
         """The method and its stopping rules in the layout of the compiled kernels."""
         return StepSettings(self.evaluations, self.tolerance, self.max_iterations, PROJECTION_TOLERANCE,
-                            self.refresh_interval, self.cutoff, UNRESOLVED_DAMPING,
+                            self.refresh_interval, self.cutoff, self.resolved_bandwidth, UNRESOLVED_DAMPING,
                             self.mode_tracking_interval, self.modal, self.articulated, self.subspace_refresh)
 
     def _fresh(self) -> ModalCorrection:
