@@ -47,8 +47,9 @@ The converged run is scipy's DOP853 (rtol 1e-10) on the same equations (``simula
     largest distance over 10, 30 and 60 s from two converged runs at 0.125 ms: the full model's, which resolves
     every mode (its own distance from the cached DOP853 run over 10 s printed first), and the one of the modes the
     integrator resolves (below the bandwidth: the limit a shrinking step converges to); compared every 6 ms, on the
-    times both reach (every 30 ms at 0.3125 ms); for the integrator as it is, so with the converged Newton
-    iteration, without the resolved bandwidth (the cutoff alone), and, when --cutoff, --mode-tracking or
+    times both reach (every 30 ms at 0.3125 ms), and the energy's mean over 50-60 s less that over 5-15 s (no drive
+    torque after 1 s, no dampers, fixed constraints after 5 s); for the integrator as it is, so with the converged
+    Newton iteration, without the resolved bandwidth (the cutoff alone), and, when --cutoff, --mode-tracking or
     --bandwidth change it, with the package's defaults.  0.3 ms is the one step whose grid misses the drive
     torque's end at t = 1 s (a cut step there, and a new step size twice).
 13. [refined] (not by default) The refined cranes, n_rfe = 24 and 48 (the iteration matrix solved by the
@@ -517,10 +518,12 @@ DRIFT_STEPS = (0.5e-3, 0.4e-3, 0.3125e-3, 0.3e-3, 1 / 3500, 0.25e-3, 0.2e-3)
 
 def drift_run(scenario: Scenario, h: float, duration: float, cutoff: float | None = None,
               converged: bool = False, mode_tracking: float | None = None,
-              resolved_bandwidth: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+              resolved_bandwidth: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """E's positions on the DRIFT_GRID times the steps reach over ``duration`` at step h (and their grid indices),
     resolving modes below omega h = ``cutoff`` and ``resolved_bandwidth`` [rad/s] and tracking them every
-    ``mode_tracking`` [s] if given, with the converged Newton iteration if ``converged``."""
+    ``mode_tracking`` [s] if given, with the converged Newton iteration if ``converged``; and the energy's drift
+    [J], its mean over the last 10 s less that over 5-15 s (on the grid: no drive torque after 1 s, no dampers,
+    fixed constraints after 5 s: it must stay)."""
     q0 = scenario.equilibrium.q
     stepper = MotionStepper(scenario.motion, 0.0, q0, np.zeros_like(q0), h, every_row=False,
                             **({"tolerance": 1e-10} if converged else {}))
@@ -530,14 +533,19 @@ def drift_run(scenario: Scenario, h: float, duration: float, cutoff: float | Non
         stepper.integrator.mode_tracking_interval = mode_tracking
     if resolved_bandwidth is not None:
         stepper.integrator.resolved_bandwidth = resolved_bandwidth
-    grid, positions = [], []
+    grid, positions, windows = [], [], {(5.0, 15.0): [], (duration - 10.0, duration): []}
     while stepper.state.t < duration - 1e-9:
         rows = stepper.advance_until(min(stepper.state.t + 1.0, duration))
         k = np.round(rows.t / DRIFT_GRID)
         on_grid = np.abs(rows.t - k * DRIFT_GRID) < 1e-9
         grid.append(k[on_grid].astype(int))
         positions.append(rows.ee_position[on_grid])
-    return np.concatenate(grid), np.concatenate(positions)
+        for (a, b), energies in windows.items():
+            for i in np.flatnonzero(on_grid & (rows.t > a) & (rows.t < b)):
+                solution = scenario.motion.solve(rows.t[i], rows.q[i], rows.qd[i])
+                energies.append(solution.kinetic_energy + solution.potential_energy)
+    early, late = (np.mean(energies) for energies in windows.values())
+    return np.concatenate(grid), np.concatenate(positions), late - early
 
 
 PACKAGE_CUTOFF, PACKAGE_MODE_TRACKING = integration.CUTOFF, integration.MODE_TRACKING_INTERVAL
@@ -564,8 +572,8 @@ def drift_references(scenario: Scenario, duration: float, cache: Path) -> dict[s
     print(f"[drift] the full model's 0.125 ms run against DOP853 (rtol 1e-10) over 10 s: E {ee:.1e} m raw, "
           f"{ee_slow:.1e} m in the controller band", flush=True)
     full = drift_run(scenario, 0.125e-3, duration, cutoff=DRIFT_REFERENCE_CUTOFF, converged=True,
-                     mode_tracking=math.inf, resolved_bandwidth=math.inf)
-    limit = drift_run(scenario, 0.125e-3, duration, converged=True)
+                     mode_tracking=math.inf, resolved_bandwidth=math.inf)[:2]
+    limit = drift_run(scenario, 0.125e-3, duration, converged=True)[:2]
     return {"the full model's": full,
             f"its own limit's (modes below {resolved_below_now(0.125e-3):.0f} Hz)": limit}
 
@@ -601,7 +609,7 @@ def step_drift(params: CraneDescription, cache: Path, duration: float = 60.0) ->
     for h in DRIFT_STEPS:
         for name, variant in variants:
             start = time.perf_counter()
-            grid, positions = drift_run(scenario, h, duration, **variant)
+            grid, positions, energy_drift = drift_run(scenario, h, duration, **variant)
             worst = []
             for reference_grid, reference in references.values():
                 common, here, there = np.intersect1d(grid, reference_grid, return_indices=True)
@@ -611,6 +619,7 @@ def step_drift(params: CraneDescription, cache: Path, duration: float = 60.0) ->
                                         if span <= duration))
             print(f"[drift] h={h * 1e3:.4f} ms, {name}: E's largest distance over 10 / 30 / 60 s from "
                   + "; from ".join(f"{label} 0.125 ms run {w} m" for label, w in zip(references, worst, strict=True))
+                  + f"; energy over the last 10 s less over 5-15 s {energy_drift:+.4f} J"
                   + f" ({time.perf_counter() - start:.0f} s wall)", flush=True)
 
 
