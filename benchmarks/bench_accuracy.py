@@ -79,7 +79,7 @@ from scipy.integrate import quad
 from scipy.signal import butter, sosfiltfilt
 
 from crane_reference.analysis.modal import linearise, modal_analysis, modes_at
-from crane_reference.dynamics.modal_correction import cutoff_frequency, iteration_factor
+from crane_reference.dynamics.modal_correction import iteration_factor
 from crane_reference.dynamics.step import first_iterate, predicted_accelerations, step_residual
 from crane_reference.model.config import load_config
 from crane_reference.model.description import CraneDescription
@@ -533,18 +533,19 @@ def drift_run(scenario: Scenario, h: float, duration: float, cutoff: float | Non
         stepper.integrator.mode_tracking_interval = mode_tracking
     if resolved_bandwidth is not None:
         stepper.integrator.resolved_bandwidth = resolved_bandwidth
-    grid, positions, windows = [], [], {(5.0, 15.0): [], (duration - 10.0, duration): []}
+    grid, positions = [], []
+    windows, energies = ((5.0, 15.0), (duration - 10.0, duration)), ([], [])
     while stepper.state.t < duration - 1e-9:
         rows = stepper.advance_until(min(stepper.state.t + 1.0, duration))
         k = np.round(rows.t / DRIFT_GRID)
         on_grid = np.abs(rows.t - k * DRIFT_GRID) < 1e-9
         grid.append(k[on_grid].astype(int))
         positions.append(rows.ee_position[on_grid])
-        for (a, b), energies in windows.items():
+        for (a, b), window in zip(windows, energies, strict=True):
             for i in np.flatnonzero(on_grid & (rows.t > a) & (rows.t < b)):
                 solution = scenario.motion.solve(rows.t[i], rows.q[i], rows.qd[i])
-                energies.append(solution.kinetic_energy + solution.potential_energy)
-    early, late = (np.mean(energies) for energies in windows.values())
+                window.append(solution.kinetic_energy + solution.potential_energy)
+    early, late = (np.mean(window) for window in energies)
     return np.concatenate(grid), np.concatenate(positions), late - early
 
 
@@ -557,7 +558,7 @@ DRIFT_REFERENCE_CUTOFF = 0.8 * math.pi
 DOP853 resolves every mode (not tracked: its modal correction is computed afresh every REFRESH_INTERVAL)."""
 
 
-def drift_references(scenario: Scenario, duration: float, cache: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+def drift_references(scenario: Scenario, duration: float, cache: Path) -> dict[str, list[np.ndarray]]:
     """[drift] The converged 0.125 ms runs on the DRIFT_GRID, by name: the full model's (every mode resolved; its own
     distance from the cached DOP853 run over that run's 10 s printed, errors(): raw and controller band), and the
     one of the modes the integrator resolves as it is (the bandwidth, the cutoff at 0.125 ms and the mode tracking
@@ -571,16 +572,23 @@ def drift_references(scenario: Scenario, duration: float, cache: Path) -> dict[s
     _, _, ee, ee_slow = errors(reference_run(scenario.params, 10.0, cache, "undamped"), check)
     print(f"[drift] the full model's 0.125 ms run against DOP853 (rtol 1e-10) over 10 s: E {ee:.1e} m raw, "
           f"{ee_slow:.1e} m in the controller band", flush=True)
-    full = drift_run(scenario, 0.125e-3, duration, cutoff=DRIFT_REFERENCE_CUTOFF, converged=True,
-                     mode_tracking=math.inf, resolved_bandwidth=math.inf)[:2]
-    limit = drift_run(scenario, 0.125e-3, duration, converged=True)[:2]
-    return {"the full model's": full,
-            f"its own limit's (modes below {resolved_below_now(0.125e-3):.0f} Hz)": limit}
+    *full, full_energy = drift_run(scenario, 0.125e-3, duration, cutoff=DRIFT_REFERENCE_CUTOFF, converged=True,
+                                   mode_tracking=math.inf, resolved_bandwidth=math.inf)
+    *limit, limit_energy = drift_run(scenario, 0.125e-3, duration, converged=True)
+    label = f"the bandwidth's limit (modes below {integration.resolved_below(0.125e-3):.0f} Hz)"
+    print(f"[drift] {label} against the full model over 10 / 30 / 60 s: {_largest_distances(limit, full, duration)} "
+          f"m; energy over the last 10 s less over 5-15 s {limit_energy:+.4f} J (the full model's "
+          f"{full_energy:+.4f} J)", flush=True)
+    return {"the full model's": full, label: limit}
 
 
-def resolved_below_now(step: float) -> float:
-    """[Hz] the integrators this run makes resolve below at ``step`` (after --cutoff and --bandwidth)."""
-    return cutoff_frequency(step, integration.CUTOFF, integration.RESOLVED_BANDWIDTH) / (2.0 * math.pi)
+def _largest_distances(run, reference, duration: float) -> str:
+    """E's largest distance of ``run`` from ``reference`` (each grid indices and E's positions there) over 10 / 30 /
+    60 s, on the grid times both reach."""
+    common, here, there = np.intersect1d(run[0], reference[0], return_indices=True)
+    distance = np.linalg.norm(run[1][here] - reference[1][there], axis=1)
+    t = common * DRIFT_GRID
+    return " / ".join(f"{distance[t <= span].max():.1e}" for span in (10.0, 30.0, 60.0) if span <= duration)
 
 
 def _tracking(interval: float) -> str:
@@ -598,8 +606,9 @@ def step_drift(params: CraneDescription, cache: Path, duration: float = 60.0) ->
     interval = integration.MODE_TRACKING_INTERVAL
     variants = [(f"as it is (cutoff {integration.CUTOFF / math.pi:g} pi, bandwidth "
                  f"{integration.RESOLVED_BANDWIDTH / (2 * math.pi):g} Hz, modes {_tracking(interval)})", {}),
-                ("as it is, converged Newton", {"converged": True}),
-                ("without the bandwidth", {"resolved_bandwidth": math.inf})]
+                ("as it is, converged Newton", {"converged": True})]
+    if math.isfinite(integration.RESOLVED_BANDWIDTH):
+        variants.append(("without the bandwidth", {"resolved_bandwidth": math.inf}))
     if (integration.CUTOFF, interval, integration.RESOLVED_BANDWIDTH) != (PACKAGE_CUTOFF, PACKAGE_MODE_TRACKING,
                                                                           PACKAGE_BANDWIDTH):
         variants.append((f"the package's default: cutoff {PACKAGE_CUTOFF / math.pi:g} pi, bandwidth "
@@ -609,14 +618,8 @@ def step_drift(params: CraneDescription, cache: Path, duration: float = 60.0) ->
     for h in DRIFT_STEPS:
         for name, variant in variants:
             start = time.perf_counter()
-            grid, positions, energy_drift = drift_run(scenario, h, duration, **variant)
-            worst = []
-            for reference_grid, reference in references.values():
-                common, here, there = np.intersect1d(grid, reference_grid, return_indices=True)
-                distance = np.linalg.norm(positions[here] - reference[there], axis=1)
-                t = common * DRIFT_GRID
-                worst.append(" / ".join(f"{distance[t <= span].max():.1e}" for span in (10.0, 30.0, 60.0)
-                                        if span <= duration))
+            *run, energy_drift = drift_run(scenario, h, duration, **variant)
+            worst = [_largest_distances(run, reference, duration) for reference in references.values()]
             print(f"[drift] h={h * 1e3:.4f} ms, {name}: E's largest distance over 10 / 30 / 60 s from "
                   + "; from ".join(f"{label} 0.125 ms run {w} m" for label, w in zip(references, worst, strict=True))
                   + f"; energy over the last 10 s less over 5-15 s {energy_drift:+.4f} J"

@@ -15,8 +15,9 @@ overlap, linear detrend per window), one-sided PSD, resolution df = fs / nperseg
 Agreement with the modal analysis (:mod:`crane_reference.analysis.modal`): the constrained modes are computed at
 states of the run every ``modal_interval`` s (linearised with the state's velocities).  The crane's
 configuration changes as E goes round the ellipse, so mode k sweeps a band [min_t f_k, max_t f_k].  The
-integrator (:mod:`crane_reference.motion.integration`) reproduces a mode at its own frequency when omega h
-is below its cutoff and damps the modes above, so only the resolved modes explain peaks.  A spectral peak
+integrator (:mod:`crane_reference.motion.integration`) reproduces a mode at its own frequency below
+:func:`~crane_reference.motion.integration.resolved_below` and damps the modes above, so only the resolved modes
+explain peaks.  A spectral peak
 agrees with mode k if it lies in k's band widened by the tolerance
 
     delta = df + 0.01 f,

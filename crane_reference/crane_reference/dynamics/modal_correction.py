@@ -137,14 +137,15 @@ def _symmetric(A):
 def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: ChainData, settings: StepSettings):
     """The modal terms of the step h at a configuration of reduced mass M_r = B^T M B (see
     :mod:`crane_reference.motion.integration`), from the full eigenproblem K_r phi = omega^2 M_r phi,
-    Phi^T M_r Phi = I (K_r :func:`reduced_stiffness`).  A mode with omega below omega_c (:func:`cutoff_frequency`)
-    gets the inertia and damping corrections c and e that map its roots lambda of lambda^2 + d lambda + omega^2
+    Phi^T M_r Phi = I (K_r :func:`reduced_stiffness`).  A mode with omega below omega_c
+    (:func:`cutoff_angular_frequency`) gets the inertia and damping corrections c and e that map its roots lambda of
+    lambda^2 + d lambda + omega^2
     (d = phi^T D_r phi, the physical modal damping) exactly: the trapezoidal rule on (1 - c) a + (d + e) v +
     omega^2 x has the roots lambda_hat = (2 / h) tanh(lambda h / 2), so 1 - c = omega^2 / (lambda_hat_1
     lambda_hat_2) and d + e = -(1 - c) (lambda_hat_1 + lambda_hat_2) (undamped: c = 1 - ((omega h / 2) /
     tan(omega h / 2))^2, e = 0); a mode at or above omega_c gets the damping
     e = beta omega^2, beta = 2 zeta / omega_c (damping ratio zeta omega / omega_c: ``settings.unresolved_damping``
-    zeta at the cutoff, stiffness-proportional, so that the unresolved part of D_u is
+    zeta at omega_c, stiffness-proportional, so that the unresolved part of D_u is
     beta (K_r - M_r Phi_r diag(omega_r^2) Phi_r^T M_r), K_r less a part of the resolved modes' rank).  In the
     independent coordinates Delta M_r = M_r Phi diag(c) Phi^T M_r and likewise D_u with e (neither acts on a
     motion no spring resists: Phi^T M_r = diag(omega^-2) Phi^T K_r), both from the resolved modes alone
@@ -158,8 +159,8 @@ def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: Cha
     stiffness = reduced_stiffness(drive, partition, chain)
     omega_squared, modes, on_modes = _generalized_modes(stiffness, reduced_mass)
     resolved = 0
-    cutoff = cutoff_frequency(h, settings.cutoff, settings.resolved_bandwidth)
-    while resolved < n_ic and np.sqrt(max(omega_squared[resolved], 0.0)) < cutoff:
+    omega_c = cutoff_angular_frequency(h, settings.cutoff, settings.resolved_bandwidth)
+    while resolved < n_ic and np.sqrt(max(omega_squared[resolved], 0.0)) < omega_c:
         resolved += 1
     c, e = _resolved_terms(omega_squared[:resolved], _modal_damping(modes, resolved, partition, chain), h)
     on_resolved = np.ascontiguousarray(on_modes[:, :resolved])
@@ -173,7 +174,8 @@ among them is seen (the count changes, and the full eigenproblem counts again), 
 together they set how fast the resolved ones converge."""
 
 REFRESH_SHIFT = 0.3
-"""The shift s of :func:`refreshed_correction`'s iteration as a fraction of omega_c^2 (:func:`cutoff_frequency`)."""
+"""The shift s of :func:`refreshed_correction`'s iteration as a fraction of omega_c^2
+(:func:`cutoff_angular_frequency`)."""
 
 REFRESH_TOLERANCE = 1e-5
 """The largest residual (K_r - omega^2 M_r) phi, relative to (omega^2 + s) M_r phi, that :func:`refreshed_correction`
@@ -208,7 +210,7 @@ def refreshed_correction(reduced_mass, S, Hw, B, correction: ModalCorrection, h,
     count = r + GUARD_MODES
     if r == 0 or count >= n_ic or partition.servo or not settings.modal:
         return modal_correction(reduced_mass, h, t, drive, partition, chain, settings)
-    cutoff_squared = cutoff_frequency(h, settings.cutoff, settings.resolved_bandwidth) ** 2
+    cutoff_squared = cutoff_angular_frequency(h, settings.cutoff, settings.resolved_bandwidth) ** 2
     shift = REFRESH_SHIFT * cutoff_squared
     factor = constrained_factor(S, Hw, constraint_rows(B, partition), 1.0 / shift, 0.0,
                                 reduced_drive_spring(drive, partition, chain) / shift, chain)
@@ -241,7 +243,7 @@ def refreshed_correction(reduced_mass, S, Hw, B, correction: ModalCorrection, h,
 
 
 @njit(cache=True, nogil=True)
-def cutoff_frequency(h, cutoff, resolved_bandwidth):
+def cutoff_angular_frequency(h, cutoff, resolved_bandwidth):
     """omega_c = min(``cutoff`` / h, ``resolved_bandwidth``) [rad/s]: the step h resolves the modes below it (see
     :mod:`crane_reference.motion.integration`)."""
     return min(cutoff / h, resolved_bandwidth)
@@ -249,9 +251,9 @@ def cutoff_frequency(h, cutoff, resolved_bandwidth):
 
 @njit(cache=True, nogil=True)
 def unresolved_beta(h, settings: StepSettings):
-    """beta = 2 zeta / omega_c [s] (omega_c :func:`cutoff_frequency`, zeta = ``settings.unresolved_damping``): an
-    unresolved mode's damping e = beta omega^2 (:func:`modal_correction`)."""
-    return 2.0 * settings.unresolved_damping / cutoff_frequency(h, settings.cutoff, settings.resolved_bandwidth)
+    """beta = 2 zeta / omega_c [s] (omega_c :func:`cutoff_angular_frequency`, zeta =
+    ``settings.unresolved_damping``): an unresolved mode's damping e = beta omega^2 (:func:`modal_correction`)."""
+    return 2.0 * settings.unresolved_damping / cutoff_angular_frequency(h, settings.cutoff, settings.resolved_bandwidth)
 
 
 @njit(cache=True, nogil=True)

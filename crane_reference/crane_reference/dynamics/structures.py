@@ -70,10 +70,10 @@ class StepSettings(NamedTuple):
     Newton evaluations per step, then until the last velocity correction is at most ``tolerance`` [rad/s or
     m/s], at most ``max_iterations``; ``projection_tolerance`` [rad] of Newton on the position constraints;
     the modal correction is computed again after ``refresh_interval`` [s] of motion (and for a new step
-    size); modes at or above omega_c = min(``cutoff`` / h, ``resolved_bandwidth``) [rad/s]
-    (:func:`~crane_reference.dynamics.modal_correction.cutoff_frequency`) are not resolved by the step and get the
-    damping ratio ``unresolved_damping`` omega / omega_c (stiffness-proportional: ``unresolved_damping`` at the
-    cutoff); between, the resolved modes are tracked to the configuration after every
+    size); modes at or above omega_c = min(``cutoff`` [rad] / h, ``resolved_bandwidth`` [rad/s])
+    (:func:`~crane_reference.dynamics.modal_correction.cutoff_angular_frequency`) are not resolved by the step and
+    get the damping ratio ``unresolved_damping`` omega / omega_c (stiffness-proportional: ``unresolved_damping`` at
+    omega_c); between, the resolved modes are tracked to the configuration after every
     ``mode_tracking_interval`` [s] of motion (:func:`~crane_reference.dynamics.modal_correction.tracked_correction`;
     0: every step, inf: never); without ``modal`` there is no modal correction (the plain trapezoidal rule, for
     comparison); with ``articulated`` the Newton iteration matrix is solved by the articulated-body recursion and

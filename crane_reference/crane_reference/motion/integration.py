@@ -35,22 +35,21 @@ for lambda_hat = (2 / h) tanh(lambda h / 2), and a mass and a damping correction
 roots (:func:`crane_reference.dynamics.modal_correction.modal_correction`): each damped mode turns and decays per
 step as the model's does.
 
-Modes with omega h at or above the cutoff (0.8 pi: the output sampled every step cannot show them; at h = 1 ms
-those above 400 Hz) cannot be turned exactly (tan has a pole at pi) and are not resolved, nor are modes above the
-resolved bandwidth (:data:`RESOLVED_BANDWIDTH`: those the node's step resolves, up to 800 Hz): a step h resolves
-the modes below omega_c = min(cutoff / h, bandwidth)
-(:func:`~crane_reference.dynamics.modal_correction.cutoff_frequency`).  The velocities of a resolved mode come out
-larger than the exact ones by tan(omega h / 2) / (omega h / 2) (2.4 at 0.8 pi, 1.08 at 0.3 pi).  With the bandwidth,
-every step below the node's resolves the node's modes, and a finer step converges to the same model of them; with
-the cutoff alone, each finer step resolves new modes close to omega h = pi, which drifts the slow motion's phase
-along the task over a minute by an amount erratic in h (docs/performance.md, "Over a minute, by step").  An infinite
-bandwidth resolves every mode below the cutoff (a study of the model's high modes).  The unresolved modes get
-D_u = M_r Phi_u diag(beta omega^2) Phi_u^T M_r with beta = 2 zeta / omega_c, which damps
-each with the ratio zeta omega / omega_c, zeta = 1 at the cutoff and more above it (they keep their static
-deflection), so that no such mode rings at a frequency it does not have.  Being stiffness-proportional, that part
-is beta (K_r - M_r Phi_r diag(omega_r^2) Phi_r^T M_r): the constant springs less a term of the resolved modes'
-rank, which an articulated-body solve of the iteration matrix can take (docs/performance.md, "The articulated
-iteration matrix").
+Modes with omega h at or above the cutoff (0.8 pi: the output sampled every step cannot show them; at h = 1 ms those
+above 400 Hz) cannot be turned exactly (tan has a pole at pi) and are not resolved, nor are modes above the resolved
+bandwidth (:data:`RESOLVED_BANDWIDTH`: those the node's step resolves, up to 800 Hz): a step h resolves the modes
+below omega_c = min(cutoff / h, bandwidth)
+(:func:`~crane_reference.dynamics.modal_correction.cutoff_angular_frequency`). The velocities of a resolved mode
+come out larger than the exact ones by tan(omega h / 2) / (omega h / 2) (2.4 at 0.8 pi, 1.08 at 0.3 pi). With the
+bandwidth, every step below the node's resolves the node's modes, and a finer step converges to the same model of
+them; with the cutoff alone, each finer step resolves new modes close to omega h = pi, which drifts the slow
+motion's phase along the task over a minute by an amount erratic in h (docs/performance.md, "Over a minute, by
+step"). An infinite bandwidth resolves every mode below the cutoff (a study of the model's high modes). The
+unresolved modes get D_u = M_r Phi_u diag(beta omega^2) Phi_u^T M_r with beta = 2 zeta / omega_c, which damps each
+with the ratio zeta omega / omega_c, zeta = 1 at omega_c and more above it (they keep their static deflection), so
+that no such mode rings at a frequency it does not have. Being stiffness-proportional, that part is beta (K_r - M_r
+Phi_r diag(omega_r^2) Phi_r^T M_r): the constant springs less a term of the resolved modes' rank, which an
+articulated-body solve of the iteration matrix can take (docs/performance.md, "The articulated iteration matrix").
 
 M_r moves with the configuration.  Delta M_r and D_u are computed afresh every :data:`REFRESH_INTERVAL` of motion:
 from the eigenproblem of the n_ic x n_ic reduced matrices, or, from :data:`ARTICULATED_FROM` independent coordinates,
@@ -99,7 +98,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..dynamics.modal_correction import corrected_accelerations, cutoff_frequency, no_correction
+from ..dynamics.modal_correction import corrected_accelerations, cutoff_angular_frequency, no_correction
 from ..dynamics.runs import integration_run
 from ..dynamics.structures import (
     CONSTRAINTS_UNSOLVABLE,
@@ -147,7 +146,7 @@ factored densely, O(n^3): where the articulated one is the cheaper (docs/perform
 iteration matrix")."""
 
 UNRESOLVED_DAMPING = 1.0
-"""Damping ratio given to a mode the step does not resolve at the cutoff; above it the ratio grows as omega."""
+"""Damping ratio given to a mode the step does not resolve at omega_c; above it the ratio grows as omega."""
 
 METHOD = "trapezoidal rule with exact modal frequencies (crane_reference.motion.integration)"
 """How reports name the method."""
@@ -156,7 +155,7 @@ METHOD = "trapezoidal rule with exact modal frequencies (crane_reference.motion.
 def resolved_below(step: float) -> float:
     """[Hz]: the package's integrator at ``step`` [s] turns the modes below this at their own frequencies and damps
     those above (:data:`CUTOFF`, :data:`RESOLVED_BANDWIDTH`)."""
-    return cutoff_frequency(step, CUTOFF, RESOLVED_BANDWIDTH) / (2.0 * math.pi)
+    return cutoff_angular_frequency(step, CUTOFF, RESOLVED_BANDWIDTH) / (2.0 * math.pi)
 
 
 class IntegrationError(RuntimeError):
