@@ -639,7 +639,7 @@ def main() -> None:
                         help="sections to run")
     parser.add_argument("--hours", type=float, default=1.0, help="[long]: hours of motion")
     parser.add_argument("--cutoff", type=float, help="omega h [pi rad] from which every integrator made damps a mode "
-                        "instead of resolving it (default: integration.CUTOFF, 0.8)")
+                        "instead of resolving it (default: integration.CUTOFF, 0.8; the bandwidth stays: --bandwidth)")
     parser.add_argument("--bandwidth", type=float, help="[Hz] from which every integrator made damps a mode at any "
                         "step (inf: the cutoff alone; default: integration.RESOLVED_BANDWIDTH, 800 Hz)")
     parser.add_argument("--refresh", type=float, help="[s] of motion after which every integrator made computes its "
