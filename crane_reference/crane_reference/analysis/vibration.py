@@ -17,8 +17,7 @@ states of the run every ``modal_interval`` s (linearised with the state's veloci
 configuration changes as E goes round the ellipse, so mode k sweeps a band [min_t f_k, max_t f_k].  The
 integrator (:mod:`crane_reference.motion.integration`) reproduces a mode at its own frequency below
 :func:`~crane_reference.motion.integration.resolved_below` and damps the modes above, so only the resolved modes
-explain peaks.  A spectral peak
-agrees with mode k if it lies in k's band widened by the tolerance
+explain peaks.  A spectral peak agrees with mode k if it lies in k's band widened by the tolerance
 
     delta = df + 0.01 f,
 

@@ -136,19 +136,17 @@ def _symmetric(A):
 @njit(cache=True, nogil=True)
 def modal_correction(reduced_mass, h, t, drive, partition: Partition, chain: ChainData, settings: StepSettings):
     """The modal terms of the step h at a configuration of reduced mass M_r = B^T M B (see
-    :mod:`crane_reference.motion.integration`), from the full eigenproblem K_r phi = omega^2 M_r phi,
-    Phi^T M_r Phi = I (K_r :func:`reduced_stiffness`).  A mode with omega below omega_c
-    (:func:`cutoff_angular_frequency`) gets the inertia and damping corrections c and e that map its roots lambda of
-    lambda^2 + d lambda + omega^2
-    (d = phi^T D_r phi, the physical modal damping) exactly: the trapezoidal rule on (1 - c) a + (d + e) v +
-    omega^2 x has the roots lambda_hat = (2 / h) tanh(lambda h / 2), so 1 - c = omega^2 / (lambda_hat_1
-    lambda_hat_2) and d + e = -(1 - c) (lambda_hat_1 + lambda_hat_2) (undamped: c = 1 - ((omega h / 2) /
-    tan(omega h / 2))^2, e = 0); a mode at or above omega_c gets the damping
-    e = beta omega^2, beta = 2 zeta / omega_c (damping ratio zeta omega / omega_c: ``settings.unresolved_damping``
-    zeta at omega_c, stiffness-proportional, so that the unresolved part of D_u is
-    beta (K_r - M_r Phi_r diag(omega_r^2) Phi_r^T M_r), K_r less a part of the resolved modes' rank).  In the
-    independent coordinates Delta M_r = M_r Phi diag(c) Phi^T M_r and likewise D_u with e (neither acts on a
-    motion no spring resists: Phi^T M_r = diag(omega^-2) Phi^T K_r), both from the resolved modes alone
+    :mod:`crane_reference.motion.integration`), from the full eigenproblem K_r phi = omega^2 M_r phi, Phi^T M_r Phi
+    = I (K_r :func:`reduced_stiffness`).  A mode with omega below omega_c (:func:`cutoff_angular_frequency`) gets
+    the inertia and damping corrections c and e that map its roots lambda of lambda^2 + d lambda + omega^2 (d =
+    phi^T D_r phi, the physical modal damping) exactly: the trapezoidal rule on (1 - c) a + (d + e) v + omega^2 x
+    has the roots lambda_hat = (2 / h) tanh(lambda h / 2), so 1 - c = omega^2 / (lambda_hat_1 lambda_hat_2) and d +
+    e = -(1 - c) (lambda_hat_1 + lambda_hat_2) (undamped: c = 1 - ((omega h / 2) / tan(omega h / 2))^2, e = 0); a
+    mode at or above omega_c gets the damping e = beta omega^2, beta = 2 zeta / omega_c (damping ratio zeta omega /
+    omega_c: ``settings.unresolved_damping`` zeta at omega_c, stiffness-proportional, so that the unresolved part of
+    D_u is beta (K_r - M_r Phi_r diag(omega_r^2) Phi_r^T M_r), K_r less a part of the resolved modes' rank).  In the
+    independent coordinates Delta M_r = M_r Phi diag(c) Phi^T M_r and likewise D_u with e (neither acts on a motion
+    no spring resists: Phi^T M_r = diag(omega^-2) Phi^T K_r), both from the resolved modes alone
     (:func:`_terms_of_resolved_modes`).  Servo-constraints (P = E_ic: no symmetric reduced mass) get none, and so
     does the plain trapezoidal rule (``settings.modal`` False)."""
     n_ic = partition.independent.size

@@ -39,15 +39,15 @@ Modes with omega h at or above the cutoff (0.8 pi: the output sampled every step
 above 400 Hz) cannot be turned exactly (tan has a pole at pi) and are not resolved, nor are modes above the resolved
 bandwidth (:data:`RESOLVED_BANDWIDTH`: those the node's step resolves, up to 800 Hz): a step h resolves the modes
 below omega_c = min(cutoff / h, bandwidth)
-(:func:`~crane_reference.dynamics.modal_correction.cutoff_angular_frequency`). The velocities of a resolved mode
-come out larger than the exact ones by tan(omega h / 2) / (omega h / 2) (2.4 at 0.8 pi, 1.08 at 0.3 pi). With the
+(:func:`~crane_reference.dynamics.modal_correction.cutoff_angular_frequency`).  The velocities of a resolved mode
+come out larger than the exact ones by tan(omega h / 2) / (omega h / 2) (2.4 at 0.8 pi, 1.08 at 0.3 pi).  With the
 bandwidth, every step below the node's resolves the node's modes, and a finer step converges to the same model of
 them; with the cutoff alone, each finer step resolves new modes close to omega h = pi, which drifts the slow
 motion's phase along the task over a minute by an amount erratic in h (docs/performance.md, "Over a minute, by
-step"). An infinite bandwidth resolves every mode below the cutoff (a study of the model's high modes). The
+step").  An infinite bandwidth resolves every mode below the cutoff (a study of the model's high modes).  The
 unresolved modes get D_u = M_r Phi_u diag(beta omega^2) Phi_u^T M_r with beta = 2 zeta / omega_c, which damps each
 with the ratio zeta omega / omega_c, zeta = 1 at omega_c and more above it (they keep their static deflection), so
-that no such mode rings at a frequency it does not have. Being stiffness-proportional, that part is beta (K_r - M_r
+that no such mode rings at a frequency it does not have.  Being stiffness-proportional, that part is beta (K_r - M_r
 Phi_r diag(omega_r^2) Phi_r^T M_r): the constant springs less a term of the resolved modes' rank, which an
 articulated-body solve of the iteration matrix can take (docs/performance.md, "The articulated iteration matrix").
 

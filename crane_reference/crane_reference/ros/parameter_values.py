@@ -20,7 +20,8 @@ class NodeParameterValues:
     """Crane model variant: 'flexible' (each flexible link cut into its rigid finite elements) or 'rigid' (one
     element each) (read-only)."""
     integrator_step: float
-    """[s] Step of the integrator (read-only)."""
+    """[s] Step of the integrator; a step resolves the modes below min(0.8 pi / step, 2 pi 800 Hz) and damps the
+    others (read-only)."""
     publish_rate: int
     """[Hz] Rate of joint_states and ~/end_effector_pose; sample k is stamped start + k / publish_rate
     (read-only)."""

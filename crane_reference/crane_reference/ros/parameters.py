@@ -46,8 +46,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "'' loads the packaged default", empty_allowed=True, read_only=True),
     ParameterSpec("model", "string", "flexible", "Crane model variant: 'flexible' (each flexible link cut into its "
                   "rigid finite elements) or 'rigid' (one element each)", choices=VARIANTS, read_only=True),
-    ParameterSpec("integrator.step", "double", ONLINE_STEP, "Step of the integrator", "s",
-                  (1e-5, 1e-2), read_only=True),
+    ParameterSpec("integrator.step", "double", ONLINE_STEP, "Step of the integrator; a step resolves the modes below "
+                  "min(0.8 pi / step, 2 pi 800 Hz) and damps the others", "s", (1e-5, 1e-2), read_only=True),
     ParameterSpec("publish_rate", "integer", 100, "Rate of joint_states and ~/end_effector_pose; sample k is "
                   "stamped start + k / publish_rate", "Hz", (1, MAX_PUBLISH_RATE), read_only=True),
     ParameterSpec("frame_id", "string", "world", "Frame of ~/end_effector_pose, ~/reference_preview and ~/markers "
