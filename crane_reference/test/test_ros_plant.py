@@ -277,7 +277,9 @@ def test_the_process_ends_with_0_on_a_signal(signal_number):
 def test_a_stopped_process_counts_the_periods_it_missed():
     """The plant's process stopped for about 0.5 s (SIGSTOP, as a machine too busy for it would leave it) at
     100 Hz in real time: the periods due meanwhile are missed, counted in /diagnostics' ``missed_ticks`` (the
-    stop's length over the period, less the one that runs at once on waking) at WARN, and the states go on."""
+    stop's length over the period, less the one that runs at once on waking) at WARN, and the states go on.  The
+    count before the stop is read once two reports in a row agree on it (periods missed while the plant starts are
+    reported up to a diagnostics period later)."""
     period = 0.01
     process = plant_process()
     context = rclpy.Context()
@@ -297,7 +299,11 @@ def test_a_stopped_process_counts_the_periods_it_missed():
                      what, timeout)
             assert process.poll() is None, process.communicate()[1]
 
-        spin_until(lambda: len(states) >= 20 and reports and "missed_ticks" in reports[-1][1], "states and a report")
+        def steady() -> bool:
+            counts = [values.get("missed_ticks") for _, values in reports[-2:]]
+            return len(states) >= 20 and len(counts) == 2 and counts[0] is not None and counts[0] == counts[1]
+
+        spin_until(steady, "states and two reports with the same count of missed periods")
         before = int(reports[-1][1]["missed_ticks"])
         stopped = time.monotonic()
         os.kill(process.pid, signal.SIGSTOP)
