@@ -10,12 +10,13 @@ the same run.
 1. [eval] Time of M(q) with h, gravity and E's kinematics, and of one full qdd from (8), at 24 DOF; the cost
    of calling a compiled function with the ChainData named tuple.
 2. [profile] Per crane of ``--rfe`` (default 6), the compiled cost of the parts of one step (timed in compiled
-   loops, also in ABA calls): the modal correction (an eigenproblem, every REFRESH_INTERVAL of motion), the same
-   refreshed by subspace iteration from the modes one REFRESH_INTERVAL before (at 1.01 s of the paper's task from
-   those at 1 s; the full eigenproblem where no guard mode fits), the tracking of its resolved modes (every
+   loops, also in ABA calls): M alone, the modal correction (an eigenproblem, every REFRESH_INTERVAL of motion), the
+   same refreshed by subspace iteration from the modes one REFRESH_INTERVAL before (at 1.01 s of the paper's task
+   from those at 1 s; the full eigenproblem where no guard mode fits), the tracking of its resolved modes (every
    MODE_TRACKING_INTERVAL), the iteration factor, per Newton evaluation a projection and a residual, a full
    evaluation (on the rows a caller reads) and what the node reads of a row (its effort and constraint distance, by
-   inverse dynamics: ``evaluated_rows``).
+   inverse dynamics: ``evaluated_rows``); beside ABA, in the same run, Pinocchio's counterparts of three of them:
+   inverse dynamics (RNEA: a Newton residual), the mass matrix (CRBA: M) and forward kinematics.
 3. [speed] Per case (rigid; flexible with n_rfe = 6, 12, 24): Pinocchio's ABA per call; at
    the node's default ``ONLINE_STEP`` and at 1 ms the steps alone per step (compiled runs of
    0.25 s, best of ``--repeats``), as a multiple of one ABA call and as a real-time factor, and with every
@@ -36,11 +37,12 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
-from common import aba_time, call_seconds, newton_iterations, run_times
+from common import aba_time, call_seconds, newton_iterations, pinocchio_times, run_times
 from numba import njit
 
 from crane_reference.dynamics.evaluation import accelerations_at, evaluate
 from crane_reference.dynamics.inertia import world_pseudo_inertias
+from crane_reference.dynamics.kinematics import forward_kinematics
 from crane_reference.dynamics.modal_correction import (
     iteration_factor,
     modal_correction,
@@ -50,7 +52,7 @@ from crane_reference.dynamics.modal_correction import (
 )
 from crane_reference.dynamics.projection import project_positions
 from crane_reference.dynamics.runs import evaluated_rows, integration_run
-from crane_reference.dynamics.step import newton_residual, refresh_inputs
+from crane_reference.dynamics.step import mass_at, newton_residual, refresh_inputs
 from crane_reference.dynamics.structures import Coefficients, StepSettings, StepStart
 from crane_reference.dynamics.terms import chain_terms, end_effector_jacobian, position_terms
 from crane_reference.model.config import load_config
@@ -156,6 +158,16 @@ def _repeat_position_terms(q, chain, n):
 
 
 @njit
+def _repeat_mass(q, chain, n):
+    T, S = forward_kinematics(q, chain.kinds, chain.axes, chain.origins)
+    Hw = world_pseudo_inertias(T, chain.body_joint, chain.body_H)
+    total = 0.0
+    for _ in range(n):
+        total += mass_at(S, Hw, chain)[0, 0]
+    return total
+
+
+@njit
 def _repeat_end_effector(q, chain, n):
     total = 0.0
     for _ in range(n):
@@ -241,6 +253,7 @@ def _repeat_read_row(q, qd, qdd, k, drives, partition, chain, n):
 
 PART_NAMES = {
     "position_terms": "M, gravity, E's Jacobian (position_terms)",
+    "mass": "M alone, from the frames (mass_at)",
     "kinematics": "E's position and Jacobian (kinematics only)",
     "projection": "projection on the position constraints",
     "residual": "Newton residual of (8) by inverse dynamics",
@@ -283,6 +296,7 @@ def part_calls(scenario: Scenario) -> list[tuple[str, Callable, tuple]]:
     reduced_mass = B.T @ acc.M @ B
     correction = modal_correction(reduced_mass, ONLINE_STEP, 0.0, drive, partition, chain, settings)
     return [("position_terms", _repeat_position_terms, (q, chain)),
+            ("mass", _repeat_mass, (q, chain)),
             ("kinematics", _repeat_end_effector, (q, chain)),
             ("projection", _repeat_projection, (off, k, motion.holonomic_dependent, chain)),
             ("residual", _repeat_residual, (q, qd, acc.qdd[partition.integrated], k, drive, partition, chain)),
@@ -315,9 +329,12 @@ def component_times(params: CraneDescription, rfe_count: int, repeat: int = 3000
     integrator's qdd; every REFRESH_INTERVAL of motion the modal correction."""
     scenario = Scenario(params.with_rfe_count(rfe_count), "flexible")
     partition = scenario.motion.partition
-    aba = aba_time(scenario)
+    peer = pinocchio_times(scenario)
+    aba = peer.aba
     print(f"[profile] n_rfe={rfe_count:2d} dof={scenario.model.dof:2d} n_ic={partition.independent.size:2d}: "
-          f"Pinocchio ABA {aba * 1e6:.2f} us/call")
+          f"Pinocchio ABA {aba * 1e6:.2f} us/call; its counterparts of the parts below, in ABA: inverse dynamics "
+          f"(RNEA) {peer.rnea / aba:.2f}, the mass matrix (CRBA) {peer.crba / aba:.2f}, forward kinematics "
+          f"{peer.forward_kinematics / aba:.2f}")
     for name, seconds in part_times(scenario, repeat).items():
         print(f"[profile] n_rfe={rfe_count:2d} {PART_NAMES[name]:<52} {seconds * 1e6:7.2f} us = "
               f"{seconds / aba:5.1f} ABA")

@@ -7,6 +7,7 @@ import math
 import os
 import time
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
@@ -45,21 +46,54 @@ def process_cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
 
 
-def aba_time(scenario: Scenario, repeat: int = 20000) -> float:
-    """Best per-call time [s] of Pinocchio's forward dynamics (ABA, called from Python) on the URDF that
-    crane-reference exports for the scenario's chain, at a random state (continuous joints as cos/sin)."""
-    import pinocchio as pin  # here: the other benchmarks need no Pinocchio
-    model = pin.buildModelFromXML(model_to_urdf(scenario.model))
-    data = model.createData()
-    rng = np.random.default_rng(0)
-    q, v, tau = pin.randomConfiguration(model), rng.normal(size=model.nv), rng.normal(size=model.nv)
-    best = math.inf
+class PinocchioTimes(NamedTuple):
+    """Best per-call times [s] of Pinocchio's algorithms, each called from Python at one random state: forward
+    dynamics (ABA, the unit of cost), inverse dynamics (RNEA), the joint-space mass matrix (CRBA) and the joints'
+    placements (forward kinematics)."""
+
+    aba: float
+    rnea: float
+    crba: float
+    forward_kinematics: float
+
+
+def _best_call(call: Callable[[], object], repeat: int) -> float:
+    """The best of 5 loops of ``repeat`` calls of ``call()``, per call [s]."""
+    fastest = math.inf
     for _ in range(5):
         start = time.perf_counter()
         for _ in range(repeat):
-            pin.aba(model, data, q, v, tau)
-        best = min(best, (time.perf_counter() - start) / repeat)
-    return best
+            call()
+        fastest = min(fastest, (time.perf_counter() - start) / repeat)
+    return fastest
+
+
+def _pinocchio_model(scenario: Scenario) -> tuple:
+    """Pinocchio's model and data of the URDF that crane-reference exports for the scenario's chain, and a random
+    state of it (continuous joints as cos/sin): q, v, tau."""
+    import pinocchio as pin  # here: the other benchmarks need no Pinocchio
+    model = pin.buildModelFromXML(model_to_urdf(scenario.model))
+    rng = np.random.default_rng(0)
+    return model, model.createData(), pin.randomConfiguration(model), rng.normal(size=model.nv), \
+        rng.normal(size=model.nv)
+
+
+def aba_time(scenario: Scenario, repeat: int = 20000) -> float:
+    """Best per-call time [s] of Pinocchio's forward dynamics (ABA, called from Python) on the URDF that
+    crane-reference exports for the scenario's chain, at a random state."""
+    import pinocchio as pin
+    model, data, q, v, tau = _pinocchio_model(scenario)
+    return _best_call(lambda: pin.aba(model, data, q, v, tau), repeat)
+
+
+def pinocchio_times(scenario: Scenario, repeat: int = 20000) -> PinocchioTimes:
+    """:class:`PinocchioTimes` as :func:`aba_time` measures ABA, on the same model and state."""
+    import pinocchio as pin
+    model, data, q, v, tau = _pinocchio_model(scenario)
+    return PinocchioTimes(_best_call(lambda: pin.aba(model, data, q, v, tau), repeat),
+                          _best_call(lambda: pin.rnea(model, data, q, v, tau), repeat),
+                          _best_call(lambda: pin.crba(model, data, q), repeat),
+                          _best_call(lambda: pin.forwardKinematics(model, data, q), repeat))
 
 
 def run_times(scenario: Scenario, step: float, duration: float, every_row: bool, chunk: float = 0.25,
