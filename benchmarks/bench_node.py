@@ -481,6 +481,9 @@ try:
     rclpy.spin(node)
 except (KeyboardInterrupt, ExternalShutdownException):
     pass
+except RuntimeError:  # a message taken while SIGINT shuts the context down fails to convert
+    if rclpy.ok():
+        raise
 """
 
 
