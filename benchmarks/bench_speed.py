@@ -324,12 +324,14 @@ def part_times(scenario: Scenario, repeat: int) -> dict[str, float]:
 
 def component_times(params: CraneDescription, rfe_count: int, repeat: int = 3000) -> None:
     """[profile] Compiled cost of the parts of a step (flexible, ``rfe_count`` RFEs; :func:`part_times`), also as
-    a multiple of one Pinocchio ABA call on the same chain in this run: a step is a factor, per Newton
-    evaluation a projection and a residual, and at its end a projection and a full evaluation with the
-    integrator's qdd; every REFRESH_INTERVAL of motion the modal correction."""
+    a multiple of one Pinocchio ABA call on the same chain in this run, with Pinocchio's RNEA, CRBA and forward
+    kinematics beside it (:func:`common.pinocchio_times`; RNEA and CRBA compute their own kinematics, the residual
+    and M here are given the frames): a step is a factor, per Newton evaluation a projection and a residual, and at
+    its end a projection and a full evaluation with the integrator's qdd; every REFRESH_INTERVAL of motion the modal
+    correction."""
     scenario = Scenario(params.with_rfe_count(rfe_count), "flexible")
     partition = scenario.motion.partition
-    peer = pinocchio_times(scenario)
+    peer = pinocchio_times(scenario, 20000 if rfe_count <= 12 else 5000)
     aba = peer.aba
     print(f"[profile] n_rfe={rfe_count:2d} dof={scenario.model.dof:2d} n_ic={partition.independent.size:2d}: "
           f"Pinocchio ABA {aba * 1e6:.2f} us/call; its counterparts of the parts below, in ABA: inverse dynamics "
@@ -337,7 +339,7 @@ def component_times(params: CraneDescription, rfe_count: int, repeat: int = 3000
           f"{peer.forward_kinematics / aba:.2f}")
     for name, seconds in part_times(scenario, repeat).items():
         print(f"[profile] n_rfe={rfe_count:2d} {PART_NAMES[name]:<52} {seconds * 1e6:7.2f} us = "
-              f"{seconds / aba:5.1f} ABA")
+              f"{seconds / aba:6.2f} ABA")
 
 
 SCALING_RFE = (6, 12, 24, 48)

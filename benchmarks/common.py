@@ -57,13 +57,13 @@ class PinocchioTimes(NamedTuple):
     forward_kinematics: float
 
 
-def _best_call(call: Callable[[], object], repeat: int) -> float:
-    """The best of 5 loops of ``repeat`` calls of ``call()``, per call [s]."""
+def _best_call(function: Callable, arguments: tuple, repeat: int) -> float:
+    """The best of 5 loops of ``repeat`` calls of ``function(*arguments)``, per call [s]."""
     fastest = math.inf
     for _ in range(5):
         start = time.perf_counter()
         for _ in range(repeat):
-            call()
+            function(*arguments)
         fastest = min(fastest, (time.perf_counter() - start) / repeat)
     return fastest
 
@@ -82,18 +82,18 @@ def aba_time(scenario: Scenario, repeat: int = 20000) -> float:
     """Best per-call time [s] of Pinocchio's forward dynamics (ABA, called from Python) on the URDF that
     crane-reference exports for the scenario's chain, at a random state."""
     import pinocchio as pin
-    model, data, q, v, tau = _pinocchio_model(scenario)
-    return _best_call(lambda: pin.aba(model, data, q, v, tau), repeat)
+    return _best_call(pin.aba, _pinocchio_model(scenario), repeat)
 
 
 def pinocchio_times(scenario: Scenario, repeat: int = 20000) -> PinocchioTimes:
-    """:class:`PinocchioTimes` as :func:`aba_time` measures ABA, on the same model and state."""
+    """:class:`PinocchioTimes` as :func:`aba_time` measures ABA, on the same model and state; RNEA and CRBA compute
+    their own kinematics."""
     import pinocchio as pin
     model, data, q, v, tau = _pinocchio_model(scenario)
-    return PinocchioTimes(_best_call(lambda: pin.aba(model, data, q, v, tau), repeat),
-                          _best_call(lambda: pin.rnea(model, data, q, v, tau), repeat),
-                          _best_call(lambda: pin.crba(model, data, q), repeat),
-                          _best_call(lambda: pin.forwardKinematics(model, data, q), repeat))
+    return PinocchioTimes(_best_call(pin.aba, (model, data, q, v, tau), repeat),
+                          _best_call(pin.rnea, (model, data, q, v, tau), repeat),
+                          _best_call(pin.crba, (model, data, q), repeat),
+                          _best_call(pin.forwardKinematics, (model, data, q), repeat))
 
 
 def run_times(scenario: Scenario, step: float, duration: float, every_row: bool, chunk: float = 0.25,
