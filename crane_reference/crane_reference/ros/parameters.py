@@ -11,6 +11,7 @@ Values from the crane description: the defaults of the task (``ellipse.*``, ``z.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import replace
 
@@ -24,6 +25,7 @@ from ..model.config import ConfigError, load_config
 from ..model.description import CraneDescription
 from ..model.paper_layout import ACTUATED as PAPER_ACTUATED
 from ..model.parameters import Task, TorqueDrive
+from ..motion.integration import CUTOFF, RESOLVED_BANDWIDTH
 from ..motion.steps import ONLINE_STEP
 from .parameter_spec import (
     ParameterSpec,
@@ -47,7 +49,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("model", "string", "flexible", "Crane model variant: 'flexible' (each flexible link cut into its "
                   "rigid finite elements) or 'rigid' (one element each)", choices=VARIANTS, read_only=True),
     ParameterSpec("integrator.step", "double", ONLINE_STEP, "Step of the integrator; a step resolves the modes below "
-                  "min(0.8 pi / step, 2 pi 800 Hz) and damps the others", "s", (1e-5, 1e-2), read_only=True),
+                  f"min({CUTOFF / math.pi:g} pi / step, 2 pi {RESOLVED_BANDWIDTH / (2.0 * math.pi):g} Hz) and damps "
+                  "the others", "s", (1e-5, 1e-2), read_only=True),
     ParameterSpec("publish_rate", "integer", 100, "Rate of joint_states and ~/end_effector_pose; sample k is "
                   "stamped start + k / publish_rate", "Hz", (1, MAX_PUBLISH_RATE), read_only=True),
     ParameterSpec("frame_id", "string", "world", "Frame of ~/end_effector_pose, ~/reference_preview and ~/markers "
